@@ -1,0 +1,1 @@
+"""dynid.optim."""
