@@ -1,0 +1,660 @@
+"""Robot models: built-in names, URDF files and modified-DH tables.
+
+Every description is reduced to one canonical kinematic tree (:class:`RobotModel`): a list of
+single-DOF joints with their placement in the parent joint frame, the standard inertial parameters of
+the body each joint carries, the armature (rotor inertia) and the tool frame.  The numeric Pinocchio
+model and the symbolic CasADi functions are both built from that one tree, so they cannot disagree.
+
+Standard parameters are Pinocchio's: per joint ``[m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz]``
+with ``m c`` the first moment and the inertia about the joint frame origin, in the joint frame (SI).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import sys
+import tomllib
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+
+from dynid.exceptions import RobotModelError, ShapeError
+
+__all__ = [
+    "BUILTIN_ROBOTS",
+    "DEFAULT_DDQ_MAX",
+    "PARAM_NAMES",
+    "RobotModel",
+    "load_robot",
+]
+
+PARAM_NAMES = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
+"""Names of the 10 standard parameters of a link, in Pinocchio's order."""
+
+DEFAULT_DDQ_MAX = 10.0
+"""Acceleration limit (rad/s^2 or m/s^2) used when a model states none (URDF has no such field)."""
+
+# Built-in robots: URDF inside the installed example-robot-data package, joints to lock, tool frame,
+# acceleration limits (rad/s^2).  Panda: Franka's datasheet limits; UR: none published, the default.
+BUILTIN_ROBOTS: dict[str, dict] = {
+    "ur5": {
+        "urdf": "ur_description/urdf/ur5_robot.urdf",
+        "lock": (),
+        "tool": "tool0",
+        "ddq_max": None,
+    },
+    "ur10": {
+        "urdf": "ur_description/urdf/ur10_robot.urdf",
+        "lock": (),
+        "tool": "tool0",
+        "ddq_max": None,
+    },
+    "panda": {
+        "urdf": "panda_description/urdf/panda.urdf",
+        "lock": ("panda_finger_joint1", "panda_finger_joint2"),
+        "tool": "panda_hand_tcp",
+        "ddq_max": (15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0),
+    },
+}
+
+_JOINT_TYPES = {
+    "JointModelRX": "RX",
+    "JointModelRY": "RY",
+    "JointModelRZ": "RZ",
+    "JointModelRUBX": "RX",  # continuous joints: one angle, no wrap-around in identification
+    "JointModelRUBY": "RY",
+    "JointModelRUBZ": "RZ",
+    "JointModelPX": "PX",
+    "JointModelPY": "PY",
+    "JointModelPZ": "PZ",
+    "JointModelRevoluteUnaligned": "RU",
+    "JointModelPrismaticUnaligned": "PU",
+}
+
+
+@dataclass(frozen=True, eq=False)
+class Joint:
+    """One single-DOF joint of the canonical tree.
+
+    Parameters
+    ----------
+    name : str
+        Joint name.
+    kind : str
+        ``RX RY RZ PX PY PZ`` (axis of the joint frame) or ``RU PU`` (unaligned ``axis``).
+    parent : int
+        Index of the parent joint, 0 for the base, joints numbered from 1.
+    rotation, translation : ndarray, shape (3, 3) and (3,)
+        Placement of the joint frame in the parent joint frame at q = 0 (m).
+    axis : ndarray, shape (3,)
+        Unit axis for ``RU`` / ``PU`` joints.
+    """
+
+    name: str
+    kind: str
+    parent: int
+    rotation: np.ndarray
+    translation: np.ndarray
+    axis: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
+
+    @property
+    def revolute(self) -> bool:
+        return self.kind.startswith("R")
+
+
+@dataclass(frozen=True, eq=False)
+class RobotModel:
+    """A serial or tree-structured arm with n single-DOF joints.
+
+    Build one with :func:`load_robot`.  Limits are arrays of shape (n,) in rad, rad/s, rad/s^2
+    (m, m/s, m/s^2 for prismatic joints).
+
+    Attributes
+    ----------
+    name : str
+        Short name ("ur5", the file stem of a URDF or table).
+    source : str
+        Where the model came from (built-in name, URDF path, TOML path).
+    joints : tuple of Joint
+        The canonical tree, in the model's joint order.
+    params : ndarray, shape (10 n,)
+        Standard inertial parameters, Pinocchio's order per joint (see :data:`PARAM_NAMES`).
+    armature : ndarray, shape (n,)
+        Rotor inertia reflected to the joint (kg m^2), added to the diagonal of M.
+    gravity : ndarray, shape (3,)
+        Gravity in the base frame (m/s^2).
+    tool_name, tool_parent, tool_rotation, tool_translation
+        Tool frame: its placement in the frame of joint ``tool_parent`` (1-based).
+    q_min, q_max, dq_max, ddq_max : ndarray, shape (n,)
+        Joint limits.
+    """
+
+    name: str
+    source: str
+    joints: tuple[Joint, ...]
+    params: np.ndarray
+    armature: np.ndarray
+    gravity: np.ndarray
+    tool_name: str
+    tool_parent: int
+    tool_rotation: np.ndarray
+    tool_translation: np.ndarray
+    q_min: np.ndarray
+    q_max: np.ndarray
+    dq_max: np.ndarray
+    ddq_max: np.ndarray
+
+    def __post_init__(self) -> None:
+        n = len(self.joints)
+        if n == 0:
+            raise RobotModelError(f"the robot '{self.name}' has no movable joint; give an arm with at least one.")
+        for label, size in (
+            ("params", 10 * n),
+            ("armature", n),
+            ("q_min", n),
+            ("q_max", n),
+            ("dq_max", n),
+            ("ddq_max", n),
+        ):
+            value = np.asarray(getattr(self, label), dtype=float)
+            if value.shape != (size,):
+                raise ShapeError(
+                    f"{label} of the robot '{self.name}' has shape {value.shape}; expected ({size},) for "
+                    f"{n} joints."
+                )
+            if not np.all(np.isfinite(value)):
+                raise RobotModelError(f"{label} of the robot '{self.name}' holds non-finite values; fix the model.")
+            value.setflags(write=False)
+            object.__setattr__(self, label, value)
+        if np.any(self.q_min >= self.q_max):
+            bad = int(np.argmax(self.q_min >= self.q_max)) + 1
+            raise RobotModelError(
+                f"joint {bad} of the robot '{self.name}' has q_min {self.q_min[bad - 1]:g} >= q_max "
+                f"{self.q_max[bad - 1]:g}; give a lower limit below the upper one."
+            )
+        for label in ("dq_max", "ddq_max"):
+            value = getattr(self, label)
+            if np.any(value <= 0):
+                bad = int(np.argmax(value <= 0)) + 1
+                raise RobotModelError(
+                    f"{label} of joint {bad} of the robot '{self.name}' is {value[bad - 1]:g}; limits must be "
+                    "positive, override it with a positive value."
+                )
+
+    # ------------------------------------------------------------------ sizes and names
+    @property
+    def n(self) -> int:
+        """Number of joints."""
+        return len(self.joints)
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return tuple(j.name for j in self.joints)
+
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        """Names of the 10 n standard parameters: ``m1, mx1, ..., Izz1, m2, ...``."""
+        return tuple(f"{p}{j + 1}" for j in range(self.n) for p in PARAM_NAMES)
+
+    # ------------------------------------------------------------------ canonical text and keys
+    @cached_property
+    def spec(self) -> str:
+        """The canonical tree as text, read by the symbolic generator (one record per line)."""
+
+        def num(values) -> str:
+            return " ".join(repr(float(v)) for v in np.ravel(values))
+
+        lines = ["dynid-spec 1", f"gravity {num(self.gravity)}"]
+        for i, joint in enumerate(self.joints):
+            lines.append(
+                f"joint {_token(joint.name)} {joint.kind} {joint.parent} {num(joint.rotation)} "
+                f"{num(joint.translation)} {num(joint.axis)}"
+            )
+            lines.append(f"inertia {num(self.params[10 * i : 10 * i + 10])}")
+            lines.append(f"armature {num([self.armature[i]])}")
+        lines.append(
+            f"tool {_token(self.tool_name)} {self.tool_parent} {num(self.tool_rotation)} "
+            f"{num(self.tool_translation)}"
+        )
+        return "\n".join(lines) + "\n"
+
+    @cached_property
+    def key(self) -> str:
+        """Content hash of the canonical tree (kinematics, inertias, armature, tool; not limits)."""
+        return hashlib.sha256(self.spec.encode()).hexdigest()[:16]
+
+    # ------------------------------------------------------------------ numeric Pinocchio
+    @cached_property
+    def pin_model(self):
+        """The numeric ``pinocchio.Model`` built from the canonical tree."""
+        import pinocchio as pin
+
+        model = pin.Model()
+        model.name = self.name
+        for i, joint in enumerate(self.joints):
+            jmodel = _pin_joint(pin, joint)
+            placement = pin.SE3(np.array(joint.rotation), np.array(joint.translation))
+            jid = model.addJoint(joint.parent, jmodel, placement, joint.name)
+            inertia = _pin_inertia(pin, self.params[10 * i : 10 * i + 10], self.name, i + 1)
+            if inertia is not None:
+                model.appendBodyToJoint(jid, inertia, pin.SE3.Identity())
+        model.armature = np.array(self.armature)
+        model.gravity.linear = np.array(self.gravity)
+        model.lowerPositionLimit = np.array(self.q_min)
+        model.upperPositionLimit = np.array(self.q_max)
+        model.velocityLimit = np.array(self.dq_max)
+        return model
+
+    # ------------------------------------------------------------------ changes
+    def with_limits(
+        self,
+        *,
+        q_min: Sequence[float] | float | None = None,
+        q_max: Sequence[float] | float | None = None,
+        dq_max: Sequence[float] | float | None = None,
+        ddq_max: Sequence[float] | float | None = None,
+    ) -> RobotModel:
+        """Return a copy with some joint limits overridden (a scalar applies to every joint)."""
+        changes = {}
+        for label, value in (("q_min", q_min), ("q_max", q_max), ("dq_max", dq_max), ("ddq_max", ddq_max)):
+            if value is None:
+                continue
+            arr = np.broadcast_to(np.asarray(value, dtype=float), (self.n,)) if np.ndim(value) == 0 else value
+            arr = np.asarray(arr, dtype=float)
+            if arr.shape != (self.n,):
+                raise ShapeError(
+                    f"{label} has {arr.size} values; the robot '{self.name}' has {self.n} joints, give {self.n} "
+                    "values or one for all."
+                )
+            changes[label] = arr.copy()
+        return replace(self, **changes)
+
+    def with_params(
+        self, params: np.ndarray | None = None, armature: np.ndarray | None = None
+    ) -> RobotModel:
+        """Return a copy with other standard parameters and/or armature (e.g. a perturbed truth)."""
+        out = replace(
+            self,
+            params=np.array(self.params if params is None else params, dtype=float),
+            armature=np.array(self.armature if armature is None else armature, dtype=float),
+        )
+        return out
+
+    # ------------------------------------------------------------------ checks
+    def check_state(self, label: str, value, *, batch: bool = True) -> np.ndarray:
+        """Return ``value`` as float array of shape (m, n) (or (n,) if ``batch`` is False), or raise.
+
+        Raises
+        ------
+        ShapeError
+            With a message naming the robot and the expected size.
+        """
+        arr = np.asarray(value, dtype=float)
+        if arr.ndim == 1 and batch:
+            arr = arr[None, :]
+        ok = arr.ndim == 2 and arr.shape[1] == self.n if batch else arr.shape == (self.n,)
+        if not ok:
+            cols = arr.shape[-1] if arr.ndim else 1
+            raise ShapeError(
+                f"{label} has {cols} {'columns' if batch else 'values'}; the robot '{self.name}' has "
+                f"{self.n} joints, give {'an (m, ' + str(self.n) + ') array' if batch else str(self.n) + ' values'}."
+            )
+        return arr
+
+    def __repr__(self) -> str:
+        return f"RobotModel(name={self.name!r}, n={self.n}, source={self.source!r})"
+
+
+# ---------------------------------------------------------------------------- helpers
+def _token(name: str) -> str:
+    """A whitespace-free rendering of a name for the specification text."""
+    return "".join(ch if not ch.isspace() else "_" for ch in name) or "_"
+
+
+def _pin_joint(pin, joint: Joint):
+    simple = {
+        "RX": pin.JointModelRX,
+        "RY": pin.JointModelRY,
+        "RZ": pin.JointModelRZ,
+        "PX": pin.JointModelPX,
+        "PY": pin.JointModelPY,
+        "PZ": pin.JointModelPZ,
+    }
+    if joint.kind in simple:
+        return simple[joint.kind]()
+    if joint.kind == "RU":
+        return pin.JointModelRevoluteUnaligned(np.array(joint.axis))
+    return pin.JointModelPrismaticUnaligned(np.array(joint.axis))
+
+
+def _pin_inertia(pin, v: np.ndarray, robot: str, j: int):
+    """Inertia of a body from its 10 standard parameters; None for an empty body."""
+    v = np.asarray(v, dtype=float)
+    if v[0] > 0:
+        return pin.Inertia.FromDynamicParameters(v)
+    if v[0] < 0 or np.any(v[1:4] != 0):
+        raise RobotModelError(
+            f"link {j} of the robot '{robot}' has mass {v[0]:g} and first moment {v[1:4]}; a body needs a "
+            "positive mass (or zero mass and zero first moment)."
+        )
+    if np.any(v[4:] != 0):
+        return pin.Inertia(0.0, np.zeros(3), pin.Symmetric3(v[4:]))
+    return None
+
+
+def _site_roots() -> list[Path]:
+    return [Path(p) for p in sys.path if p]
+
+
+def example_robot_data_dir() -> Path:
+    """Folder ``robots/`` of the installed example-robot-data package."""
+    for root in _site_roots():
+        candidate = root / "cmeel.prefix" / "share" / "example-robot-data" / "robots"
+        if candidate.is_dir():
+            return candidate
+    raise RobotModelError(
+        "the built-in robots need the package example-robot-data, which was not found on sys.path; "
+        "install it with 'pip install example-robot-data'."
+    )
+
+
+def _from_pin_model(model, *, name: str, source: str, tool: str | None, ddq_max) -> RobotModel:
+    """Canonical tree of a numeric Pinocchio model (URDF import)."""
+    import pinocchio as pin
+
+    if model.nq != model.nv:
+        raise RobotModelError(f"the model '{source}' has nq != nv; dynid handles arms with single-DOF joints only.")
+    joints = []
+    params = []
+    for i in range(1, model.njoints):
+        short = model.joints[i].shortname()
+        kind = _JOINT_TYPES.get(short)
+        if kind is None:
+            raise RobotModelError(
+                f"joint '{model.names[i]}' of '{source}' is a {short}; dynid supports revolute, continuous "
+                "and prismatic joints, make the others fixed."
+            )
+        axis = np.array([0.0, 0.0, 1.0])
+        if kind in ("RU", "PU"):
+            axis = np.array(model.joints[i].extract().axis, dtype=float)
+        placement = model.jointPlacements[i]
+        joints.append(
+            Joint(
+                name=model.names[i],
+                kind=kind,
+                parent=int(model.parents[i]),
+                rotation=np.array(placement.rotation),
+                translation=np.array(placement.translation),
+                axis=axis,
+            )
+        )
+        params.append(np.array(model.inertias[i].toDynamicParameters()))
+    n = len(joints)
+    # Tool frame: the named frame, else the last frame in the model.
+    frame_id = None
+    if tool is not None and model.existFrame(tool):
+        frame_id = model.getFrameId(tool)
+    elif tool is None and len(model.frames) > 1:
+        frame_id = len(model.frames) - 1
+    if frame_id is not None:
+        frame = model.frames[frame_id]
+        tool_name, tool_parent = frame.name, int(frame.parentJoint)
+        tool_rot, tool_pos = np.array(frame.placement.rotation), np.array(frame.placement.translation)
+    else:
+        tool_name, tool_parent, tool_rot, tool_pos = "tool", n, np.eye(3), np.zeros(3)
+    q_min = np.array(model.lowerPositionLimit, dtype=float)
+    q_max = np.array(model.upperPositionLimit, dtype=float)
+    # Continuous joints and missing limits: one turn either way.
+    unbounded = ~np.isfinite(q_min) | ~np.isfinite(q_max) | (q_min >= q_max) | (np.abs(q_min) > 1e10)
+    q_min[unbounded], q_max[unbounded] = -math.pi, math.pi
+    dq_max = np.array(model.velocityLimit, dtype=float)
+    dq_max[~np.isfinite(dq_max) | (dq_max <= 0) | (dq_max > 1e10)] = math.pi
+    ddq = np.full(n, DEFAULT_DDQ_MAX) if ddq_max is None else np.asarray(ddq_max, dtype=float)
+    armature = np.array(model.armature, dtype=float) if len(model.armature) == n else np.zeros(n)
+    del pin
+    return RobotModel(
+        name=name,
+        source=source,
+        joints=tuple(joints),
+        params=np.concatenate(params),
+        armature=armature,
+        gravity=np.array(model.gravity.linear, dtype=float),
+        tool_name=tool_name,
+        tool_parent=tool_parent,
+        tool_rotation=tool_rot,
+        tool_translation=tool_pos,
+        q_min=q_min,
+        q_max=q_max,
+        dq_max=dq_max,
+        ddq_max=ddq,
+    )
+
+
+def _load_urdf(path: Path, *, name: str, source: str, lock=(), tool=None, ddq_max=None) -> RobotModel:
+    import pinocchio as pin
+
+    if not path.is_file():
+        raise RobotModelError(f"the URDF file '{path}' does not exist; give the path of an existing .urdf file.")
+    try:
+        model = pin.buildModelFromUrdf(str(path))
+    except (ValueError, RuntimeError) as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise RobotModelError(
+            f"the URDF file '{path}' could not be read ({first}); check that it is a well-formed URDF."
+        ) from None
+    if lock:
+        ids = [model.getJointId(j) for j in lock]
+        model = pin.buildReducedModel(model, ids, pin.neutral(model))
+    if model.nv == 0:
+        raise RobotModelError(f"the URDF file '{path}' has no movable joint; give an arm with at least one.")
+    return _from_pin_model(model, name=name, source=source, tool=tool, ddq_max=ddq_max)
+
+
+# ---------------------------------------------------------------------------- modified DH
+_DH_COLUMNS = ("alpha", "a", "d", "theta")
+_LINK_COLUMNS = ("m", "cx", "cy", "cz", "Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz")
+
+
+def _rot_x(angle: float) -> np.ndarray:
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def _rot_z(angle: float) -> np.ndarray:
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def mdh_placement(alpha: float, a: float, d: float, theta: float) -> tuple[np.ndarray, np.ndarray]:
+    """Placement of frame i in frame i-1 by the modified DH convention (Craig).
+
+    ``T = RotX(alpha) TransX(a) RotZ(theta) TransZ(d)``.  Returns (rotation (3, 3), translation (3,)).
+    """
+    rx = _rot_x(alpha)
+    rot = rx @ _rot_z(theta)
+    trans = np.array([a, 0.0, 0.0]) + rot @ np.array([0.0, 0.0, d])
+    return rot, trans
+
+
+def _column(table: dict, section: str, key: str, n: int | None, path: Path, default=None) -> np.ndarray:
+    sec = table.get(section, {})
+    if key not in sec:
+        if default is not None:
+            return np.full(n, default, dtype=float)
+        raise RobotModelError(
+            f"the table '{path}' has no column '{section}.{key}'; a modified-DH table needs "
+            f"[joints] alpha, a, d, theta and [links] {', '.join(_LINK_COLUMNS)} (one value per joint)."
+        )
+    try:
+        value = np.asarray(sec[key], dtype=float)
+    except (TypeError, ValueError):
+        raise RobotModelError(
+            f"column '{section}.{key}' of the table '{path}' is not a list of numbers; write it as [v1, v2, ...]."
+        ) from None
+    if n is not None and value.shape != (n,):
+        raise RobotModelError(
+            f"column '{section}.{key}' of the table '{path}' has {value.size} values; the table has {n} joints, "
+            f"give one value per joint."
+        )
+    return value
+
+
+def _load_mdh(path: Path, *, name: str) -> RobotModel:
+    if not path.is_file():
+        raise RobotModelError(f"the table '{path}' does not exist; give the path of an existing .toml file.")
+    try:
+        table = tomllib.loads(path.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise RobotModelError(f"the table '{path}' is not valid TOML ({exc}); fix its syntax.") from None
+    if "joints" not in table or "alpha" not in table.get("joints", {}):
+        raise RobotModelError(
+            f"the table '{path}' has no column 'joints.alpha'; a modified-DH table needs [joints] alpha, a, d, "
+            f"theta and [links] {', '.join(_LINK_COLUMNS)} (one value per joint)."
+        )
+    n = len(table["joints"]["alpha"])
+    dh = {k: _column(table, "joints", k, n, path) for k in _DH_COLUMNS}
+    kinds = table["joints"].get("type", ["R"] * n)
+    if len(kinds) != n or any(k not in ("R", "P") for k in kinds):
+        raise RobotModelError(
+            f"column 'joints.type' of the table '{path}' must hold 'R' or 'P' for each of its {n} joints."
+        )
+    link = {k: _column(table, "links", k, n, path) for k in _LINK_COLUMNS}
+    armature = _column(table, "links", "armature", n, path, default=0.0)
+    q_min = _column(table, "joints", "q_min", n, path, default=-math.pi)
+    q_max = _column(table, "joints", "q_max", n, path, default=math.pi)
+    dq_max = _column(table, "joints", "dq_max", n, path, default=math.pi)
+    ddq_max = _column(table, "joints", "ddq_max", n, path, default=DEFAULT_DDQ_MAX)
+    gravity = np.asarray(table.get("gravity", [0.0, 0.0, -9.81]), dtype=float)
+    joints, params = [], []
+    for i in range(n):
+        # Revolute: RotZ(q) commutes with TransZ(d); prismatic: q adds to the offset d along z.
+        # Either way the placement is the DH transform at q = 0, followed by the joint's motion.
+        rot, trans = mdh_placement(dh["alpha"][i], dh["a"][i], dh["d"][i], dh["theta"][i])
+        joints.append(
+            Joint(name=f"joint_{i + 1}", kind="RZ" if kinds[i] == "R" else "PZ", parent=i, rotation=rot, translation=trans)
+        )
+        params.append(
+            standard_from_com(
+                link["m"][i],
+                np.array([link["cx"][i], link["cy"][i], link["cz"][i]]),
+                np.array(
+                    [
+                        [link["Ixx"][i], link["Ixy"][i], link["Ixz"][i]],
+                        [link["Ixy"][i], link["Iyy"][i], link["Iyz"][i]],
+                        [link["Ixz"][i], link["Iyz"][i], link["Izz"][i]],
+                    ]
+                ),
+            )
+        )
+    tool = table.get("tool", {})
+    t_rot, t_pos = mdh_placement(
+        float(tool.get("alpha", 0.0)), float(tool.get("a", 0.0)), float(tool.get("d", 0.0)), float(tool.get("theta", 0.0))
+    )
+    return RobotModel(
+        name=str(table.get("name", name)),
+        source=str(path),
+        joints=tuple(joints),
+        params=np.concatenate(params),
+        armature=armature,
+        gravity=gravity,
+        tool_name=str(tool.get("name", "tool")),
+        tool_parent=n,
+        tool_rotation=t_rot,
+        tool_translation=t_pos,
+        q_min=q_min,
+        q_max=q_max,
+        dq_max=dq_max,
+        ddq_max=ddq_max,
+    )
+
+
+def standard_from_com(mass: float, com: np.ndarray, inertia_com: np.ndarray) -> np.ndarray:
+    """Standard parameters (Pinocchio's order) of a body given its mass, centre of mass and inertia.
+
+    Parameters
+    ----------
+    mass : float
+        Mass (kg).
+    com : ndarray, shape (3,)
+        Centre of mass in the link frame (m).
+    inertia_com : ndarray, shape (3, 3)
+        Inertia about the centre of mass, link-frame axes (kg m^2).
+
+    Returns
+    -------
+    ndarray, shape (10,)
+        ``[m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz]`` with the inertia about the link frame origin.
+    """
+    c = np.asarray(com, dtype=float)
+    skew = np.array([[0.0, -c[2], c[1]], [c[2], 0.0, -c[0]], [-c[1], c[0], 0.0]])
+    inertia = np.asarray(inertia_com, dtype=float) - mass * skew @ skew
+    return np.array(
+        [
+            mass,
+            *(mass * c),
+            inertia[0, 0],
+            inertia[0, 1],
+            inertia[1, 1],
+            inertia[0, 2],
+            inertia[1, 2],
+            inertia[2, 2],
+        ]
+    )
+
+
+# ---------------------------------------------------------------------------- entry point
+def load_robot(
+    robot: str | Path | RobotModel,
+    *,
+    q_min=None,
+    q_max=None,
+    dq_max=None,
+    ddq_max=None,
+    tool: str | None = None,
+) -> RobotModel:
+    """Load a robot from a built-in name, a URDF path or a modified-DH TOML table.
+
+    Parameters
+    ----------
+    robot : str or Path or RobotModel
+        ``"ur5"``, ``"ur10"``, ``"panda"`` (7-DOF arm, hand rigidly attached, fingers locked), a
+        ``.urdf`` path, or a ``.toml`` modified-DH table.  A RobotModel is returned as is (with the
+        limit overrides applied).
+    q_min, q_max, dq_max, ddq_max : float or sequence of float, optional
+        Override the model's joint limits (one value for all joints, or one per joint).
+    tool : str, optional
+        Name of the URDF frame used as the tool frame (default: the robot's flange / last frame).
+
+    Raises
+    ------
+    RobotModelError
+        Unknown name, missing or malformed file, unsupported joint, missing table column.
+    """
+    if isinstance(robot, RobotModel):
+        model = robot
+    else:
+        text = str(robot)
+        path = Path(text).expanduser()
+        key = text.lower()
+        if key in BUILTIN_ROBOTS and not path.exists():
+            info = BUILTIN_ROBOTS[key]
+            urdf = example_robot_data_dir() / info["urdf"]
+            model = _load_urdf(
+                urdf, name=key, source=key, lock=info["lock"], tool=tool or info["tool"], ddq_max=info["ddq_max"]
+            )
+        elif path.suffix.lower() == ".urdf":
+            model = _load_urdf(path, name=path.stem, source=str(path), tool=tool)
+        elif path.suffix.lower() == ".toml":
+            model = _load_mdh(path, name=path.stem)
+        else:
+            raise RobotModelError(
+                f"unknown robot '{text}'; give a built-in name ({', '.join(BUILTIN_ROBOTS)}), a .urdf file or a "
+                "modified-DH .toml table."
+            )
+    if any(v is not None for v in (q_min, q_max, dq_max, ddq_max)):
+        model = model.with_limits(q_min=q_min, q_max=q_max, dq_max=dq_max, ddq_max=ddq_max)
+    return model
