@@ -1,0 +1,1 @@
+"""Templates and the standalone loader shipped with every C export."""

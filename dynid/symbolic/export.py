@@ -1,0 +1,295 @@
+"""Export a robot's regressors as C source, a header, a compiled shared library and an example.
+
+``dynid export-c --robot ur5 --out ur5_c`` writes::
+
+    ur5_c/
+      dynid_ur5.c, dynid_ur5.h          CasADi-generated functions (one sample per call)
+      dynid_ur5_batch.c                 ``<fn>_batch``: N samples per call, row-major numpy layout
+      libdynid_ur5.so                   both, compiled with the system C compiler
+      example.c, Makefile               a short program that evaluates the base regressor once
+      manifest.json                     functions, shapes, base parameter names and expressions
+      dynid_loader.py                   numpy + ctypes loader (no dynid needed)
+
+The same library, built in dynid's cache, is dynid's fast path for large batches
+(:func:`compiled_functions`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import re
+import shutil
+import subprocess
+import tempfile
+from dataclasses import dataclass
+from importlib import metadata
+from pathlib import Path
+
+import casadi as ca
+
+from dynid.exceptions import GeneratorError
+from dynid.symbolic._export.loader import CompiledLibrary
+from dynid.symbolic.base import BaseParameters, base_parameters
+from dynid.symbolic.build import Progress, _locked, _stderr, cache_dir, find_compiler
+from dynid.symbolic.functions import RobotFunctions, robot_functions
+from dynid.symbolic.robot import RobotModel
+
+__all__ = ["DEFAULT_EXPORT", "CompiledLibrary", "ExportResult", "compiled_functions", "export_c"]
+
+_HERE = Path(__file__).parent / "_export"
+
+DEFAULT_EXPORT = ("base_regressor", "regressor", "rnea", "friction_columns", "gravity", "fk")
+"""Functions exported by default."""
+
+
+@dataclass(frozen=True)
+class ExportResult:
+    """Paths written by :func:`export_c`."""
+
+    folder: Path
+    source: Path
+    header: Path
+    batch_source: Path
+    library: Path
+    example: Path
+    manifest: Path
+    loader: Path
+
+
+def c_identifier(name: str) -> str:
+    """A valid C identifier made from a robot name (``tx40-mdh`` -> ``tx40_mdh``)."""
+    ident = re.sub(r"\W", "_", name)
+    return ident if ident and not ident[0].isdigit() else f"r_{ident}"
+
+
+def _functions_to_export(funcs: RobotFunctions, base: BaseParameters, names) -> list[ca.Function]:
+    available = {
+        "base_regressor": base.base_regressor,
+        "regressor": funcs.regressor,
+        "rnea": funcs.rnea,
+        "gravity": funcs.gravity,
+        "mass_matrix": funcs.mass_matrix,
+        "aba": funcs.aba,
+        "fk": funcs.fk,
+        "friction_columns": funcs.friction_columns,
+        "armature_columns": funcs.armature_columns,
+    }
+    unknown = [n for n in names if n not in available]
+    if unknown:
+        raise ValueError(
+            f"cannot export {', '.join(unknown)}; the exportable functions are {', '.join(available)}."
+        )
+    return [available[n] for n in names]
+
+
+def _renamed(f: ca.Function, name: str) -> ca.Function:
+    """The same function under another name, outputs made dense (the batch wrapper needs dense)."""
+    args = f.sx_in()
+    outs = f.call(args)
+    return ca.Function(name, args, [ca.densify(o) for o in outs], f.name_in(), f.name_out())
+
+
+def _write_sources(
+    folder: Path, robot: RobotModel, funcs: RobotFunctions, base: BaseParameters, names
+) -> tuple[str, list[dict]]:
+    """Generate C for the functions into ``folder``; return the file stem and the manifest entries."""
+    prefix = c_identifier(robot.name)
+    stem = f"dynid_{prefix}"
+    gen = ca.CodeGenerator(f"{stem}.c", {"with_header": True})
+    entries = []
+    wrappers = []
+    for name, f in zip(names, _functions_to_export(funcs, base, names), strict=True):
+        symbol = f"{prefix}_{name}"
+        g = _renamed(f, symbol)
+        gen.add(g)
+        entries.append(
+            {
+                "name": name,
+                "symbol": symbol,
+                "inputs": [{"name": g.name_in(i), "size": g.numel_in(i)} for i in range(g.n_in())],
+                "outputs": [
+                    {"name": g.name_out(i), "rows": g.size1_out(i), "cols": g.size2_out(i)} for i in range(g.n_out())
+                ],
+            }
+        )
+        wrappers.append(
+            f"\nint {symbol}_batch(const double* const* in, double* const* out, long long n) {{\n"
+            f"  return dynid_batch({symbol}, {symbol}_work, {symbol}_sparsity_in, {symbol}_sparsity_out,\n"
+            f"                     {g.n_in()}, {g.n_out()}, in, out, n);\n}}\n"
+        )
+    gen.generate(str(folder) + os.sep)
+    batch = (_HERE / "batch.c").read_text().replace("@HEADER@", f"{stem}.h").replace("@WRAPPERS@", "".join(wrappers))
+    (folder / f"{stem}_batch.c").write_text(batch)
+    # Declare the batch functions in the header too.
+    header = folder / f"{stem}.h"
+    decls = "".join(
+        f"int {e['symbol']}_batch(const double* const* in, double* const* out, long long n);\n" for e in entries
+    )
+    text = header.read_text()
+    marker = "#ifdef __cplusplus\n} /* extern \"C\" */"
+    text = text.replace(marker, "/* N samples per call, row-major (N, k) inputs and (N, rows, cols) outputs. */\n"
+                        + decls + "\n" + marker) if marker in text else text + decls
+    header.write_text(text)
+    return stem, entries
+
+
+def _compile(folder: Path, stem: str, progress: Progress | None) -> Path:
+    cc = find_compiler("c")
+    lib = folder / f"lib{stem}.so"
+    tmp = folder / f"lib{stem}.so.tmp{os.getpid()}"
+    cmd = [cc, "-O2", "-fPIC", "-shared", f"{stem}.c", f"{stem}_batch.c", "-o", tmp.name, "-lm"]
+    if progress:
+        progress(f"dynid: compiling {lib.name} with {Path(cc).name}...")
+    proc = subprocess.run(cmd, cwd=folder, capture_output=True, text=True, check=False)
+    if proc.returncode != 0:
+        tmp.unlink(missing_ok=True)
+        tail = "\n".join(proc.stderr.strip().splitlines()[-10:])
+        raise GeneratorError(f"the C compiler failed on {stem}.c (exit {proc.returncode}):\n{tail}")
+    os.replace(tmp, lib)
+    return lib
+
+
+def _example(stem: str, prefix: str, robot: RobotModel, base: BaseParameters) -> tuple[str, str]:
+    n = robot.n
+    nb = base.n_base
+    example = f"""/* Evaluate the base regressor of {robot.name} at one state and print it.
+ * Build: make   (or: cc -O2 example.c {stem}.c -o example -lm)   Run: ./example */
+#include <stdio.h>
+
+#include "{stem}.h"
+
+int main(void) {{
+  double q[{n}], dq[{n}], ddq[{n}];
+  double Yb[{n} * {nb}]; /* column-major, {n} rows x {nb} columns */
+  const casadi_real* arg[{prefix}_base_regressor_SZ_ARG];
+  casadi_real* res[{prefix}_base_regressor_SZ_RES];
+  casadi_int iw[{prefix}_base_regressor_SZ_IW + 1];
+  casadi_real w[{prefix}_base_regressor_SZ_W + 1];
+  int i, j;
+  for (i = 0; i < {n}; ++i) {{
+    q[i] = 0.1 * (i + 1);
+    dq[i] = 0.2;
+    ddq[i] = -0.3;
+  }}
+  arg[0] = q;
+  arg[1] = dq;
+  arg[2] = ddq;
+  res[0] = Yb;
+  if ({prefix}_base_regressor(arg, res, iw, w, 0)) return 1;
+  printf("Y_b of {robot.name} ({n} x {nb}) at q_i = 0.1 i, dq = 0.2, ddq = -0.3:\\n");
+  for (i = 0; i < {n}; ++i) {{
+    for (j = 0; j < {nb}; ++j) printf("% .6e ", Yb[j * {n} + i]);
+    printf("\\n");
+  }}
+  return 0;
+}}
+"""
+    makefile = f"""CC ?= cc
+CFLAGS ?= -O2
+
+example: example.c {stem}.c {stem}.h
+\t$(CC) $(CFLAGS) example.c {stem}.c -o example -lm
+
+clean:
+\trm -f example
+"""
+    return example, makefile
+
+
+def _manifest(robot: RobotModel, base: BaseParameters, stem: str, entries: list[dict]) -> dict:
+    return {
+        "robot": robot.name,
+        "robot_key": robot.key,
+        "n": robot.n,
+        "joint_names": list(robot.joint_names),
+        "library": f"lib{stem}.so",
+        "casadi": metadata.version("casadi"),
+        "pin": metadata.version("pin"),
+        "base_parameters": {
+            "names": list(base.names),
+            "expressions": list(base.expressions),
+            "gravity_related": [bool(g) for g in base.gravity_related],
+            "independent": [int(i) for i in base.independent],
+        },
+        "functions": entries,
+    }
+
+
+def export_c(
+    robot: RobotModel,
+    out: str | Path,
+    *,
+    functions=DEFAULT_EXPORT,
+    progress: Progress | None = _stderr,
+) -> ExportResult:
+    """Write C source, header, shared library, example and loader for ``robot`` into ``out``.
+
+    The folder is written in a temporary sibling and moved into place at the end, so a failure
+    leaves nothing half written.
+    """
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise GeneratorError(f"'{out}' exists and is not a folder; give a folder path for the export.")
+    if not out.parent.exists():
+        raise GeneratorError(f"the folder '{out.parent}' does not exist; create it or choose another --out.")
+    funcs = robot_functions(robot, progress=progress)
+    base = base_parameters(funcs)
+    work = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp", dir=out.parent))
+    try:
+        stem, entries = _write_sources(work, robot, funcs, base, tuple(functions))
+        _compile(work, stem, progress)
+        if "base_regressor" in functions:
+            example, makefile = _example(stem, c_identifier(robot.name), robot, base)
+            (work / "example.c").write_text(example)
+            (work / "Makefile").write_text(makefile)
+        (work / "manifest.json").write_text(json.dumps(_manifest(robot, base, stem, entries), indent=2))
+        shutil.copyfile(_HERE / "loader.py", work / "dynid_loader.py")
+        if out.exists():
+            shutil.rmtree(out)
+        os.replace(work, out)
+    finally:
+        if work.exists():
+            shutil.rmtree(work, ignore_errors=True)
+    return ExportResult(
+        folder=out,
+        source=out / f"{stem}.c",
+        header=out / f"{stem}.h",
+        batch_source=out / f"{stem}_batch.c",
+        library=out / f"lib{stem}.so",
+        example=out / "example.c",
+        manifest=out / "manifest.json",
+        loader=out / "dynid_loader.py",
+    )
+
+
+_COMPILED: dict[str, CompiledLibrary] = {}
+
+
+def compiled_functions(
+    robot: RobotModel, *, functions=DEFAULT_EXPORT, progress: Progress | None = _stderr
+) -> CompiledLibrary:
+    """The robot's functions compiled to C in dynid's cache (built once per robot), for fast batches.
+
+    >>> lib = compiled_functions(load_robot("ur5"))
+    >>> lib.base_regressor(q, dq, ddq).shape        # (N, 6, 36)
+    """
+    funcs = robot_functions(robot, progress=progress)
+    base = base_parameters(funcs)
+    digest = hashlib.sha256(
+        "|".join(
+            [funcs.folder.name, ",".join(functions), ",".join(map(str, base.independent)), metadata.version("casadi")]
+        ).encode()
+        + (_HERE / "batch.c").read_bytes()
+    ).hexdigest()[:20]
+    if digest in _COMPILED:
+        return _COMPILED[digest]
+    folder = cache_dir() / "compiled" / digest
+    if not (folder / "manifest.json").is_file():
+        with _locked(cache_dir() / "compiled" / f"{digest}.lock"):
+            if not (folder / "manifest.json").is_file():
+                export_c(robot, folder, functions=functions, progress=progress)
+    lib = CompiledLibrary(folder)
+    _COMPILED[digest] = lib
+    return lib
