@@ -15,6 +15,7 @@ __all__ = [
     "ModelFileError",
     "RobotModelError",
     "ShapeError",
+    "UsageError",
 ]
 
 
@@ -48,3 +49,7 @@ class CompilerNotFoundError(DynidError, RuntimeError):
 
 class GeneratorError(DynidError, RuntimeError):
     """The symbolic generator failed to build or to run."""
+
+
+class UsageError(DynidError, ValueError):
+    """An option or argument has a value dynid cannot use."""

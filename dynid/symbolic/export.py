@@ -29,7 +29,7 @@ from pathlib import Path
 
 import casadi as ca
 
-from dynid.exceptions import GeneratorError
+from dynid.exceptions import GeneratorError, UsageError
 from dynid.symbolic._export.loader import CompiledLibrary
 from dynid.symbolic.base import BaseParameters, base_parameters
 from dynid.symbolic.build import Progress, _locked, _stderr, cache_dir, find_compiler
@@ -78,7 +78,7 @@ def _functions_to_export(funcs: RobotFunctions, base: BaseParameters, names) -> 
     }
     unknown = [n for n in names if n not in available]
     if unknown:
-        raise ValueError(
+        raise UsageError(
             f"cannot export {', '.join(unknown)}; the exportable functions are {', '.join(available)}."
         )
     return [available[n] for n in names]

@@ -1,0 +1,282 @@
+"""Trajectory types and files.
+
+:class:`FourierTrajectory` is the excitation of the method (METHOD.md, section 3):
+
+    q_i(t) = c_i + sum_{l=1..N} [ a_{l,i} / (wf l) sin(wf l t) - b_{l,i} / (wf l) cos(wf l t) ],  wf = 2 pi ff
+
+with analytic velocity and acceleration.  :class:`SampledTrajectory` holds any trajectory on a time
+grid (e.g. an approach, the excitation and a retreat joined together) and interpolates it.
+
+Files: JSON (coefficients and metadata, or samples) and CSV sampled at a controller rate with the
+columns ``t, q_1..q_n, dq_1..dq_n, ddq_1..ddq_n``.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+
+from dynid.exceptions import ModelFileError, ShapeError
+
+__all__ = [
+    "FourierTrajectory",
+    "SampledTrajectory",
+    "Trajectory",
+    "load_trajectory",
+    "write_atomic",
+]
+
+
+class Trajectory(Protocol):
+    """Anything that gives joint positions, velocities and accelerations over time."""
+
+    n: int
+    duration: float
+
+    def evaluate(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+
+
+def write_atomic(path: str | Path, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary file and a rename: never half written."""
+    path = Path(path)
+    if not path.parent.exists():
+        raise ModelFileError(f"the folder '{path.parent}' does not exist; create it or write elsewhere.")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", newline="") as handle:
+            handle.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+@dataclass(frozen=True, eq=False)
+class FourierTrajectory:
+    """A finite Fourier series per joint (METHOD.md, section 3).
+
+    Parameters
+    ----------
+    a, b : ndarray, shape (N, n)
+        Sine and cosine coefficients of the velocity (rad/s): ``dq_i = sum a cos + b sin``.
+    c : ndarray, shape (n,)
+        Position offsets (rad).
+    base_freq : float
+        Base frequency ff (Hz); the period is 1 / ff.
+    periods : int
+        Number of periods the trajectory lasts.
+    meta : dict
+        Free metadata (robot, criterion, condition number, ...), written to the JSON file.
+    """
+
+    a: np.ndarray
+    b: np.ndarray
+    c: np.ndarray
+    base_freq: float
+    periods: int = 1
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        a = np.atleast_2d(np.asarray(self.a, dtype=float))
+        b = np.atleast_2d(np.asarray(self.b, dtype=float))
+        c = np.asarray(self.c, dtype=float).ravel()
+        if a.shape != b.shape or a.shape[1] != c.size:
+            raise ShapeError(
+                f"Fourier coefficients a {a.shape}, b {b.shape} and c {c.shape} do not match; a and b must be "
+                "(harmonics, joints) and c (joints,)."
+            )
+        if not (self.base_freq > 0 and math.isfinite(self.base_freq)):
+            raise ShapeError(f"base_freq is {self.base_freq}; give a positive frequency in Hz.")
+        if int(self.periods) < 1:
+            raise ShapeError(f"periods is {self.periods}; give at least 1.")
+        for name, value in (("a", a), ("b", b), ("c", c)):
+            if not np.all(np.isfinite(value)):
+                raise ShapeError(f"Fourier coefficients {name} hold non-finite values; give finite numbers.")
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+
+    @property
+    def n(self) -> int:
+        return self.c.size
+
+    @property
+    def harmonics(self) -> int:
+        return self.a.shape[0]
+
+    @property
+    def wf(self) -> float:
+        """Base angular frequency (rad/s)."""
+        return 2.0 * math.pi * self.base_freq
+
+    @property
+    def period(self) -> float:
+        return 1.0 / self.base_freq
+
+    @property
+    def duration(self) -> float:
+        return self.periods * self.period
+
+    def evaluate(self, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """q, dq, ddq at times ``t`` (s): each of shape (len(t), n)."""
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        lw = self.wf * np.arange(1, self.harmonics + 1)  # (N,)
+        phase = np.outer(t, lw)  # (m, N)
+        s, co = np.sin(phase), np.cos(phase)
+        q = self.c + (s / lw) @ self.a - (co / lw) @ self.b
+        dq = co @ self.a + s @ self.b
+        ddq = (-s * lw) @ self.a + (co * lw) @ self.b
+        return q, dq, ddq
+
+    def sample(self, rate: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(t, q, dq, ddq) on a uniform grid at ``rate`` Hz over the whole duration, ends included."""
+        t = uniform_grid(self.duration, rate)
+        return (t, *self.evaluate(t))
+
+    def to_dict(self) -> dict:
+        return {
+            "type": "fourier",
+            "n_joints": self.n,
+            "harmonics": self.harmonics,
+            "base_freq": self.base_freq,
+            "periods": int(self.periods),
+            "a": self.a.tolist(),
+            "b": self.b.tolist(),
+            "c": self.c.tolist(),
+            "meta": self.meta,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict) -> FourierTrajectory:
+        try:
+            return cls(
+                a=np.asarray(data["a"], dtype=float),
+                b=np.asarray(data["b"], dtype=float),
+                c=np.asarray(data["c"], dtype=float),
+                base_freq=float(data["base_freq"]),
+                periods=int(data.get("periods", 1)),
+                meta=dict(data.get("meta", {})),
+            )
+        except KeyError as exc:
+            raise ModelFileError(
+                f"the Fourier trajectory has no field {exc}; it needs a, b, c and base_freq."
+            ) from None
+
+    def save(self, path: str | Path) -> None:
+        """Write the coefficients and metadata as JSON."""
+        write_atomic(path, json.dumps(self.to_dict(), indent=2))
+
+
+@dataclass(frozen=True, eq=False)
+class SampledTrajectory:
+    """A trajectory on a time grid, interpolated linearly between samples.
+
+    Parameters
+    ----------
+    t : ndarray, shape (m,)
+        Strictly increasing times (s).
+    q, dq, ddq : ndarray, shape (m, n)
+        Positions (rad), velocities (rad/s), accelerations (rad/s^2).
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    dq: np.ndarray
+    ddq: np.ndarray
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        t = np.asarray(self.t, dtype=float).ravel()
+        arrays = [np.atleast_2d(np.asarray(v, dtype=float)) for v in (self.q, self.dq, self.ddq)]
+        if any(a.shape != arrays[0].shape or a.shape[0] != t.size for a in arrays):
+            raise ShapeError(
+                f"t has {t.size} samples, q {arrays[0].shape}, dq {arrays[1].shape}, ddq {arrays[2].shape}; "
+                "give one row per time stamp and the same joints in each."
+            )
+        if t.size < 2 or np.any(np.diff(t) <= 0):
+            raise ShapeError("the time stamps of a sampled trajectory must be at least two and strictly increasing.")
+        object.__setattr__(self, "t", t)
+        for name, value in zip(("q", "dq", "ddq"), arrays, strict=True):
+            object.__setattr__(self, name, value)
+
+    @property
+    def n(self) -> int:
+        return self.q.shape[1]
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1] - self.t[0])
+
+    def evaluate(self, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        t = np.atleast_1d(np.asarray(t, dtype=float)) + self.t[0]
+        out = []
+        for arr in (self.q, self.dq, self.ddq):
+            out.append(np.column_stack([np.interp(t, self.t, arr[:, j]) for j in range(self.n)]))
+        return out[0], out[1], out[2]
+
+    def to_csv(self, path: str | Path) -> None:
+        """Write ``t, q_1..q_n, dq_1..dq_n, ddq_1..ddq_n``."""
+        write_trajectory_csv(path, self.t, self.q, self.dq, self.ddq)
+
+
+def uniform_grid(duration: float, rate: float) -> np.ndarray:
+    """Times 0, 1/rate, ..., duration (the end included when it falls on the grid)."""
+    if not rate > 0:
+        raise ShapeError(f"the sampling rate is {rate}; give a positive rate in Hz.")
+    steps = int(round(duration * rate))
+    return np.arange(steps + 1) / rate
+
+
+def write_trajectory_csv(path, t, q, dq, ddq) -> None:
+    """Write a sampled trajectory as CSV with a header."""
+    n = q.shape[1]
+    header = ["t"] + [f"{k}_{j + 1}" for k in ("q", "dq", "ddq") for j in range(n)]
+    rows = np.column_stack([t, q, dq, ddq])
+    lines = [",".join(header)]
+    lines += [",".join(repr(float(v)) for v in row) for row in rows]
+    write_atomic(path, "\n".join(lines) + "\n")
+
+
+def load_trajectory(path: str | Path) -> FourierTrajectory | SampledTrajectory:
+    """Read a trajectory file: JSON (Fourier coefficients) or CSV (``t, q_i, dq_i, ddq_i``)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ModelFileError(f"the trajectory file '{path}' does not exist; give the file written by dynid excite.")
+    if path.suffix.lower() == ".json":
+        try:
+            data = json.loads(path.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise ModelFileError(f"the trajectory file '{path}' is not valid JSON ({exc}); rewrite it.") from None
+        if not isinstance(data, dict) or data.get("type") != "fourier":
+            raise ModelFileError(
+                f"the trajectory file '{path}' is not a dynid Fourier trajectory (no \"type\": \"fourier\"); "
+                "give a file written by dynid excite."
+            )
+        return FourierTrajectory.from_dict(data)
+    if path.suffix.lower() == ".csv":
+        with open(path, newline="") as handle:
+            reader = csv.reader(handle)
+            header = next(reader, [])
+        n = sum(1 for h in header if h.startswith("q_"))
+        need = ["t"] + [f"{k}_{j + 1}" for k in ("q", "dq", "ddq") for j in range(n)]
+        missing = [h for h in need if h not in header]
+        if n == 0 or missing:
+            raise ModelFileError(
+                f"the trajectory file '{path}' lacks the columns {', '.join(missing) or 'q_1..q_n'}; a sampled "
+                "trajectory needs t, q_i, dq_i and ddq_i."
+            )
+        data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+        idx = {h: i for i, h in enumerate(header)}
+
+        def cols(prefix: str) -> np.ndarray:
+            return data[:, [idx[f"{prefix}_{j + 1}"] for j in range(n)]]
+
+        return SampledTrajectory(t=data[:, idx["t"]], q=cols("q"), dq=cols("dq"), ddq=cols("ddq"))
+    raise ModelFileError(f"the trajectory file '{path}' has the extension '{path.suffix}'; give a .json or .csv file.")
