@@ -324,11 +324,31 @@ class Recording:
     description: str
 
     def __call__(self, root: str | os.PathLike[str] | None = None) -> Dataset:
-        """Load the recording (see :attr:`loader`)."""
+        """Load the recording.
+
+        Parameters
+        ----------
+        root : str or path-like, optional
+            Folder holding the recordings, or the recording's own folder; default :func:`find_shared_data`.
+
+        Returns
+        -------
+        Dataset
+        """
         return self.loader(root)
 
     def model_path(self, root: str | os.PathLike[str] | None = None) -> Path:
-        """Absolute path of the recording's URDF model."""
+        """Path of the recording's URDF model.
+
+        Parameters
+        ----------
+        root : str or path-like, optional
+            Folder holding the recordings, or the recording's own folder; default :func:`find_shared_data`.
+
+        Returns
+        -------
+        Path
+        """
         return _require(recording_folder(self.name, root) / self.model, f"the {self.name} model")
 
 
