@@ -208,6 +208,11 @@ def test_round_trip(rng: np.random.Generator, tmp_path: Path, suffix: str, deriv
     assert sorted(p.name for p in tmp_path.iterdir()) == [f"data{suffix}"]  # no temporary file left
 
 
+def test_saved_file_is_readable_by_others(rng: np.random.Generator, tmp_path: Path) -> None:
+    path = save_dataset(make_dataset(rng), tmp_path / "d.npz")
+    assert path.stat().st_mode & 0o044 == 0o044  # not the 0600 of a temporary file
+
+
 def test_csv_header_follows_the_contract(rng: np.random.Generator, tmp_path: Path) -> None:
     path = save_dataset(make_dataset(rng, n=2, derivatives=True), tmp_path / "d.csv")
     header = path.read_text().splitlines()[0]

@@ -744,9 +744,11 @@ def save_dataset(ds: Dataset, path: str | os.PathLike[str]) -> Path:
     folder = path.parent
     if not folder.is_dir():
         raise DataError(f"cannot write {path.name}: the folder {folder} does not exist; create it first")
+    mode = path.stat().st_mode & 0o777 if path.is_file() else 0o644  # mkstemp's own mode is 0600
     fd, tmp_name = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".tmp")
     tmp = Path(tmp_name)
     try:
+        os.fchmod(fd, mode)
         if suffix == ".csv":
             with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as f:
                 _write_csv(ds, f)
