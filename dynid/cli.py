@@ -39,7 +39,9 @@ COMMANDS = {
 
 def _available() -> dict[str, str]:
     return {
-        name: mod for name, mod in COMMANDS.items() if importlib.util.find_spec(f"dynid.commands.{mod}") is not None
+        name: mod
+        for name, mod in COMMANDS.items()
+        if importlib.util.find_spec(f"dynid.commands.{mod}") is not None
     }
 
 

@@ -24,10 +24,14 @@ def run(args: argparse.Namespace) -> int:
     from dynid.symbolic.export import DEFAULT_EXPORT, export_c
 
     robot = robot_from_args(args)
-    functions = DEFAULT_EXPORT if args.functions is None else tuple(f.strip() for f in args.functions.split(","))
+    functions = (
+        DEFAULT_EXPORT if args.functions is None else tuple(f.strip() for f in args.functions.split(","))
+    )
     result = export_c(robot, args.out, functions=functions)
-    print(f"wrote {result.folder}/: {result.source.name}, {result.header.name}, {result.batch_source.name}, "
-          f"{result.library.name}, example.c + Makefile, manifest.json, dynid_loader.py")
+    print(
+        f"wrote {result.folder}/: {result.source.name}, {result.header.name}, {result.batch_source.name}, "
+        f"{result.library.name}, example.c + Makefile, manifest.json, dynid_loader.py"
+    )
     print(f"  build the example: make -C {result.folder} && {result.folder}/example")
     print(f"  from Python: CompiledLibrary('{result.folder}').base_regressor(q, dq, ddq)  (dynid_loader.py)")
     return 0

@@ -21,8 +21,10 @@ def run(args: argparse.Namespace) -> int:
 
     robot = robot_from_args(args)
     base = base_parameters(robot_functions(robot))
-    print(f"{robot.name}: {robot.n} joints, {base.n_base} base parameters ({int(base.gravity_related.sum())} "
-          f"gravity-related), source {robot.source}")
+    print(
+        f"{robot.name}: {robot.n} joints, {base.n_base} base parameters ({int(base.gravity_related.sum())} "
+        f"gravity-related), source {robot.source}"
+    )
     print(f"{'joint':>5} {'name':<22} {'type':<4} {'q_min':>8} {'q_max':>8} {'dq_max':>7} {'ddq_max':>7}")
     for j, joint in enumerate(robot.joints):
         print(

@@ -201,7 +201,9 @@ class SampledTrajectory:
                 "give one row per time stamp and the same joints in each."
             )
         if t.size < 2 or np.any(np.diff(t) <= 0):
-            raise ShapeError("the time stamps of a sampled trajectory must be at least two and strictly increasing.")
+            raise ShapeError(
+                "the time stamps of a sampled trajectory must be at least two and strictly increasing."
+            )
         object.__setattr__(self, "t", t)
         for name, value in zip(("q", "dq", "ddq"), arrays, strict=True):
             object.__setattr__(self, name, value)
@@ -230,7 +232,7 @@ def uniform_grid(duration: float, rate: float) -> np.ndarray:
     """Times 0, 1/rate, ..., duration (the end included when it falls on the grid)."""
     if not rate > 0:
         raise ShapeError(f"the sampling rate is {rate}; give a positive rate in Hz.")
-    steps = int(round(duration * rate))
+    steps = round(duration * rate)
     return np.arange(steps + 1) / rate
 
 
@@ -248,15 +250,19 @@ def load_trajectory(path: str | Path) -> FourierTrajectory | SampledTrajectory:
     """Read a trajectory file: JSON (Fourier coefficients) or CSV (``t, q_i, dq_i, ddq_i``)."""
     path = Path(path)
     if not path.is_file():
-        raise ModelFileError(f"the trajectory file '{path}' does not exist; give the file written by dynid excite.")
+        raise ModelFileError(
+            f"the trajectory file '{path}' does not exist; give the file written by dynid excite."
+        )
     if path.suffix.lower() == ".json":
         try:
             data = json.loads(path.read_text())
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise ModelFileError(f"the trajectory file '{path}' is not valid JSON ({exc}); rewrite it.") from None
+            raise ModelFileError(
+                f"the trajectory file '{path}' is not valid JSON ({exc}); rewrite it."
+            ) from None
         if not isinstance(data, dict) or data.get("type") != "fourier":
             raise ModelFileError(
-                f"the trajectory file '{path}' is not a dynid Fourier trajectory (no \"type\": \"fourier\"); "
+                f'the trajectory file \'{path}\' is not a dynid Fourier trajectory (no "type": "fourier"); '
                 "give a file written by dynid excite."
             )
         return FourierTrajectory.from_dict(data)
@@ -279,4 +285,6 @@ def load_trajectory(path: str | Path) -> FourierTrajectory | SampledTrajectory:
             return data[:, [idx[f"{prefix}_{j + 1}"] for j in range(n)]]
 
         return SampledTrajectory(t=data[:, idx["t"]], q=cols("q"), dq=cols("dq"), ddq=cols("ddq"))
-    raise ModelFileError(f"the trajectory file '{path}' has the extension '{path.suffix}'; give a .json or .csv file.")
+    raise ModelFileError(
+        f"the trajectory file '{path}' has the extension '{path.suffix}'; give a .json or .csv file."
+    )

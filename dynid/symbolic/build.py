@@ -71,7 +71,9 @@ def _site_package(name: str) -> Path:
 
     spec = importlib.util.find_spec(name)
     if spec is None or spec.origin is None:
-        raise GeneratorError(f"the package '{name}' is not importable; install dynid's dependencies with pip.")
+        raise GeneratorError(
+            f"the package '{name}' is not importable; install dynid's dependencies with pip."
+        )
     return Path(spec.origin).parent
 
 
@@ -219,7 +221,9 @@ def robot_function_dir(spec: str, progress: Progress | None = _stderr) -> Path:
         work = Path(tempfile.mkdtemp(prefix=f"{key}.tmp", dir=folder.parent))
         try:
             (work / "robot.spec").write_text(spec)
-            proc = subprocess.run([str(exe), str(work / "robot.spec"), str(work)], capture_output=True, text=True)
+            proc = subprocess.run(
+                [str(exe), str(work / "robot.spec"), str(work)], capture_output=True, text=True
+            )
             if proc.returncode != 0:
                 raise GeneratorError(
                     f"the symbolic generator could not build this robot: {proc.stderr.strip()}; "

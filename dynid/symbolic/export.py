@@ -110,7 +110,8 @@ def _write_sources(
                 "symbol": symbol,
                 "inputs": [{"name": g.name_in(i), "size": g.numel_in(i)} for i in range(g.n_in())],
                 "outputs": [
-                    {"name": g.name_out(i), "rows": g.size1_out(i), "cols": g.size2_out(i)} for i in range(g.n_out())
+                    {"name": g.name_out(i), "rows": g.size1_out(i), "cols": g.size2_out(i)}
+                    for i in range(g.n_out())
                 ],
             }
         )
@@ -120,17 +121,32 @@ def _write_sources(
             f"                     {g.n_in()}, {g.n_out()}, in, out, n);\n}}\n"
         )
     gen.generate(str(folder) + os.sep)
-    batch = (_HERE / "batch.c").read_text().replace("@HEADER@", f"{stem}.h").replace("@WRAPPERS@", "".join(wrappers))
+    batch = (
+        (_HERE / "batch.c")
+        .read_text()
+        .replace("@HEADER@", f"{stem}.h")
+        .replace("@WRAPPERS@", "".join(wrappers))
+    )
     (folder / f"{stem}_batch.c").write_text(batch)
     # Declare the batch functions in the header too.
     header = folder / f"{stem}.h"
     decls = "".join(
-        f"int {e['symbol']}_batch(const double* const* in, double* const* out, long long n);\n" for e in entries
+        f"int {e['symbol']}_batch(const double* const* in, double* const* out, long long n);\n"
+        for e in entries
     )
     text = header.read_text()
-    marker = "#ifdef __cplusplus\n} /* extern \"C\" */"
-    text = text.replace(marker, "/* N samples per call, row-major (N, k) inputs and (N, rows, cols) outputs. */\n"
-                        + decls + "\n" + marker) if marker in text else text + decls
+    marker = '#ifdef __cplusplus\n} /* extern "C" */'
+    text = (
+        text.replace(
+            marker,
+            "/* N samples per call, row-major (N, k) inputs and (N, rows, cols) outputs. */\n"
+            + decls
+            + "\n"
+            + marker,
+        )
+        if marker in text
+        else text + decls
+    )
     header.write_text(text)
     return stem, entries
 
@@ -279,7 +295,12 @@ def compiled_functions(
     base = base_parameters(funcs)
     digest = hashlib.sha256(
         "|".join(
-            [funcs.folder.name, ",".join(functions), ",".join(map(str, base.independent)), metadata.version("casadi")]
+            [
+                funcs.folder.name,
+                ",".join(functions),
+                ",".join(map(str, base.independent)),
+                metadata.version("casadi"),
+            ]
         ).encode()
         + (_HERE / "batch.c").read_bytes()
     ).hexdigest()[:20]

@@ -11,11 +11,14 @@ with ``m c`` the first moment and the inertia about the joint frame origin, in t
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import math
+import os
 import sys
+import tempfile
 import tomllib
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
@@ -151,7 +154,9 @@ class RobotModel:
     def __post_init__(self) -> None:
         n = len(self.joints)
         if n == 0:
-            raise RobotModelError(f"the robot '{self.name}' has no movable joint; give an arm with at least one.")
+            raise RobotModelError(
+                f"the robot '{self.name}' has no movable joint; give an arm with at least one."
+            )
         for label, size in (
             ("params", 10 * n),
             ("armature", n),
@@ -167,7 +172,9 @@ class RobotModel:
                     f"{n} joints."
                 )
             if not np.all(np.isfinite(value)):
-                raise RobotModelError(f"{label} of the robot '{self.name}' holds non-finite values; fix the model.")
+                raise RobotModelError(
+                    f"{label} of the robot '{self.name}' holds non-finite values; fix the model."
+                )
             value.setflags(write=False)
             object.__setattr__(self, label, value)
         if np.any(self.q_min >= self.q_max):
@@ -273,9 +280,7 @@ class RobotModel:
             changes[label] = arr.copy()
         return replace(self, **changes)
 
-    def with_params(
-        self, params: np.ndarray | None = None, armature: np.ndarray | None = None
-    ) -> RobotModel:
+    def with_params(self, params: np.ndarray | None = None, armature: np.ndarray | None = None) -> RobotModel:
         """Return a copy with other standard parameters and/or armature (e.g. a perturbed truth)."""
         out = replace(
             self,
@@ -367,7 +372,9 @@ def _from_pin_model(model, *, name: str, source: str, tool: str | None, ddq_max)
     import pinocchio as pin
 
     if model.nq != model.nv:
-        raise RobotModelError(f"the model '{source}' has nq != nv; dynid handles arms with single-DOF joints only.")
+        raise RobotModelError(
+            f"the model '{source}' has nq != nv; dynid handles arms with single-DOF joints only."
+        )
     joints = []
     params = []
     for i in range(1, model.njoints):
@@ -434,15 +441,45 @@ def _from_pin_model(model, *, name: str, source: str, tool: str | None, ddq_max)
     )
 
 
+class _Captured:
+    text = ""
+
+
+@contextlib.contextmanager
+def _captured_stderr() -> Iterator[_Captured]:
+    """Catch what C++ libraries print on file descriptor 2 (urdfdom's parse errors)."""
+    said = _Captured()
+    try:
+        fd = sys.stderr.fileno()
+    except (AttributeError, OSError, ValueError):  # no real stderr (e.g. captured by a host)
+        yield said
+        return
+    sys.stderr.flush()
+    saved = os.dup(fd)
+    with tempfile.TemporaryFile(mode="w+b") as tmp:
+        os.dup2(tmp.fileno(), fd)
+        try:
+            yield said
+        finally:
+            os.dup2(saved, fd)
+            os.close(saved)
+            tmp.seek(0)
+            said.text = tmp.read().decode(errors="replace")
+
+
 def _load_urdf(path: Path, *, name: str, source: str, lock=(), tool=None, ddq_max=None) -> RobotModel:
     import pinocchio as pin
 
     if not path.is_file():
-        raise RobotModelError(f"the URDF file '{path}' does not exist; give the path of an existing .urdf file.")
+        raise RobotModelError(
+            f"the URDF file '{path}' does not exist; give the path of an existing .urdf file."
+        )
     try:
-        model = pin.buildModelFromUrdf(str(path))
+        with _captured_stderr() as said:
+            model = pin.buildModelFromUrdf(str(path))
     except (ValueError, RuntimeError) as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        lines = [ln.strip() for ln in (said.text or str(exc)).splitlines() if ln.strip().startswith("Error")]
+        first = lines[0].removeprefix("Error:").strip() if lines else str(exc).strip().splitlines()[0]
         raise RobotModelError(
             f"the URDF file '{path}' could not be read ({first}); check that it is a well-formed URDF."
         ) from None
@@ -535,7 +572,13 @@ def _load_mdh(path: Path, *, name: str) -> RobotModel:
         # Either way the placement is the DH transform at q = 0, followed by the joint's motion.
         rot, trans = mdh_placement(dh["alpha"][i], dh["a"][i], dh["d"][i], dh["theta"][i])
         joints.append(
-            Joint(name=f"joint_{i + 1}", kind="RZ" if kinds[i] == "R" else "PZ", parent=i, rotation=rot, translation=trans)
+            Joint(
+                name=f"joint_{i + 1}",
+                kind="RZ" if kinds[i] == "R" else "PZ",
+                parent=i,
+                rotation=rot,
+                translation=trans,
+            )
         )
         params.append(
             standard_from_com(
@@ -552,7 +595,10 @@ def _load_mdh(path: Path, *, name: str) -> RobotModel:
         )
     tool = table.get("tool", {})
     t_rot, t_pos = mdh_placement(
-        float(tool.get("alpha", 0.0)), float(tool.get("a", 0.0)), float(tool.get("d", 0.0)), float(tool.get("theta", 0.0))
+        float(tool.get("alpha", 0.0)),
+        float(tool.get("a", 0.0)),
+        float(tool.get("d", 0.0)),
+        float(tool.get("theta", 0.0)),
     )
     return RobotModel(
         name=str(table.get("name", name)),
@@ -644,7 +690,12 @@ def load_robot(
             info = BUILTIN_ROBOTS[key]
             urdf = example_robot_data_dir() / info["urdf"]
             model = _load_urdf(
-                urdf, name=key, source=key, lock=info["lock"], tool=tool or info["tool"], ddq_max=info["ddq_max"]
+                urdf,
+                name=key,
+                source=key,
+                lock=info["lock"],
+                tool=tool or info["tool"],
+                ddq_max=info["ddq_max"],
             )
         elif path.suffix.lower() == ".urdf":
             model = _load_urdf(path, name=path.stem, source=str(path), tool=tool)

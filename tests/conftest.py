@@ -1,0 +1,46 @@
+"""Shared fixtures and markers."""
+
+from __future__ import annotations
+
+import os
+
+# One BLAS / OpenMP thread: several copies load in one process (casadi, pinocchio, numpy).
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+DATA = Path(__file__).resolve().parent / "data"
+SHARED_DATA = Path(os.environ.get("DYNID_SHARED_DATA", REPO.parent / "shared" / "data"))
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(20231121)
+
+
+@pytest.fixture(scope="session")
+def ur5():
+    from dynid.symbolic import load_robot
+
+    return load_robot("ur5")
+
+
+@pytest.fixture(scope="session")
+def panda():
+    from dynid.symbolic import load_robot
+
+    return load_robot("panda")
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    """The real recordings beside the repository; tests that need them skip when absent."""
+    if not SHARED_DATA.is_dir():
+        pytest.skip(f"the real recordings are not at {SHARED_DATA} (set DYNID_SHARED_DATA to their folder)")
+    return SHARED_DATA
