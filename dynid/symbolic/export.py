@@ -84,11 +84,19 @@ def _functions_to_export(funcs: RobotFunctions, base: BaseParameters, names) -> 
     return [available[n] for n in names]
 
 
-def _renamed(f: ca.Function, name: str) -> ca.Function:
-    """The same function under another name, outputs made dense (the batch wrapper needs dense)."""
+def _renamed(f: ca.Function, name: str) -> tuple[ca.Function, list[tuple[int, int]]]:
+    """The same function under another name, for C: dense outputs stored row-major.
+
+    CasADi stores a matrix column by column; the exported function returns the transpose, whose
+    column-major storage is the row-major (C and numpy) storage of the matrix itself.  The batch
+    entry point then writes every sample straight into the caller's array, with no copy.
+    Returns the function and the (rows, cols) of each original output.
+    """
     args = f.sx_in()
     outs = f.call(args)
-    return ca.Function(name, args, [ca.densify(o) for o in outs], f.name_in(), f.name_out())
+    shapes = [(int(o.size1()), int(o.size2())) for o in outs]
+    dense = [ca.densify(o.T) for o in outs]
+    return ca.Function(name, args, dense, f.name_in(), f.name_out(), {"cse": True}), shapes
 
 
 def _write_sources(
@@ -102,7 +110,7 @@ def _write_sources(
     wrappers = []
     for name, f in zip(names, _functions_to_export(funcs, base, names), strict=True):
         symbol = f"{prefix}_{name}"
-        g = _renamed(f, symbol)
+        g, shapes = _renamed(f, symbol)
         gen.add(g)
         entries.append(
             {
@@ -110,8 +118,7 @@ def _write_sources(
                 "symbol": symbol,
                 "inputs": [{"name": g.name_in(i), "size": g.numel_in(i)} for i in range(g.n_in())],
                 "outputs": [
-                    {"name": g.name_out(i), "rows": g.size1_out(i), "cols": g.size2_out(i)}
-                    for i in range(g.n_out())
+                    {"name": g.name_out(i), "rows": rows, "cols": cols} for i, (rows, cols) in enumerate(shapes)
                 ],
             }
         )
@@ -155,7 +162,7 @@ def _compile(folder: Path, stem: str, progress: Progress | None) -> Path:
     cc = find_compiler("c")
     lib = folder / f"lib{stem}.so"
     tmp = folder / f"lib{stem}.so.tmp{os.getpid()}"
-    cmd = [cc, "-O2", "-fPIC", "-shared", f"{stem}.c", f"{stem}_batch.c", "-o", tmp.name, "-lm"]
+    cmd = [cc, "-O3", "-fPIC", "-shared", f"{stem}.c", f"{stem}_batch.c", "-o", tmp.name, "-lm"]
     if progress:
         progress(f"dynid: compiling {lib.name} with {Path(cc).name}...")
     proc = subprocess.run(cmd, cwd=folder, capture_output=True, text=True, check=False)
@@ -178,7 +185,7 @@ def _example(stem: str, prefix: str, robot: RobotModel, base: BaseParameters) ->
 
 int main(void) {{
   double q[{n}], dq[{n}], ddq[{n}];
-  double Yb[{n} * {nb}]; /* column-major, {n} rows x {nb} columns */
+  double Yb[{n} * {nb}]; /* row-major (C order): {n} rows x {nb} columns */
   const casadi_real* arg[{prefix}_base_regressor_SZ_ARG];
   casadi_real* res[{prefix}_base_regressor_SZ_RES];
   casadi_int iw[{prefix}_base_regressor_SZ_IW + 1];
@@ -196,7 +203,7 @@ int main(void) {{
   if ({prefix}_base_regressor(arg, res, iw, w, 0)) return 1;
   printf("Y_b of {robot.name} ({n} x {nb}) at q_i = 0.1 i, dq = 0.2, ddq = -0.3:\\n");
   for (i = 0; i < {n}; ++i) {{
-    for (j = 0; j < {nb}; ++j) printf("% .6e ", Yb[j * {n} + i]);
+    for (j = 0; j < {nb}; ++j) printf("% .6e ", Yb[i * {nb} + j]);
     printf("\\n");
   }}
   return 0;
