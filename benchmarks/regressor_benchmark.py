@@ -67,6 +67,37 @@ def warm_request_seconds(name: str) -> float:
     return float(run.stdout.strip().splitlines()[-1])
 
 
+def bench_robot(name: str, m: int) -> tuple[list[float], int]:
+    """Print one robot's rows; return its speed-up ratios and the threads of the compiled path."""
+    robot = load_robot(name)
+    funcs = robot_functions(robot)
+    base = base_parameters(funcs)
+    lib = compiled_functions(robot)
+    q, dq, ddq = random_states(robot, m, np.random.default_rng(0))
+    cases = (
+        ("regressor", lib.regressor, lambda: funcs.regressor_numeric(q, dq, ddq), None, 10 * robot.n),
+        ("base_regressor", lib.base_regressor, lambda: base.evaluate(q, dq, ddq), base.independent, base.n_base),
+    )
+    ratios = []
+    for label, compiled, vm, columns, width in cases:
+        # The three paths give the same numbers; then time them.
+        ref = pinocchio_loop(robot, q[:200], dq[:200], ddq[:200], columns)
+        assert np.allclose(compiled(q[:200], dq[:200], ddq[:200]), ref, atol=1e-9)
+        buffer = np.ones((m, robot.n, width))  # touched: its pages exist
+        t_new = best_of(lambda c=compiled: c(q, dq, ddq))
+        t_reused = best_of(lambda c=compiled, b=buffer: c(q, dq, ddq, out=b))
+        t_pin_new = best_of(lambda c=columns: pinocchio_loop(robot, q, dq, ddq, c), repeats=1)
+        t_pin_reused = best_of(lambda c=columns, b=buffer: pinocchio_loop(robot, q, dq, ddq, c, b), repeats=1)
+        t_vm = best_of(vm, repeats=1)
+        us = [1e6 * t / m for t in (t_new, t_reused, t_pin_new, t_pin_reused, t_vm)]
+        print(
+            f"{name:<6} {label:<15} " + " ".join(f"{u:>8.2f}u" for u in us) + f"   {t_pin_new / t_new:>11.1f}x "
+            f"{t_pin_reused / t_reused:>11.1f}x"
+        )
+        ratios += [t_pin_new / t_new, t_pin_reused / t_reused]
+    return ratios, lib.threads
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=100_000)
@@ -83,35 +114,11 @@ def main() -> None:
     print(f"{'':<22} {'new':>9} {'reused':>9} {'new':>9} {'reused':>9} {'new':>9}   {'new':>12} {'reused':>12}")
     print("-" * len(header))
     ratios = []
-    lib1_threads = None
+    threads = 1
     for name in ("ur5", "panda"):
-        robot = load_robot(name)
-        funcs = robot_functions(robot)
-        base = base_parameters(funcs)
-        lib = compiled_functions(robot)
-        lib1_threads = lib.threads
-        q, dq, ddq = random_states(robot, m, np.random.default_rng(0))
-        cases = (
-            ("regressor", lib.regressor, lambda: funcs.regressor_numeric(q, dq, ddq), None, 10 * robot.n),
-            ("base_regressor", lib.base_regressor, lambda: base.evaluate(q, dq, ddq), base.independent, base.n_base),
-        )
-        for label, compiled, vm, columns, width in cases:
-            # The three paths give the same numbers; then time them.
-            ref = pinocchio_loop(robot, q[:200], dq[:200], ddq[:200], columns)
-            assert np.allclose(compiled(q[:200], dq[:200], ddq[:200]), ref, atol=1e-9)
-            buffer = np.ones((m, robot.n, width))  # touched: its pages exist
-            t_new = best_of(lambda c=compiled: c(q, dq, ddq))
-            t_reused = best_of(lambda c=compiled, b=buffer: c(q, dq, ddq, out=b))
-            t_pin_new = best_of(lambda c=columns: pinocchio_loop(robot, q, dq, ddq, c), repeats=1)
-            t_pin_reused = best_of(lambda c=columns, b=buffer: pinocchio_loop(robot, q, dq, ddq, c, b), repeats=1)
-            t_vm = best_of(vm, repeats=1)
-            us = [1e6 * t / m for t in (t_new, t_reused, t_pin_new, t_pin_reused, t_vm)]
-            print(
-                f"{name:<6} {label:<15} " + " ".join(f"{u:>8.2f}u" for u in us) + f"   {t_pin_new / t_new:>11.1f}x "
-                f"{t_pin_reused / t_reused:>11.1f}x"
-            )
-            ratios += [t_pin_new / t_new, t_pin_reused / t_reused]
-    print(f"\n(u = microseconds per sample; the compiled path ran on {lib1_threads} thread(s), set DYNID_NUM_THREADS")
+        robot_ratios, threads = bench_robot(name, m)
+        ratios += robot_ratios
+    print(f"\n(u = microseconds per sample; the compiled path ran on {threads} thread(s), set DYNID_NUM_THREADS")
     print(" to change; CasADi VM: F.map(N) plus the conversion of its DM result to numpy)")
     print(
         f"target: compiled batch >= 4x faster than numeric Pinocchio: worst ratio {min(ratios):.1f}x -> "
