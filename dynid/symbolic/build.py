@@ -30,6 +30,7 @@ __all__ = [
     "FUNCTION_NAMES",
     "cache_dir",
     "find_compiler",
+    "generator_is_built",
     "generator_path",
     "robot_function_dir",
 ]
@@ -155,6 +156,11 @@ def _run_with_progress(cmd: list[str], what: str, expected: str, progress: Progr
         raise GeneratorError(f"{what} failed (exit {proc.returncode}); the compiler said:\n{tail}")
     if progress:
         progress(f"dynid: {what}: done in {time.monotonic() - start:.0f} s")
+
+
+def generator_is_built() -> bool:
+    """Whether the generator of this environment is compiled already (no one-time build ahead)."""
+    return (cache_dir() / "generator" / _generator_key() / "dynid-generator").is_file()
 
 
 def generator_path(progress: Progress | None = _stderr) -> Path:

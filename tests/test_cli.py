@@ -1,0 +1,89 @@
+"""The dynid command: subcommands run, figures land in --json, mistakes end in one sentence."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from dynid.cli import main
+
+
+def test_help_lists_the_commands(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    for command in ("demo", "info", "export-c"):
+        assert command in out
+
+
+def test_info_writes_its_figures(tmp_path, capsys):
+    figures = tmp_path / "ur5.json"
+    assert main(["info", "--robot", "ur5", "--dq-max", "1.5", "--json", str(figures)]) == 0
+    data = json.loads(figures.read_text())
+    assert data["n_base"] == 36
+    assert data["limits"]["dq_max"] == [1.5] * 6
+    assert len(data["base_parameters"]) == 36
+    assert "36 base parameters" in capsys.readouterr().out
+
+
+def test_export_c_command(tmp_path, capsys):
+    out = tmp_path / "panda_c"
+    assert (
+        main(["export-c", "--robot", "panda", "--out", str(out), "--functions", "base_regressor,rnea"]) == 0
+    )
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert [f["name"] for f in manifest["functions"]] == ["base_regressor", "rnea"]
+    assert (out / "libdynid_panda.so").is_file()
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (
+            ["info", "--robot", "ur6"],
+            r"dynid info: error: unknown robot 'ur6'; give a built-in name \(ur5, ur10, panda\)",
+        ),
+        (["info", "--robot", "ur5", "--dq-max", "1,2"], r"dq_max has 2 values; the robot 'ur5' has 6 joints"),
+        (
+            ["info", "--robot", "ur5", "--dq-max", "fast"],
+            r"--dq-max is 'fast'; give numbers separated by commas",
+        ),
+        (
+            ["export-c", "--robot", "ur5", "--out", "/nonexistent/dir/x"],
+            r"the folder '/nonexistent/dir' does not exist",
+        ),
+        (["export-c", "--robot", "ur5", "--out", "{tmp}/x", "--functions", "jac"], r"cannot export jac"),
+    ],
+)
+def test_mistakes_end_in_one_sentence(argv, message, capsys, tmp_path):
+    argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert "Traceback" not in err
+    import re
+
+    assert re.search(message, err), err
+    assert not (tmp_path / "x").exists()
+
+
+def test_the_installed_command_runs():
+    """The console script itself (not just main): exit code and no traceback on a mistake."""
+    run = subprocess.run(
+        [sys.executable, "-m", "dynid.cli", "info", "--robot", "nowhere.urdf"], capture_output=True, text=True
+    )
+    assert run.returncode == 2
+    assert run.stderr.strip().startswith("dynid info: error: the URDF file 'nowhere.urdf' does not exist")
+    assert "Traceback" not in run.stderr
+
+
+def test_demo_runs_what_exists(tmp_path, capsys):
+    figures = tmp_path / "demo.json"
+    assert main(["demo", "--out", str(tmp_path / "demo"), "--quick", "--json", str(figures)]) == 0
+    data = json.loads(figures.read_text())
+    assert data["n_base"] == 36
+    assert data["c_export_max_error"] < 1e-10
