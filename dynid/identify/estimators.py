@@ -1,0 +1,504 @@
+"""Layer 1: link parameters by least squares (OLS, WLS, GLS, IRLS), in scikit-learn style.
+
+>>> est = IRLS(robot=load_robot("ur5")).fit(dataset)       # dataset: t, q, tau [, dq, ddq]
+>>> est.params_, est.std_percent_, est.cond_, est.rms_
+>>> tau = est.predict(q, dq, ddq)                           # or est.predict(other_dataset)
+
+The estimators share one data path (:mod:`dynid.identify.linear_system`): preprocessing, the compiled
+regressor, parallel filtering, and a compressed QR factor of the stacked system.  They differ in the
+weighting of the joints (METHOD.md section 4), with ``Omega`` the joint-noise covariance:
+
+=======  ==================================================================================
+OLS      no weighting, ``x = argmin || tau - W x ||^2``
+WLS      per-joint variances ``Omega_jj = var(E_j)`` of the OLS residual
+GLS      full ``Omega = E^T E / (m - p)`` of the OLS residual
+IRLS     GLS repeated with ``Omega`` of the latest residual until ``x`` stops changing
+=======  ==================================================================================
+
+Each whitens the stacked system (``L^-1`` per sample with ``Omega = L L^T``) and solves it by QR;
+normal equations are never formed.  The covariance of the estimate is
+``sigma^2 (W~^T W~)^-1`` with ``W~`` the whitened regressor and ``sigma^2`` the whitened residual
+variance (1 when ``Omega`` is right; estimating it keeps the figures honest when it is not).
+
+The standard deviations assume residuals independent from sample to sample.  Filtered data are
+correlated in time, so with a low-pass (``cutoff``) the reported deviations are too small by up to
+``sqrt(fs / (2 cutoff))``; compare methods on them, do not read them as confidence intervals.
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import Any, ClassVar
+
+import numpy as np
+import scipy.linalg
+from numpy.typing import NDArray
+
+from dynid.exceptions import IdentificationError, UsageError
+from dynid.identify.dataset import Dataset
+from dynid.identify.linear_system import (
+    ColumnSet,
+    LinearSystem,
+    Preprocessing,
+    build_system,
+    describe_joints,
+    linear_torque,
+    prepare,
+    single_blas_thread,
+    still_joints,
+)
+
+__all__ = [
+    "GLS",
+    "IRLS",
+    "OLS",
+    "WLS",
+    "IdentificationWarning",
+    "LinkEstimator",
+    "check_is_fitted",
+]
+
+RANK_TOL = 1e-10
+"""Relative singular value (of the column-normalised weighted regressor) below which a direction of
+the parameters counts as not excited by the data."""
+
+
+class IdentificationWarning(UserWarning):
+    """An identification finished but something deserves attention (e.g. IRLS did not converge)."""
+
+
+def check_is_fitted(estimator: Any, attribute: str = "params_") -> None:
+    """Raise an :class:`IdentificationError` if ``estimator`` has not been fitted.
+
+    Parameters
+    ----------
+    estimator : object
+        An estimator of dynid.
+    attribute : str
+        A fitted attribute (ending in ``_``) that ``fit`` sets.
+    """
+    if not hasattr(estimator, attribute):
+        raise IdentificationError(
+            f"this {type(estimator).__name__} is not fitted yet; call fit(...) before using it"
+        )
+
+
+def whitener(omega: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``L^-1`` (lower triangular) with ``Omega = L L^T``, regularised; identity for a zero ``Omega``.
+
+    Parameters
+    ----------
+    omega : ndarray, shape (n, n)
+        Joint-noise covariance (N^2 m^2).
+    """
+    n = omega.shape[0]
+    scale = float(np.trace(omega)) / n
+    if not np.isfinite(scale) or scale <= 1e-300:
+        return np.eye(n)
+    reg = omega + 1e-10 * scale * np.eye(n)
+    L = np.linalg.cholesky(reg / scale)
+    return scipy.linalg.solve_triangular(L, np.eye(n), lower=True)
+
+
+class LinkEstimator:
+    """Base of the layer-1 estimators (not used alone; see :class:`OLS`, :class:`WLS`, :class:`GLS`,
+    :class:`IRLS`).
+
+    Parameters
+    ----------
+    robot : RobotModel
+        The robot that recorded the data.
+    friction : bool
+        Identify linear friction (Coulomb, viscous, offset per joint) with the link parameters.
+    armature : bool
+        Identify the armature of each joint with the link parameters (folded into a base parameter
+        where its column duplicates one; see ``notes_``).
+    preprocessing : Preprocessing, optional
+        Filtering and differentiation of a dataset (default :class:`Preprocessing`).
+
+    Attributes
+    ----------
+    params_ : ndarray, shape (p,)
+        Identified parameters: base parameters, then armature and friction (SI units).
+    names_, expressions_ : tuple of str
+        Their names and expressions in the standard parameters.
+    cov_ : ndarray, shape (p, p)
+        Covariance of ``params_``.
+    std_, std_percent_ : ndarray, shape (p,)
+        Standard deviations, absolute and in % of ``|params_|``.
+    cond_ : float
+        Condition number of the weighted stacked regressor.
+    rms_ : ndarray, shape (n,)
+        Residual RMS per joint (N m) on the identification samples.
+    omega_ : ndarray, shape (n, n)
+        Joint-noise covariance ``E^T E / (m - p)`` used in the weighting (OLS: of its own residual,
+        for information; it weighs nothing).
+    sigma2_ : float
+        Whitened residual variance.
+    n_samples_ : int
+        Samples used.
+    notes_ : tuple of str
+        Columns folded into others.
+    columns_ : ColumnSet
+        The identified parameters (names, kinds, base map).
+    preprocessing_ : dict
+        Resolved preprocessing settings.
+    """
+
+    method: ClassVar[str] = ""
+
+    def __init__(
+        self,
+        *,
+        robot,
+        friction: bool = True,
+        armature: bool = True,
+        preprocessing: Preprocessing | None = None,
+    ) -> None:
+        self.robot = robot
+        self.friction = friction
+        self.armature = armature
+        self.preprocessing = preprocessing
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(robot={getattr(self.robot, 'name', self.robot)!r})"
+
+    # ------------------------------------------------------------------ fit
+    def fit(self, data: Dataset | LinearSystem) -> LinkEstimator:
+        """Identify the parameters.
+
+        Parameters
+        ----------
+        data : Dataset or LinearSystem
+            Measured data, or a system already built by :func:`build_system` (several estimators can
+            then share the pass over the data).
+
+        Returns
+        -------
+        self
+        """
+        system = self._system(data)
+        with single_blas_thread():
+            self._fit_system(system)
+        return self
+
+    def _system(self, data: Dataset | LinearSystem) -> LinearSystem:
+        if isinstance(data, LinearSystem):
+            cols = data.columns
+            if cols.robot.key != self.robot.key:
+                raise UsageError(
+                    f"the system was built for the robot '{cols.robot.name}'; this estimator is for "
+                    f"'{self.robot.name}': build the system with the same robot"
+                )
+            if (cols.friction, cols.armature) != (bool(self.friction), bool(self.armature)):
+                raise UsageError(
+                    f"the system has friction={cols.friction}, armature={cols.armature}; the estimator asks "
+                    f"friction={bool(self.friction)}, armature={bool(self.armature)}: build it with the same options"
+                )
+            return data
+        return build_system(
+            self.robot,
+            data,
+            preprocessing=self.preprocessing,
+            friction=self.friction,
+            armature=self.armature,
+        )
+
+    def _weighted_fit(self, system: LinearSystem, W: NDArray[np.float64]) -> tuple[NDArray[np.float64], Any]:
+        R, rhs, rss = system.whitened(W)
+        _check_rank(system, R)
+        x = scipy.linalg.solve_triangular(R, rhs, check_finite=False)
+        return x, (R, rhs, rss)
+
+    def _omega(self, system: LinearSystem, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        m, p = system.m, system.p
+        if m <= p:
+            raise IdentificationError(
+                f"{self.method.upper()} estimates the joint-noise covariance from the residuals and needs more "
+                f"samples than parameters; the data give {m} samples for {p} parameters: record more than {p} "
+                "samples, or use OLS"
+            )
+        return system.residual_matrix(x) / (m - p)
+
+    def _iterate(self, system: LinearSystem) -> tuple[NDArray[np.float64], NDArray[np.float64], Any]:
+        """Return (x, Omega used, (R, rhs, rss)); subclasses choose the weighting."""
+        raise NotImplementedError
+
+    def _fit_system(self, system: LinearSystem) -> None:
+        x, omega, (R, rhs, rss) = self._iterate(system)
+        m, n, p = system.m, system.n, system.p
+        dof = m * n - p
+        sigma2 = rss / dof
+        Rinv = scipy.linalg.solve_triangular(R, np.eye(p), check_finite=False)
+        cov = sigma2 * (Rinv @ Rinv.T)
+        std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            pct = np.where(np.abs(x) > 0, 100.0 * std / np.abs(x), np.inf)
+        sv = np.linalg.svd(R, compute_uv=False)
+        cols: ColumnSet = system.columns
+        self.params_ = x
+        self.names_ = cols.names
+        self.expressions_ = cols.expressions
+        self.cov_ = cov
+        self.std_ = std
+        self.std_percent_ = pct
+        self.cond_ = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
+        self.rms_ = system.rms(x)
+        self.omega_ = omega
+        self.sigma2_ = float(sigma2)
+        self.n_samples_ = m
+        self.notes_ = cols.notes
+        self.columns_ = cols
+        self.preprocessing_ = system.prepared.settings
+        self.R_ = R
+        self.rhs_ = rhs
+        self.rss_ = rss
+        self.whitener_ = whitener(omega) if self.method != "ols" else np.eye(n)
+
+    # ------------------------------------------------------------------ predict
+    def predict(self, q, dq=None, ddq=None) -> NDArray[np.float64]:
+        """Joint torques (N m) of the identified linear model.
+
+        Parameters
+        ----------
+        q : ndarray, shape (m, n), or Dataset
+            Joint angles (rad); or a dataset, preprocessed as the identification data were (the result
+            then holds the kept rows, filtered like the torque: compare it with
+            ``prepare(ds, ...).tau_reference``).
+        dq, ddq : ndarray, shape (m, n)
+            Joint velocities (rad/s) and accelerations (rad/s^2); not given with a dataset.
+
+        Returns
+        -------
+        ndarray, shape (m, n)
+        """
+        check_is_fitted(self)
+        if isinstance(q, Dataset):
+            prep = prepare(q, Preprocessing.from_settings(self.preprocessing_), n_joints=self.robot.n)
+            full = linear_torque(self.columns_, self.params_, prep.q, prep.dq, prep.ddq)
+            return prep.filter(full)[prep.rows]
+        if dq is None or ddq is None:
+            raise UsageError("predict takes (q, dq, ddq) arrays or one Dataset; dq and ddq are missing")
+        return linear_torque(self.columns_, self.params_, q, dq, ddq)
+
+    def summary(self) -> list[dict[str, Any]]:
+        """One row per parameter: name, expression, value, std, std_percent, kind."""
+        check_is_fitted(self)
+        return [
+            {
+                "name": name,
+                "expression": expr,
+                "value": float(v),
+                "std": float(s),
+                "std_percent": float(pc) if np.isfinite(pc) else None,
+                "kind": kind,
+            }
+            for name, expr, v, s, pc, kind in zip(
+                self.names_,
+                self.expressions_,
+                self.params_,
+                self.std_,
+                self.std_percent_,
+                self.columns_.kinds,
+                strict=True,
+            )
+        ]
+
+
+def _check_rank(system: LinearSystem, R: NDArray[np.float64]) -> None:
+    """Raise an IdentificationError naming the parameters the data do not excite."""
+    cols = system.columns
+    norms = np.linalg.norm(R, axis=0)
+    scale = norms.max(initial=0.0)
+    zero = norms <= 1e-13 * max(scale, 1e-300)
+    Rs = R / np.where(zero, 1.0, norms)
+    Rs[:, zero] = 0.0
+    _, sv, Vt = np.linalg.svd(Rs)
+    small = sv <= RANK_TOL * max(sv[0], 1e-300)
+    if not small.any():
+        return
+    null = Vt[small]
+    weight = np.sqrt((null**2).sum(axis=0))
+    involved = np.flatnonzero((weight > 0.05) | zero)
+    names = [cols.names[k] for k in involved]
+    rank = int((~small).sum())
+    still = still_joints(system.prepared)
+    links = sorted({int(cols.joints[k]) for k in involved})
+    if still:
+        hint = (
+            f"{describe_joints(still)} never move{'s' if len(still) == 1 else ''} in the data: record a motion "
+            f"that moves {describe_joints(still)} too, with varied velocity and acceleration"
+        )
+    else:
+        hint = (
+            f"record a richer motion of {describe_joints(links)} (larger, varied velocities and accelerations; "
+            "an optimised excitation from 'dynid excite'), or identify without those terms"
+        )
+    raise IdentificationError(
+        f"the data do not excite the base parameters {', '.join(names)} (the weighted regressor has rank {rank} "
+        f"of {system.p}); {hint}"
+    )
+
+
+class OLS(LinkEstimator):
+    """Ordinary least squares: ``x = argmin || tau - W x ||^2`` (METHOD.md section 4).
+
+    Parameters
+    ----------
+    robot : RobotModel
+        The robot that recorded the data.
+    friction : bool
+        Identify linear friction with the link parameters.
+    armature : bool
+        Identify the armature with the link parameters.
+    preprocessing : Preprocessing, optional
+        Filtering and differentiation of a dataset.
+    """
+
+    method = "ols"
+
+    def _iterate(self, system):
+        n = system.n
+        x, fac = self._weighted_fit(system, np.eye(n))
+        dof = max(system.m - system.p, 1)
+        return x, system.residual_matrix(x) / dof, fac
+
+
+class WLS(LinkEstimator):
+    """Weighted least squares: each joint weighted by the inverse variance of its OLS residual.
+
+    Parameters
+    ----------
+    robot : RobotModel
+        The robot that recorded the data.
+    friction : bool
+        Identify linear friction with the link parameters.
+    armature : bool
+        Identify the armature with the link parameters.
+    preprocessing : Preprocessing, optional
+        Filtering and differentiation of a dataset.
+    """
+
+    method = "wls"
+
+    def _iterate(self, system):
+        x0, _ = self._weighted_fit(system, np.eye(system.n))
+        omega = np.diag(np.diag(self._omega(system, x0)))
+        x, fac = self._weighted_fit(system, whitener(omega))
+        return x, omega, fac
+
+
+class GLS(LinkEstimator):
+    """Generalised least squares with the full joint-noise covariance ``Omega = E^T E / (m - p)``.
+
+    ``E`` is the OLS residual (m, n); the stacked noise covariance is block diagonal with m copies
+    of ``Omega``.
+
+    Parameters
+    ----------
+    robot : RobotModel
+        The robot that recorded the data.
+    friction : bool
+        Identify linear friction with the link parameters.
+    armature : bool
+        Identify the armature with the link parameters.
+    preprocessing : Preprocessing, optional
+        Filtering and differentiation of a dataset.
+    """
+
+    method = "gls"
+
+    def _iterate(self, system):
+        x0, _ = self._weighted_fit(system, np.eye(system.n))
+        omega = self._omega(system, x0)
+        x, fac = self._weighted_fit(system, whitener(omega))
+        return x, omega, fac
+
+
+class IRLS(LinkEstimator):
+    """Iteratively reweighted least squares: GLS with ``Omega`` of the latest residual, to convergence.
+
+    Parameters
+    ----------
+    robot : RobotModel
+        The robot that recorded the data.
+    friction : bool
+        Identify linear friction with the link parameters.
+    armature : bool
+        Identify the armature with the link parameters.
+    preprocessing : Preprocessing, optional
+        Filtering and differentiation of a dataset.
+    weighting : {"full", "diagonal"}
+        Full ``Omega`` (GLS steps) or its diagonal (WLS steps).
+    tol : float
+        Stop when the change of the estimate, ``max |dx| / (|x| + std)``, falls below ``tol``.
+    max_iter : int
+        Most weightings tried; an :class:`IdentificationWarning` says when that was not enough.
+
+    Attributes
+    ----------
+    n_iter_ : int
+        Weightings solved (after the OLS start).
+    converged_ : bool
+        Whether the tolerance was met.
+    """
+
+    method = "irls"
+
+    def __init__(
+        self,
+        *,
+        robot,
+        friction: bool = True,
+        armature: bool = True,
+        preprocessing: Preprocessing | None = None,
+        weighting: str = "full",
+        tol: float = 1e-6,
+        max_iter: int = 50,
+    ) -> None:
+        super().__init__(robot=robot, friction=friction, armature=armature, preprocessing=preprocessing)
+        self.weighting = weighting
+        self.tol = tol
+        self.max_iter = max_iter
+
+    def _iterate(self, system):
+        if self.weighting not in ("full", "diagonal"):
+            raise UsageError(f"weighting is {self.weighting!r}; IRLS weighs with 'full' or 'diagonal' Omega")
+        if not (int(self.max_iter) >= 1 and self.tol > 0):
+            raise UsageError(
+                f"IRLS needs max_iter >= 1 and tol > 0; got max_iter={self.max_iter!r}, tol={self.tol!r}"
+            )
+        x, fac = self._weighted_fit(system, np.eye(system.n))
+        converged = False
+        it = 0
+        omega = np.eye(system.n)
+        for it in range(1, int(self.max_iter) + 1):  # noqa: B007 (it is kept)
+            omega = self._omega(system, x)
+            if self.weighting == "diagonal":
+                omega = np.diag(np.diag(omega))
+            x_new, fac = self._weighted_fit(system, whitener(omega))
+            R = fac[0]
+            rss = fac[2]
+            dof = max(system.m * system.n - system.p, 1)
+            Rinv_diag = np.sqrt(np.sum(scipy.linalg.solve_triangular(R, np.eye(system.p)) ** 2, axis=1))
+            std = np.sqrt(rss / dof) * Rinv_diag
+            floor = 1e-8 * float(np.abs(x_new).max(initial=0.0)) + 1e-300
+            change = float(np.max(np.abs(x_new - x) / (np.abs(x_new) + std + floor)))
+            x = x_new
+            if change < self.tol:
+                converged = True
+                break
+        self.n_iter_ = it
+        self.converged_ = converged
+        if not converged:
+            warnings.warn(
+                f"IRLS did not converge in {self.max_iter} iterations (last relative change {change:.3g} > tol "
+                f"{self.tol:g}); raise max_iter or tol, or use GLS",
+                IdentificationWarning,
+                stacklevel=3,
+            )
+        return x, omega, fac
+
+
+ESTIMATORS: dict[str, type[LinkEstimator]] = {"ols": OLS, "wls": WLS, "gls": GLS, "irls": IRLS}
+"""Layer-1 estimators by method name."""
