@@ -891,7 +891,7 @@ class CoupledFriction(Effect):
         f = np.zeros(n)
         f[a] = f[b] = g
         J = np.zeros((n, n))
-        J[np.ix_([a, b], [a, b])] = dg
+        J[a, a] = J[a, b] = J[b, a] = J[b, b] = dg
         return f, J
 
     def details(self):

@@ -84,7 +84,7 @@ from dynid.identify.effects import (
     parse_effects,
     robot_scales,
 )
-from dynid.optim.trajectory import FourierTrajectory, Trajectory, write_atomic
+from dynid.optim.trajectory import FourierTrajectory, Trajectory
 from dynid.symbolic.robot import RobotModel, standard_from_com
 
 __all__ = [
@@ -635,7 +635,7 @@ class SimulationResult:
             },
             "tracking_error_rms": np.sqrt(np.mean(err**2, axis=0)).tolist(),
             "sensor_effect_order": list(_SENSOR_ORDER),
-            **{k: v for k, v in self.meta.items() if k != "reference"},
+            "trajectory": self.meta.get("trajectory"),
         }
 
 
@@ -813,7 +813,7 @@ def simulate(
         tau_meas = np.round(tau_meas / lsb) * lsb
 
     pick = slice(0, ticks, stride)
-    meta = {"trajectory": source, "effects": [str(e.to_dict()["name"]) for e in truth.effects]}
+    meta = {"trajectory": source, "effects": [e.name for e in truth.effects]}
     return SimulationResult(
         t=t_ctrl[pick],
         q=states["q_meas"][pick],
@@ -867,13 +867,15 @@ class _Run:
         control_rate: float,
         substeps: int | None,
     ) -> None:
+        import pinocchio as pin
+
         self.truth = truth
         self.controller = controller
         self.noise = noise
         self.dt = 1.0 / control_rate
         n = truth.nominal.n
         self.n = n
-        self.model = truth.link_robot.pin_model
+        self.model = pin.Model(truth.link_robot.pin_model)  # a copy: the loop changes its armature
         self.data = self.model.createData()
         self.nominal = truth.nominal.pin_model
         self.nominal_data = self.nominal.createData()
@@ -923,6 +925,7 @@ class _Run:
         import pinocchio as pin
 
         model, data = self.model, self.data
+        armature = np.array(model.armature)
         n, dt, ns = self.n, self.dt, self.substeps
         h = dt / ns
         ticks = t_ctrl.size
@@ -989,16 +992,14 @@ class _Run:
                     if i == 0
                     else f0 + (jd * (dx - dx0) if jfull is None else jd * (dx - dx0) + jfull @ (dx - dx0))
                 )
-                mass = pin.crba(model, data, q)
-                bias = pin.nle(model, data, q, dq)
                 tau_link = tau_m - f
                 if has_flex:
                     tau_s = tr.spring(theta - q[flex], dtheta - dq[flex])
                     tau_link[flex] = tau_s
                     motor_rhs = tau_m[flex] - tau_s - f[flex]
-                rhs = tau_link - bias
                 if i == 0:
-                    ddq = np.linalg.solve(mass, rhs)
+                    model.armature = armature
+                    ddq = pin.aba(model, data, q, dq, tau_link)
                     out["q"][k] = q
                     out["dq"][k] = dq
                     out["ddq"][k] = ddq
@@ -1010,11 +1011,17 @@ class _Run:
                     if has_flex:
                         acc[flex] = motor_rhs / motor
                     out["ddtheta"][k] = acc
-                if self.terms:
+                if jfull is None:
+                    # (M + diag(h J)) a = tau - b - f is forward dynamics with h J added to the armature.
+                    if self.terms:
+                        model.armature = armature + h * jr
+                    acc = pin.aba(model, data, q, dq, tau_link)
+                else:
+                    model.armature = armature
+                    mass = pin.crba(model, data, q)
                     mass.flat[diag] += h * jr
-                    if jfull is not None:
-                        mass += h * jfull
-                acc = np.linalg.solve(mass, rhs)
+                    mass += h * jfull
+                    acc = np.linalg.solve(mass, tau_link - pin.nle(model, data, q, dq))
                 dq = dq + h * acc
                 q = q + h * dq
                 if has_flex:
@@ -1062,7 +1069,8 @@ def write_simulation(
     sidecar_written = False
     try:
         save_dataset(dataset, tmp)
-        write_atomic(sidecar, text)
+        os.chmod(tmp, _file_mode(path))
+        _write_text_atomic(sidecar, text)
         sidecar_written = True
         os.replace(tmp, path)
     except BaseException:
@@ -1071,6 +1079,29 @@ def write_simulation(
             sidecar.unlink(missing_ok=True)
         raise
     return path, sidecar
+
+
+def _file_mode(path: Path) -> int:
+    """Mode for a new file at ``path``: the existing file's, else 0666 less the umask (not mkstemp's 0600)."""
+    if path.exists():
+        return path.stat().st_mode & 0o777
+    umask = os.umask(0)
+    os.umask(umask)
+    return 0o666 & ~umask
+
+
+def _write_text_atomic(path: Path, text: str) -> None:
+    """Write ``text`` through a temporary file in the same folder and a rename: never half written."""
+    fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    tmp = Path(tmp_name)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as handle:
+            handle.write(text)
+        os.chmod(tmp, _file_mode(path) if not path.is_dir() else 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def _jsonable(value: Any) -> Any:
