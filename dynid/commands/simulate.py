@@ -77,7 +77,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pathlib import Path
 
     from dynid.identify.effects import parse_effects
     from dynid.identify.simulate import NoiseModel, check_output_path, simulate, write_simulation
@@ -99,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
         perturb=args.perturb,
         rate=args.rate,
         duration=args.duration,
-        source=f"the trajectory '{Path(args.trajectory).name}'",
+        source=f"the trajectory '{args.trajectory}'",
     )
     data, sidecar = write_simulation(result, out, true_states=args.true_states)
     err = (result.q_true - result.q_desired) * 1e3

@@ -472,7 +472,8 @@ class Effect:
 
     Roles: ``model`` effects change the truth robot (:meth:`apply_model`), ``drive`` effects add a
     torque on the drive side (:meth:`drive`), ``transmission`` effects make a joint flexible (the
-    simulator reads their attributes), ``sensor`` effects change the measured torque (:meth:`measure`).
+    simulator reads their attributes), ``friction`` effects scale the truth friction (temperature:
+    ``factor(t)``), ``sensor`` effects change the measured torque (:meth:`measure`).
 
     Attributes
     ----------

@@ -813,7 +813,15 @@ def simulate(
         tau_meas = np.round(tau_meas / lsb) * lsb
 
     pick = slice(0, ticks, stride)
-    meta = {"trajectory": source, "effects": [e.name for e in truth.effects]}
+    meta = {
+        "trajectory": {
+            "source": source,
+            "type": type(trajectory).__name__,
+            "duration": float(trajectory.duration),
+            "meta": dict(getattr(trajectory, "meta", {}) or {}),
+        },
+        "effects": [e.name for e in truth.effects],
+    }
     return SimulationResult(
         t=t_ctrl[pick],
         q=states["q_meas"][pick],
