@@ -35,6 +35,7 @@ import scipy.linalg
 from numpy.typing import NDArray
 
 from dynid.exceptions import IdentificationError, UsageError
+from dynid.identify._threads import single_blas_thread
 from dynid.identify.dataset import Dataset
 from dynid.identify.linear_system import (
     ColumnSet,
@@ -44,7 +45,6 @@ from dynid.identify.linear_system import (
     describe_joints,
     linear_torque,
     prepare,
-    single_blas_thread,
     still_joints,
 )
 

@@ -44,6 +44,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.signal import sosfiltfilt
 
 from dynid.exceptions import DataError, IdentificationError, ShapeError
+from dynid.identify._threads import single_blas_thread
 from dynid.identify.dataset import Dataset, DataWarning
 from dynid.identify.preprocess import butter_sos, kept_rows, lowpass, preprocess
 
@@ -58,7 +59,6 @@ __all__ = [
     "column_set",
     "linear_torque",
     "prepare",
-    "single_blas_thread",
 ]
 
 EXTRA_KINDS = ("armature", "coulomb", "viscous", "offset")
@@ -825,18 +825,6 @@ def _qr_rows(Z: NDArray[np.float64], rows: NDArray[np.intp]) -> NDArray[np.float
     if R.shape[0] < c:
         R = np.vstack([R, np.zeros((c - R.shape[0], c))])
     return R
-
-
-def single_blas_thread():
-    """Context limiting BLAS to one thread.
-
-    The blocks dynid factorises are small or tall and thin; on a shared 2-core machine a threaded
-    OpenBLAS spends 10-100x longer on them than one thread (measured: QR of 2,000 x 178, 0.1-1.7 s
-    against 0.008 s).
-    """
-    from threadpoolctl import threadpool_limits
-
-    return threadpool_limits(limits=1, user_api="blas")
 
 
 def build_system(
