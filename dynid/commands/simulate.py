@@ -77,7 +77,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-
     from dynid.identify.effects import parse_effects
     from dynid.identify.simulate import NoiseModel, check_output_path, simulate, write_simulation
     from dynid.optim.trajectory import load_trajectory

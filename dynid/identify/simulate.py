@@ -105,7 +105,7 @@ CONTROL_RATE = 1000.0
 """Default control and integration rate (Hz)."""
 
 _SENSOR_ORDER = ("drive_gain", "delay", "offset")
-_MOTOR_FLOOR = 0.02  # motor inertia of a flexible joint: at least this fraction of the joint's inertia scale
+_MOTOR_FLOOR = 0.1  # motor inertia of a flexible joint: at least this fraction of the joint inertia scale
 _SPRING_DAMPING = 0.05  # damping ratio of a flexible joint's spring
 _LIMIT_TOL = 1e-6
 
