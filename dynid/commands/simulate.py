@@ -21,8 +21,9 @@ _EFFECT_HELP = (
 )
 _NOISE_HELP = (
     "sensor model, key=value,... or 'off': torque (white std, fraction of the joint's torque scale, default "
-    "0.01), coloured (AR(1) std, 0.005), colour (AR(1) coefficient per ms, 0.9), encoder_bits (counts per "
-    "rev = 2^bits, 18; 0 exact), current_lsb (torque quantisation step, fraction of the torque scale, 0.001)"
+    "0.01), coloured (AR(1) std, 0.005), colour (AR(1) coefficient per ms, 0.9), encoder_bits (logged "
+    "angle, counts per rev = 2^bits, 18; 0 exact), current_lsb (torque quantisation step, fraction of the torque scale, 0.001), control_bits (resolution of "
+    "the motor encoders the controller reads, per joint revolution, 24)"
 )
 
 

@@ -55,7 +55,7 @@ cogging            ``sum_k a_k sin(k N x + phi_k)``, N = 100 (gear ratio), k = 1
                    a_2 = 0.5 % of s_j, random phases; x the drive-side angle
 elasticity         joint spring between motor and link: motor inertia B, ``tau_s = K (theta -     any
                    q) + D (dtheta - dq)``; K = I_j (2 pi 10 Hz)^2 / VALUE, D for 5 % damping,
-                   B = the truth armature or at least 10 % of I_j; the encoder reads theta
+                   B = the truth armature or at least 50 % of I_j; the encoder reads theta
 backlash           dead zone of total width 1 mrad (0.5 mrad either way) in the transmission,      any
                    stiffness I_j (2 pi 20 Hz)^2 (or the elasticity's K on the same joint)
 delay              the measured torque lags the applied one by d = 4 ms                           any
@@ -71,9 +71,10 @@ nonlinear_viscous  ``kv2 dq|dq| + kv3 dq^3``, kv2 v_j^2 = 2 %, kv3 v_j^3 = 1 % o
 
 The motor inertia B of a flexible (elastic or backlashed) joint is not in the nominal model: it shows in
 the measured torque as ``B ddtheta`` like an armature, which re-identification with armature columns
-absorbs.  It is at least 10 % of I_j because the controller's derivative gain is sized for the whole
-joint: on a lighter motor it exceeds the stability limit of a 1 kHz sampled loop (``Kd dt / B`` near 2)
-and the drive chatters.
+absorbs.  It is at least 50 % of I_j (reflected rotor inertias of geared arms are of that order) because
+the controller's derivative action, sized for the whole joint, must stay well inside the stability limit
+of the 1 kHz sampled loop on the motor alone (above the spring's resonance the controller sees only B);
+at 2 % and 10 % the drives chattered.
 
 Syntax of one effect: ``NAME`` (all joints it applies to, size 1), ``NAME:VALUE``, ``NAME@J`` (joint J
 only, joints numbered from 1), ``NAME@J-K`` (joints J..K), ``NAME@J:VALUE``; several effects are

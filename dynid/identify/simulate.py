@@ -18,19 +18,26 @@ seed, controller gains) goes to a sidecar ``<out>.truth.json`` written beside th
 Loop (per control tick of ``1 / control_rate`` s, 1 kHz by default):
 
 1. the encoders read the drive-side angle (the motor side of an elastic or backlashed joint, else the
-   joint angle), quantised to ``2^encoder_bits`` counts per revolution;
+   joint angle): the controller reads the motor encoders, ``2^control_bits`` counts per joint revolution
+   (2^24 by default: 2^17 counts per motor turn through a 100:1 gear), the log records
+   ``2^encoder_bits`` (2^18 by default);
 2. a PD + feedforward controller computes the drive torque
-   ``tau_m = rnea_nominal(q_d, dq_d, ddq_d) + Kp (q_d - q_enc) + Kd (dq_d - v)``, where the feedforward
-   uses the *nominal* model (never the truth), ``v`` is the backward difference of the encoder angle
-   low-pass filtered at 100 Hz, ``Kp = I_j w^2``, ``Kd = 2 zeta I_j w``, ``w = 2 pi 5 Hz``,
-   ``zeta = 0.7`` and ``I_j`` the joint's inertia scale;
+   ``tau_m = rnea_nominal(q_d, dq_d, ddq_d) + M_nominal(q_enc) (Kp (q_d - q_enc) + Kd (dq_d - v))``:
+   feedforward and PD weighting both use the *nominal* model (never the truth); ``v`` is the backward
+   difference of the encoder angle low-pass filtered at 100 Hz; ``Kp = w^2``, ``Kd = 2 zeta w`` with
+   ``w = 2 pi 10 Hz``, ``zeta = 0.7``.  Weighting the PD by the mass matrix keeps every motion mode at
+   the same bandwidth: gains per joint sized by the diagonal of M make light coupled modes (Panda's
+   joints 1 and 3 when their axes align) exceed the stability limit of the 1 kHz sampled loop;
 3. the torque is held for the tick (zero-order hold) while the truth moves: forward dynamics of the
-   truth (Pinocchio's ``crba`` and ``nle`` on the numeric model) with the friction and effect torques
-   entering as joint torques, integrated in ``substeps`` steps by semi-implicit Euler (velocity first,
-   then position) in which the velocity-dependent torques are *linearly implicit*: the step solves
-   ``(M + h df/ddq) a = tau - b - f``.  The smoothed ``sign(dq) = tanh(dq / eps)`` of the friction has a
-   slope ``Fc / eps`` near zero speed that would need sub-microsecond explicit steps; implicitly it is a
-   strong damping the step cannot overshoot, so reversals are smooth at any step;
+   truth (Pinocchio's ``aba`` on the numeric model) with the friction and effect torques entering as
+   joint torques, integrated in ``substeps`` steps by semi-implicit Euler (velocity first, then
+   position) in which the velocity-dependent torques are *linearly implicit*: the step solves
+   ``(M + h df/ddq) a = tau - b - f``, with ``f`` and ``df/ddq`` evaluated at the tick and linearised
+   within it.  The diagonal ``h df/ddq`` is added to the armature of the model, so the step is one
+   ``aba``; a coupled term (coupled_friction) takes ``crba`` and a solve.  The smoothed
+   ``sign(dq) = tanh(dq / eps)`` of the friction has a slope ``Fc / eps`` near zero speed that would
+   need sub-microsecond explicit steps; implicitly it is a strong damping the step cannot overshoot,
+   so reversals are smooth at any step;
 4. the *measured torque* is the drive torque ``tau_m`` (what a current sensor reads), then the sensor
    effects (drive_gain, delay, offset), white + AR(1) coloured noise and the current quantisation.
 
@@ -47,7 +54,8 @@ key           default    meaning
 torque        0.01       white torque noise, std as a fraction of s_j
 coloured      0.005      AR(1) coloured torque noise, stationary std as a fraction of s_j
 colour        0.9        AR(1) coefficient of the coloured noise per control tick, in [0, 1)
-encoder_bits  18         encoder resolution at the joint, 2^bits counts per revolution (0: exact)
+encoder_bits  18         resolution of the logged angle, 2^bits counts per joint revolution (0: exact)
+control_bits  24         resolution of the angle the controller reads (motor encoders), per joint revolution
 current_lsb   0.001      quantisation step of the torque reading, fraction of s_j (0: exact)
 ============  =========  =================================================================
 
@@ -105,7 +113,7 @@ CONTROL_RATE = 1000.0
 """Default control and integration rate (Hz)."""
 
 _SENSOR_ORDER = ("drive_gain", "delay", "offset")
-_MOTOR_FLOOR = 0.1  # motor inertia of a flexible joint: at least this fraction of the joint inertia scale
+_MOTOR_FLOOR = 0.5  # motor inertia of a flexible joint: at least this fraction of its inertia scale
 _SPRING_DAMPING = 0.05  # damping ratio of a flexible joint's spring
 _LIMIT_TOL = 1e-6
 
@@ -124,7 +132,7 @@ class NoiseModel:
     colour : float
         AR(1) coefficient per control tick, ``0 <= colour < 1``.
     encoder_bits : int
-        Encoder counts per revolution at the joint are ``2**encoder_bits``; 0 reads exact angles.
+        The logged angles have ``2**encoder_bits`` counts per joint revolution; 0 logs exact angles.
     current_lsb : float
         Quantisation step of the torque reading, fraction of each joint's torque scale; 0 for none.
     """
@@ -135,7 +143,9 @@ class NoiseModel:
     encoder_bits: int = 18
     current_lsb: float = 0.001
 
-    KEYS = ("torque", "coloured", "colour", "encoder_bits", "current_lsb")
+    control_bits: int = 24
+
+    KEYS = ("torque", "coloured", "colour", "encoder_bits", "current_lsb", "control_bits")
 
     def __post_init__(self) -> None:
         for key in ("torque", "coloured", "current_lsb"):
@@ -148,17 +158,18 @@ class NoiseModel:
             raise UsageError(
                 f"the noise setting colour is {self.colour}; give an AR(1) coefficient in [0, 1)."
             )
-        if int(self.encoder_bits) != self.encoder_bits or not 0 <= self.encoder_bits <= 40:
-            raise UsageError(
-                f"the noise setting encoder_bits is {self.encoder_bits}; give a whole number of bits in 0..40 "
-                "(0 for exact angles)."
-            )
-        object.__setattr__(self, "encoder_bits", int(self.encoder_bits))
+        for key in ("encoder_bits", "control_bits"):
+            value = getattr(self, key)
+            if not (math.isfinite(value) and int(value) == value and 0 <= value <= 40):
+                raise UsageError(
+                    f"the noise setting {key} is {value}; give a whole number of bits in 0..40 (0 for exact angles)."
+                )
+            object.__setattr__(self, key, int(value))
 
     @classmethod
     def off(cls) -> NoiseModel:
         """No noise and no quantisation: the measured values are the exact ones."""
-        return cls(torque=0.0, coloured=0.0, colour=0.0, encoder_bits=0, current_lsb=0.0)
+        return cls(torque=0.0, coloured=0.0, colour=0.0, encoder_bits=0, current_lsb=0.0, control_bits=0)
 
     @classmethod
     def parse(cls, spec: str | Mapping[str, float] | NoiseModel | None) -> NoiseModel:
@@ -207,14 +218,14 @@ class NoiseModel:
 # ---------------------------------------------------------------------------- controller
 @dataclass(frozen=True, eq=False)
 class ControllerGains:
-    """PD + feedforward joint controller (feedforward from the nominal model).
+    """PD + feedforward joint controller: ``rnea_nominal(q_d, dq_d, ddq_d) + M_nominal(q) (kp e + kd de)``.
 
     Attributes
     ----------
     kp : ndarray, shape (n,)
-        Position gains (N m/rad).
+        Position gains (1/s^2), multiplied by the nominal mass matrix.
     kd : ndarray, shape (n,)
-        Velocity gains (N m s/rad).
+        Velocity gains (1/s), multiplied by the nominal mass matrix.
     bandwidth : float
         Design bandwidth (Hz) with which the gains were chosen.
     damping : float
@@ -225,28 +236,36 @@ class ControllerGains:
 
     kp: np.ndarray
     kd: np.ndarray
-    bandwidth: float = 5.0
+    bandwidth: float = 10.0
     damping: float = 0.7
     velocity_cutoff: float = 100.0
 
     @classmethod
-    def for_inertia(
-        cls, inertia: np.ndarray, *, bandwidth: float = 5.0, damping: float = 0.7
-    ) -> ControllerGains:
-        """Gains ``Kp = I w^2``, ``Kd = 2 zeta I w`` with ``w = 2 pi bandwidth``, for inertias I (n,) (kg m^2)."""
+    def design(cls, n: int, *, bandwidth: float = 10.0, damping: float = 0.7) -> ControllerGains:
+        """Gains ``kp = w^2``, ``kd = 2 zeta w`` with ``w = 2 pi bandwidth`` for n joints.
+
+        Parameters
+        ----------
+        n : int
+            Number of joints.
+        bandwidth : float
+            Closed-loop natural frequency (Hz).
+        damping : float
+            Damping ratio zeta.
+        """
         w = 2 * math.pi * bandwidth
-        inertia = np.asarray(inertia, dtype=float)
-        return cls(kp=inertia * w * w, kd=2 * damping * inertia * w, bandwidth=bandwidth, damping=damping)
+        return cls(kp=np.full(n, w * w), kd=np.full(n, 2 * damping * w), bandwidth=bandwidth, damping=damping)
 
     def to_dict(self) -> dict:
         return {
-            "law": "tau = rnea_nominal(q_d, dq_d, ddq_d) + kp (q_d - q_encoder) + kd (dq_d - v_filtered)",
+            "law": "tau = rnea_nominal(q_d, dq_d, ddq_d) + M_nominal(q_encoder) (kp (q_d - q_encoder) + "
+            "kd (dq_d - v_filtered))",
             "kp": self.kp.tolist(),
             "kd": self.kd.tolist(),
             "bandwidth_hz": self.bandwidth,
             "damping": self.damping,
             "velocity_cutoff_hz": self.velocity_cutoff,
-            "units": "N m/rad, N m s/rad",
+            "units": "1/s^2, 1/s (times the nominal mass matrix)",
         }
 
 
@@ -729,7 +748,7 @@ def simulate(
         A truth from :func:`build_truth` (then ``effects``, ``friction``, ``perturb``, ``truth_seed`` are
         not used): the same robot on another trajectory.
     controller : ControllerGains, optional
-        Default :meth:`ControllerGains.for_inertia` of the robot's inertia scales.
+        Default :meth:`ControllerGains.design` (10 Hz, damping 0.7).
     source : str
         Name of the trajectory in messages.
 
@@ -795,7 +814,7 @@ def simulate(
         raise ShapeError(f"the truth has {truth.nominal.n} joints; the robot '{robot.name}' has {n}.")
     scales = truth.scales
     if controller is None:
-        controller = ControllerGains.for_inertia(scales.inertia)
+        controller = ControllerGains.design(n)
 
     run = _Run(truth, controller, noise, control_rate, substeps)
     states = run.integrate(t_ctrl, qd, dqd, ddqd)
@@ -912,6 +931,7 @@ class _Run:
                 terms.append((effect.name, effect.drive))
         self.terms = terms
         self.encoder_step = 0.0 if noise.encoder_bits == 0 else 2 * math.pi / 2**noise.encoder_bits
+        self.control_step = 0.0 if noise.control_bits == 0 else 2 * math.pi / 2**noise.control_bits
 
     def _drive(self, t, x, dx, tau_m, store=None):
         n = self.n
@@ -942,7 +962,7 @@ class _Run:
         has_flex = flex.size > 0
         kp, kd = self.controller.kp, self.controller.kd
         alpha = math.exp(-2 * math.pi * self.controller.velocity_cutoff * dt)
-        step = self.encoder_step
+        step, cstep = self.encoder_step, self.control_step
 
         ff = np.empty((ticks, n))
         for k in range(ticks):
@@ -980,12 +1000,13 @@ class _Run:
                 dx[flex] = dtheta
             else:
                 x, dx = q, dq
-            x_meas = np.round(x / step) * step if step else x.copy()
+            x_ctrl = np.round(x / cstep) * cstep if cstep else x.copy()
             if x_prev is not None:
-                v = alpha * v + (1 - alpha) * (x_meas - x_prev) / dt
-            x_prev = x_meas
-            tau_m = ff[k] + kp * (qd[k] - x_meas) + kd * (dqd[k] - v)
-            out["q_meas"][k] = x_meas
+                v = alpha * v + (1 - alpha) * (x_ctrl - x_prev) / dt
+            x_prev = x_ctrl
+            weight = pin.crba(self.nominal, self.nominal_data, x_ctrl)
+            tau_m = ff[k] + weight @ (kp * (qd[k] - x_ctrl) + kd * (dqd[k] - v))
+            out["q_meas"][k] = np.round(x / step) * step if step else x
             out["tau_drive"][k] = tau_m
             # Drive-side torques at the tick, linearised in the speed for the substeps of this tick.
             f0, jd, jfull = self._drive(t_ctrl[k], x, dx, tau_m, store)
