@@ -89,6 +89,20 @@ def test_no_effect_no_noise_torque_is_rnea_of_true_states(robot, trajectory, pla
     assert plain.components == {}
 
 
+def test_perturbed_truth_drives_the_robot(robot, trajectory):
+    res = run(robot, trajectory, perturb=0.2, seed=4)
+    params = res.truth.robot.params
+    assert np.abs(params / np.where(robot.params == 0, 1, robot.params) - 1).max() > 0.05
+    model = robot.pin_model
+    data = model.createData()
+    Y = [
+        pin.computeJointTorqueRegressor(model, data, *s)
+        for s in zip(res.q_true, res.dq_true, res.ddq_true, strict=True)
+    ]
+    np.testing.assert_allclose(res.tau, np.array(Y) @ params, rtol=0, atol=EXACT)
+    assert np.abs(res.tau - np.array(Y) @ robot.params).max() > 0.1
+
+
 def test_true_acceleration_is_consistent_with_the_motion(plain):
     # The reported ddq is the instantaneous acceleration: the trapezoid rule integrates it to the velocity
     # (after the first ticks, where the controller's torque still jumps from tick to tick).
