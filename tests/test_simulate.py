@@ -143,6 +143,21 @@ def test_seed_friction_has_per_direction_coulomb_and_joins_at_lambda(robot):
     assert np.all(near0 > at_lam)
 
 
+def test_seed_friction_is_what_the_friction_layer_fits(robot):
+    # The truth's seed model has the form SeedFriction identifies: its fit on the truth curve returns it.
+    from dynid.identify.friction import SeedFriction
+
+    fr = build_truth(robot, friction="seed").friction
+    dq = np.random.default_rng(0).uniform(-1.5, 1.5, 4000)
+    dq = dq[np.abs(dq) > 20 * fr.eps]  # outside the tanh smoothing of sign(dq)
+    j = 1
+    torque = fr.torque(np.outer(dq, np.ones(robot.n)))[0][:, j]
+    fitted = SeedFriction().fit(dq, torque).coef_
+    truth = [fr.kc_pos[j], fr.kc_neg[j], fr.kv1[j], fr.kv2[j], fr.kv3[j], fr.kc_pos[j] + fr.ks[j]]
+    truth += [fr.kc_neg[j] + fr.ks[j], fr.vs[j]]
+    np.testing.assert_allclose(fitted, truth, rtol=1e-4)
+
+
 # ---------------------------------------------------------------------------- one test per effect
 def test_offset_is_a_constant_shift(robot, trajectory, plain):
     res = run(robot, trajectory, effects="offset")

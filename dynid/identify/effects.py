@@ -26,9 +26,11 @@ kind        model and default size
 none        0
 linear      ``Fc sign(dq) + Fv dq``; Fc = 5 % of s_j, Fv such that Fv v_j = 3 % of s_j
 seed        the paper's model: ``kc+`` (dq > 0) = 1.1 Fc, ``kc-`` (dq < 0) = 0.9 Fc, ``kv1 dq + kv2 dq|dq|
-            + kv3 dq^3`` with kv1 = Fv, kv2 v_j^2 = 1 % and kv3 v_j^3 = 0.5 % of s_j; below ``lambda`` =
-            3 % of dq_max an extra ``ks sign(dq) (1 - |dq| / lambda)``, ks = 0.5 Fc (negative slope at low
-            speed, zero at +-lambda so the two regions join continuously)
+            + kv3 dq^3`` with kv1 = Fv, kv2 v_j^2 = 1 % and kv3 v_j^3 = 0.5 % of s_j above ``lambda`` = 3 %
+            of dq_max; below it a straight line in |dq| from the static level ``kc+- + ks`` at zero speed
+            to the high-speed curve at +-lambda (continuous there), ks = 0.5 Fc: a negative slope at low
+            speed.  The same form as :class:`dynid.identify.friction.SeedFriction` with its static
+            levels ``ks+- = kc+- + ks``
 stribeck    ``(Fc + (Fs - Fc) exp(-(dq / vs)^2)) sign(dq) + Fv dq``; Fs - Fc = 0.5 Fc, vs = 2 % of dq_max
 ==========  =====================================================================================
 
@@ -308,12 +310,22 @@ class TruthFriction:
         f = kc * s + self.kv1 * dq
         df = kc * ds + self.kv1
         if self.kind == "seed":
-            f = f + self.kv2 * dq * a + self.kv3 * dq**3
-            df = df + 2 * self.kv2 * a + 3 * self.kv3 * dq**2
-            inside = a < self.vs
-            ramp = np.where(inside, 1.0 - a / self.vs, 0.0)
-            f = f + self.ks * s * ramp
-            df = df + self.ks * (ds * ramp - np.where(inside, np.abs(s) / self.vs, 0.0))
+            # Magnitude g(|dq|): kc + kv(|dq|) above lambda; below, the line from kc + ks (at 0) to
+            # kc + kv(lambda) (at lambda).  f = s g, with s the smooth sign.
+            lam = self.vs
+            kv_lam = self.kv1 * lam + self.kv2 * lam**2 + self.kv3 * lam**3
+            inside = a < lam
+            r = a / lam
+            g = np.where(
+                inside,
+                kc + (1.0 - r) * self.ks + r * kv_lam,
+                kc + self.kv1 * a + self.kv2 * a * a + self.kv3 * a**3,
+            )
+            dg = np.where(
+                inside, (kv_lam - self.ks) / lam, self.kv1 + 2 * self.kv2 * a + 3 * self.kv3 * a * a
+            )
+            f = s * g
+            df = ds * g + np.abs(s) * dg
         elif self.kind == "stribeck":
             e = np.exp(-((dq / self.vs) ** 2))
             f = f + self.ks * s * e
@@ -337,6 +349,9 @@ class TruthFriction:
         }.get(self.kind, {})
         for attr, label in names.items():
             out[label] = getattr(self, attr).tolist()
+        if self.kind == "seed":
+            out["ks_pos"] = (self.kc_pos + self.ks).tolist()  # static levels, as SeedFriction names them
+            out["ks_neg"] = (self.kc_neg + self.ks).tolist()
         out["units"] = "N m, rad/s (kv1 N m s/rad, kv2 N m s^2/rad^2, kv3 N m s^3/rad^3)"
         return out
 
