@@ -10,3 +10,31 @@ from __future__ import annotations
 from dynid.identify.dataset import Dataset, DataWarning, load_dataset, save_dataset
 
 __all__ = ["DataWarning", "Dataset", "load_dataset", "save_dataset"]
+
+# Identification: layer 1 (estimators, consistent fit), layer 2 (friction), layer 3 (GMR), the
+# three-layer pipeline and the model file.  Imported on first use (CasADi and scikit-learn are slow).
+_IDENTIFY = {
+    "OLS": "estimators",
+    "WLS": "estimators",
+    "GLS": "estimators",
+    "IRLS": "estimators",
+    "ConsistentLS": "consistent",
+    "FrictionLayer": "friction",
+    "GMRCorrection": "gmr",
+    "Preprocessing": "linear_system",
+    "build_system": "linear_system",
+    "IdentifiedModel": "model",
+    "ThreeLayerModel": "model",
+    "identify": "model",
+    "load_model": "model",
+    "save_model": "model",
+}
+__all__ += list(_IDENTIFY)
+
+
+def __getattr__(name: str):
+    if name in _IDENTIFY:
+        import importlib
+
+        return getattr(importlib.import_module(f"dynid.identify.{_IDENTIFY[name]}"), name)
+    raise AttributeError(f"module 'dynid.identify' has no attribute {name!r}")

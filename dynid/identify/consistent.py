@@ -222,7 +222,7 @@ class ConsistentLS(LinkEstimator):
         preprocessing: Preprocessing | None = None,
         reference_weight: float = 0.0,
         tol: float = 1e-8,
-        max_iter: int = 3000,
+        max_iter: int = 1000,
     ) -> None:
         super().__init__(robot=robot, friction=friction, armature=armature, preprocessing=preprocessing)
         self.weighting = weighting

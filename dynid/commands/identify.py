@@ -1,0 +1,134 @@
+"""``dynid identify``: identify a robot's dynamic model from a dataset in three layers."""
+
+from __future__ import annotations
+
+import argparse
+
+from dynid.commands.common import add_json_argument, add_robot_arguments, robot_from_args
+
+HELP = "identify link parameters, friction and a GMM correction from a dataset; write a model file"
+
+
+def _gmm(text: str) -> str | int:
+    if text in ("off", "auto"):
+        return text
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"--gmm is '{text}'; give off, auto or a number of components"
+        ) from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"--gmm is {value}; give at least 1 component, or off / auto")
+    return value
+
+
+def _cutoff(text: str) -> float | str | None:
+    if text in ("auto", "none"):
+        return None if text == "none" else "auto"
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"--cutoff is '{text}'; give a frequency in Hz, auto or none"
+        ) from None
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_robot_arguments(parser)
+    parser.add_argument(
+        "--data", required=True, metavar="D.csv", help="dataset (.csv or .npz: t, q_i, tau_i [, dq_i, ddq_i])"
+    )
+    parser.add_argument(
+        "--method",
+        default="irls",
+        choices=("ols", "wls", "gls", "irls", "consistent"),
+        help="layer-1 method (default irls)",
+    )
+    parser.add_argument(
+        "--friction",
+        default="seed",
+        choices=("none", "linear", "seed", "stribeck", "sigmoid"),
+        help="friction model (default seed: the paper's)",
+    )
+    parser.add_argument(
+        "--gmm", default="auto", type=_gmm, metavar="{off,auto,K}", help="layer-3 correction (default auto)"
+    )
+    parser.add_argument(
+        "--cutoff",
+        default="auto",
+        type=_cutoff,
+        metavar="HZ",
+        help="low-pass cut-off for torque and regressor (default auto: none if the data have dq and ddq, else 20 Hz)",
+    )
+    parser.add_argument(
+        "--decimate", default=1, type=int, metavar="N", help="keep one sample in N after filtering"
+    )
+    parser.add_argument(
+        "--reference-weight",
+        default=0.0,
+        type=float,
+        metavar="W",
+        help="consistent method: pull toward the URDF bodies (default 0)",
+    )
+    parser.add_argument(
+        "--out", required=True, metavar="M.json", help="model file to write (arrays go to M.npz beside it)"
+    )
+    add_json_argument(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    import time
+
+    import numpy as np
+
+    from dynid.cli import write_json
+    from dynid.identify.dataset import load_dataset
+    from dynid.identify.linear_system import Preprocessing
+    from dynid.identify.model import identify, save_model
+
+    robot = robot_from_args(args)
+    start = time.perf_counter()
+    data = load_dataset(args.data, robot.n, robot_name=robot.name)
+    model = identify(
+        robot,
+        data,
+        method=args.method,
+        friction=args.friction,
+        gmm=args.gmm,
+        preprocessing=Preprocessing(cutoff=args.cutoff, decimate=args.decimate),
+        reference_weight=args.reference_weight,
+    )
+    json_path, arrays_path = save_model(model, args.out)
+    elapsed = time.perf_counter() - start
+    figures = model.figures()
+    print(
+        f"{robot.name}: {model.method} on {figures['n_samples']} samples ({figures['reference']}), "
+        f"cond {model.cond:.4g}, {elapsed:.1f} s"
+    )
+    for note in figures["notes"]:
+        print(f"  note: {note}")
+    print(f"{'name':<8} {'value':>13} {'std %':>9}  expression")
+    for row in figures["parameters"]:
+        pct = "-" if row["std_percent"] is None else f"{row['std_percent']:.3g}"
+        print(f"{row['name']:<8} {row['value']:>13.6g} {pct:>9}  {row['expression']}")
+    layers = figures["rms_layers"]
+    for label in ("link", "friction", "gmm"):
+        print(f"rms after {label:<8} (N m): " + " ".join(f"{v:.4g}" for v in layers[label]))
+    print(f"friction: {figures['friction']['model']} ({figures['friction']['source']})")
+    if model.gmr is not None:
+        state = "active on joints " + ", ".join(str(j + 1) for j in np.flatnonzero(model.gmr.active_))
+        print(
+            f"gmm: {state if model.gmr.active_.any() else 'no correction'}; {model.gmr.fallback_ or ''}".rstrip(
+                "; "
+            )
+        )
+    if "consistency" in figures:
+        c = figures["consistency"]
+        print(
+            f"consistent: relative distance {c['relative_distance']:.3g}, {c['mahalanobis']:.3g} std from the "
+            f"unconstrained estimate; smallest pseudo-inertia eigenvalue {min(c['min_eigenvalues']):.3g}"
+        )
+    print(f"wrote {json_path} and {arrays_path}")
+    write_json(args.json, {**figures, "elapsed_s": elapsed, "model": str(json_path)})
+    return 0

@@ -1,0 +1,722 @@
+"""The three-layer identification and the identified model file.
+
+>>> model = identify(load_robot("ur5"), load_dataset("D.csv"), method="irls", friction="seed", gmm="auto")
+>>> save_model(model, "M.json")                 # M.json (figures, readable) + M.npz (arrays)
+>>> model = load_model("M.json")
+>>> tau = model.predict(q, dq, ddq)             # or model.predict(dataset)
+
+Layers (METHOD.md section 4):
+
+1. link parameters by OLS / WLS / GLS / IRLS / physically consistent least squares on the
+   parallel-filtered stacked regressor (base parameters, armature, and linear friction identified
+   with them unless ``friction="none"``);
+2. friction: ``F_est = tau - tau_link`` (the rigid-body part of layer 1 removed, its linear friction
+   not), fitted per joint by the chosen model; with ``friction="linear"`` the layer-1 coefficients are
+   kept as they are;
+3. what is left, ``tau_err``, by Gaussian mixture regression on ``[q, dq]`` (guarded: zero where it
+   does not help on validation blocks).
+
+Prediction on a dataset repeats the identification's preprocessing: the layer-1 part is evaluated on
+the states and filtered like the torque (parallel filtering), the layer-2 and -3 parts are added at
+the kept samples (they were fitted against the filtered residual, as functions of the states).
+Compare the result with :meth:`IdentifiedModel.prepare` ``(ds).tau_reference``.
+
+Model file: ``M.json`` holds everything a person reads (robot, parameters with their standard
+deviations, preprocessing, friction coefficients, condition number, RMS per layer) and the name and
+SHA-256 of ``M.npz``, which holds the arrays (covariance, mixture).  Both are written to temporary
+files and renamed into place, the arrays first, so a reader never sees a half-written model: an
+interrupted write leaves the old pair, or a JSON whose checksum tells that its arrays are not the
+ones it was written with.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dynid.exceptions import DynidError, ModelFileError, UsageError
+from dynid.identify._threads import single_blas_thread
+from dynid.identify.consistent import ConsistentLS
+from dynid.identify.dataset import Dataset
+from dynid.identify.estimators import ESTIMATORS, LinkEstimator, check_is_fitted
+from dynid.identify.friction import FRICTION_MODELS, FrictionLayer
+from dynid.identify.gmr import GMRCorrection
+from dynid.identify.linear_system import (
+    ColumnSet,
+    Prepared,
+    Preprocessing,
+    build_system,
+    column_set,
+    linear_torque,
+    prepare,
+)
+
+__all__ = [
+    "METHODS",
+    "IdentifiedModel",
+    "ThreeLayerModel",
+    "identify",
+    "load_model",
+    "save_model",
+]
+
+METHODS = (*ESTIMATORS, "consistent")
+"""Layer-1 methods: ``ols``, ``wls``, ``gls``, ``irls``, ``consistent``."""
+FORMAT = "dynid-model"
+VERSION = 1
+
+
+def _finite_or_none(v: float) -> float | None:
+    return float(v) if np.isfinite(v) else None
+
+
+@dataclass(frozen=True, eq=False)
+class IdentifiedModel:
+    """An identified robot model: predicts joint torques from states or from a dataset.
+
+    Attributes
+    ----------
+    robot : RobotModel
+        The robot it was identified for.
+    columns : ColumnSet
+        Layer-1 parameters (names, kinds, expressions).
+    params : ndarray, shape (p,)
+        Layer-1 parameter values (SI).
+    cov : ndarray, shape (p, p)
+        Their covariance.
+    method : str
+        Layer-1 method.
+    preprocessing : dict
+        Resolved preprocessing settings (applied again by :meth:`predict` on a dataset).
+    friction : FrictionLayer or None
+        Friction model; with ``friction_source == "layer1"`` it restates the layer-1 coefficients.
+    friction_source : str
+        ``"layer1"`` (linear friction identified with the links), ``"layer2"`` (refitted) or ``"none"``.
+    gmr : GMRCorrection or None
+        Layer-3 correction.
+    cond : float
+        Condition number of the weighted regressor.
+    rms : ndarray, shape (n,)
+        Residual RMS per joint (N m) of the whole model on the identification data.
+    rms_layers : dict
+        RMS per joint after each layer: ``link``, ``friction``, ``gmm``.
+    info : dict
+        Everything else reported (samples, notes, IRLS iterations, consistency distance, GMM state).
+    """
+
+    robot: Any
+    columns: ColumnSet
+    params: NDArray[np.float64]
+    cov: NDArray[np.float64]
+    method: str
+    preprocessing: dict[str, Any]
+    friction: FrictionLayer | None
+    friction_source: str
+    gmr: GMRCorrection | None
+    cond: float
+    rms: NDArray[np.float64]
+    rms_layers: dict[str, list[float]]
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def std(self) -> NDArray[np.float64]:
+        """Standard deviation of each layer-1 parameter."""
+        return np.sqrt(np.maximum(np.diag(self.cov), 0.0))
+
+    @property
+    def std_percent(self) -> NDArray[np.float64]:
+        """Standard deviation in % of ``|params|`` (inf for a zero value)."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(np.abs(self.params) > 0, 100.0 * self.std / np.abs(self.params), np.inf)
+
+    @property
+    def filtered_mask(self) -> NDArray[np.bool_]:
+        """Layer-1 parameters in the filtered part of a prediction (rigid body, and layer-1 friction)."""
+        mask = self.columns.link_mask.copy()
+        if self.friction_source == "layer1":
+            mask |= self.columns.friction_mask
+        return mask
+
+    def prepare(self, ds: Dataset) -> Prepared:
+        """Preprocess a dataset as the identification data were.
+
+        Parameters
+        ----------
+        ds : Dataset
+            Data of the same robot.
+        """
+        return prepare(ds, Preprocessing.from_settings(self.preprocessing), n_joints=self.robot.n)
+
+    def _direct(self, q: NDArray[np.float64], dq: NDArray[np.float64]) -> NDArray[np.float64]:
+        out = np.zeros_like(q)
+        if self.friction is not None and self.friction_source == "layer2":
+            out += self.friction.predict(dq)
+        if self.gmr is not None:
+            out += self.gmr.predict(np.hstack([q, dq]))
+        return out
+
+    def predict(self, q, dq=None, ddq=None) -> NDArray[np.float64]:
+        """Joint torques (N m).
+
+        Parameters
+        ----------
+        q : ndarray, shape (m, n), or Dataset
+            Joint angles (rad); or a dataset, preprocessed as the identification data were: the result
+            then holds :meth:`prepare` ``(ds).rows``, to compare with ``prepare(ds).tau_reference``.
+        dq, ddq : ndarray, shape (m, n)
+            Joint velocities (rad/s) and accelerations (rad/s^2); not given with a dataset.
+
+        Returns
+        -------
+        ndarray, shape (m, n)
+        """
+        if isinstance(q, Dataset):
+            prep = self.prepare(q)
+            full = linear_torque(
+                self.columns, self.params, prep.q, prep.dq, prep.ddq, mask=self.filtered_mask
+            )
+            rows = prep.rows
+            return prep.filter(full)[rows] + self._direct(prep.q[rows], prep.dq[rows])
+        if dq is None or ddq is None:
+            raise UsageError("predict takes (q, dq, ddq) arrays or one Dataset; dq and ddq are missing")
+        link = linear_torque(self.columns, self.params, q, dq, ddq, mask=self.filtered_mask)
+        return link + self._direct(np.atleast_2d(np.asarray(q, float)), np.atleast_2d(np.asarray(dq, float)))
+
+    # ------------------------------------------------------------------ figures
+    def figures(self) -> dict[str, Any]:
+        """The JSON-ready figures of the model (the model file without its bookkeeping)."""
+        cols = self.columns
+        std, pct = self.std, self.std_percent
+        return {
+            "robot": {
+                "name": self.robot.name,
+                "source": self.robot.source,
+                "key": self.robot.key,
+                "n": self.robot.n,
+                "joint_names": list(self.robot.joint_names),
+            },
+            "method": self.method,
+            "layer1": {"friction": cols.friction, "armature": cols.armature},
+            "preprocessing": self.preprocessing,
+            "parameters": [
+                {
+                    "name": name,
+                    "expression": expr,
+                    "kind": kind,
+                    "value": float(v),
+                    "std": float(s),
+                    "std_percent": _finite_or_none(pc),
+                }
+                for name, expr, kind, v, s, pc in zip(
+                    cols.names, cols.expressions, cols.kinds, self.params, std, pct, strict=True
+                )
+            ],
+            "base_params": {name: float(v) for name, v in zip(cols.names, self.params, strict=True)},
+            "std": {name: float(s) for name, s in zip(cols.names, std, strict=True)},
+            "std_percent": {name: _finite_or_none(pc) for name, pc in zip(cols.names, pct, strict=True)},
+            "cond": float(self.cond),
+            "rms": [float(v) for v in self.rms],
+            "rms_mean": float(np.mean(self.rms)),
+            "rms_layers": self.rms_layers,
+            "friction": {
+                "model": "none" if self.friction is None else self.friction.model,
+                "source": self.friction_source,
+                "joints": [] if self.friction is None else self.friction.to_dict()["joints"],
+            },
+            "gmm": None
+            if self.gmr is None
+            else {
+                "mode": self.gmr.mode,
+                "n_components": [int(k) for k in self.gmr.n_components_],
+                "active": [bool(a) for a in self.gmr.active_],
+                "fallback": self.gmr.fallback_,
+                "validation_rms": self.info.get("gmm_validation_rms"),
+            },
+            **{k: v for k, v in self.info.items() if k != "gmm_validation_rms"},
+        }
+
+
+# ---------------------------------------------------------------------------- the pipeline
+class ThreeLayerModel:
+    """Link parameters, friction and a mixture-regression correction, identified one after the other.
+
+    Parameters
+    ----------
+    robot : RobotModel
+        The robot that recorded the data.
+    method : {"ols", "wls", "gls", "irls", "consistent"}
+        Layer-1 method (``consistent``: IRLS weighting with physically consistent links).
+    friction : {"none", "linear", "seed", "stribeck", "sigmoid"}
+        Friction model (layer 2; ``linear`` keeps the coefficients identified with the links).
+    gmm : "off" or "auto" or int
+        Layer 3: off, mixture size by BIC, or a fixed number of components.
+    preprocessing : Preprocessing, optional
+        Filtering, differentiation, trimming, decimation (default :class:`Preprocessing`).
+    armature : bool
+        Identify the armature with the link parameters.
+    reference_weight : float
+        Pull toward the URDF bodies in the consistent fit.
+    gmm_mode : {"own", "per_joint", "vector"}
+        Inputs of the mixture regression (see :class:`GMRCorrection`).
+    random_state : int
+        Seed of the mixture's EM.
+
+    Attributes
+    ----------
+    model_ : IdentifiedModel
+        The identified model.
+    link_ : LinkEstimator
+        The fitted layer-1 estimator.
+    """
+
+    def __init__(
+        self,
+        *,
+        robot,
+        method: str = "irls",
+        friction: str = "seed",
+        gmm: str | int = "auto",
+        preprocessing: Preprocessing | None = None,
+        armature: bool = True,
+        reference_weight: float = 0.0,
+        gmm_mode: str = "own",
+        random_state: int = 0,
+    ) -> None:
+        self.robot = robot
+        self.method = method
+        self.friction = friction
+        self.gmm = gmm
+        self.preprocessing = preprocessing
+        self.armature = armature
+        self.reference_weight = reference_weight
+        self.gmm_mode = gmm_mode
+        self.random_state = random_state
+
+    def __repr__(self) -> str:
+        return (
+            f"ThreeLayerModel(robot={getattr(self.robot, 'name', self.robot)!r}, method={self.method!r}, "
+            f"friction={self.friction!r}, gmm={self.gmm!r})"
+        )
+
+    def _check(self) -> None:
+        if self.method not in METHODS:
+            raise UsageError(f"unknown method {self.method!r}; choose one of {', '.join(METHODS)}")
+        if self.friction not in FRICTION_MODELS:
+            raise UsageError(
+                f"unknown friction model {self.friction!r}; choose one of {', '.join(FRICTION_MODELS)}"
+            )
+        g = self.gmm
+        ok = g in ("off", "auto") or (isinstance(g, int | np.integer) and not isinstance(g, bool) and g >= 1)
+        if not ok:
+            raise UsageError(f"gmm is {g!r}; give 'off', 'auto' or a positive number of components")
+
+    def fit(self, data: Dataset) -> ThreeLayerModel:
+        """Identify the three layers.
+
+        Parameters
+        ----------
+        data : Dataset
+            Measured data of the robot.
+
+        Returns
+        -------
+        self
+        """
+        self._check()
+        robot = self.robot
+        layer1_friction = self.friction != "none"
+        system = build_system(
+            robot, data, preprocessing=self.preprocessing, friction=layer1_friction, armature=self.armature
+        )
+        est: LinkEstimator
+        if self.method == "consistent":
+            est = ConsistentLS(
+                robot=robot,
+                friction=layer1_friction,
+                armature=self.armature,
+                preprocessing=self.preprocessing,
+                reference_weight=self.reference_weight,
+            )
+        else:
+            est = ESTIMATORS[self.method](
+                robot=robot,
+                friction=layer1_friction,
+                armature=self.armature,
+                preprocessing=self.preprocessing,
+            )
+        est.fit(system)
+        cols = system.columns
+        x = est.params_
+        prep = system.prepared
+        rows = prep.rows
+        with single_blas_thread():
+            tau = system.tau()
+            resid = tau - system.predict(x, mask=cols.link_mask)  # F_est: what the rigid body leaves
+        system.release()
+        rms_layers = {"link": _rms(resid)}
+        dq_k, q_k = prep.dq[rows], prep.q[rows]
+        friction: FrictionLayer | None = None
+        if self.friction == "none":
+            source = "none"
+        elif self.friction == "linear":
+            source = "layer1"
+            xe = dict(zip(cols.names, x, strict=True))
+            n = robot.n
+            friction = FrictionLayer.from_linear(
+                [xe.get(f"fc{j + 1}", 0.0) for j in range(n)],
+                [xe.get(f"fv{j + 1}", 0.0) for j in range(n)],
+                [xe.get(f"fo{j + 1}", 0.0) for j in range(n)],
+            )
+            friction.rms_ = system.rms(x)  # with the link part: the layer-1 residual
+            resid = resid - _layer1_friction(cols, x, prep)
+        else:
+            source = "layer2"
+            friction = FrictionLayer(model=self.friction).fit(dq_k, resid)
+            resid = resid - friction.predict(dq_k)
+        rms_layers["friction"] = _rms(resid)
+        gmr: GMRCorrection | None = None
+        info: dict[str, Any] = {
+            "n_samples": len(rows),
+            "notes": list(est.notes_),
+            "reference": prep.reference,
+        }
+        if self.gmm != "off":
+            gmr = GMRCorrection(
+                n_components=self.gmm if self.gmm == "auto" else int(self.gmm),
+                mode=self.gmm_mode,
+                random_state=self.random_state,
+            ).fit(np.hstack([q_k, dq_k]), resid)
+            if gmr.active_.any():
+                resid = resid - gmr.predict(np.hstack([q_k, dq_k]))
+            info["gmm_validation_rms"] = gmr.validation_rms_.tolist()
+        rms_layers["gmm"] = _rms(resid)
+        if hasattr(est, "n_iter_"):
+            info["irls"] = {"iterations": int(est.n_iter_), "converged": bool(est.converged_)}
+        if isinstance(est, ConsistentLS):
+            info["consistency"] = {
+                "relative_distance": est.distance_["relative"],
+                "mahalanobis": est.distance_["mahalanobis"],
+                "rms_change": [float(v) for v in est.distance_["rms_change"]],
+                "min_eigenvalues": [float(v) for v in est.min_eigenvalues_],
+                "standard_params": [float(v) for v in est.standard_],
+                "solver": est.solver_,
+            }
+        self.link_ = est
+        self.model_ = IdentifiedModel(
+            robot=robot,
+            columns=cols,
+            params=np.asarray(x, dtype=np.float64),
+            cov=np.asarray(est.cov_, dtype=np.float64),
+            method=self.method,
+            preprocessing=dict(prep.settings),
+            friction=friction,
+            friction_source=source,
+            gmr=gmr,
+            cond=float(est.cond_),
+            rms=np.array(rms_layers["gmm"]),
+            rms_layers=rms_layers,
+            info=info,
+        )
+        return self
+
+    def predict(self, q, dq=None, ddq=None) -> NDArray[np.float64]:
+        """Joint torques (N m) of the identified model (see :meth:`IdentifiedModel.predict`).
+
+        Parameters
+        ----------
+        q : ndarray, shape (m, n), or Dataset
+            Joint angles (rad), or a dataset.
+        dq, ddq : ndarray, shape (m, n)
+            Joint velocities (rad/s) and accelerations (rad/s^2).
+        """
+        check_is_fitted(self, "model_")
+        return self.model_.predict(q, dq, ddq)
+
+
+def _rms(r: NDArray[np.float64]) -> list[float]:
+    return [float(v) for v in np.sqrt(np.mean(r**2, axis=0))]
+
+
+def _layer1_friction(cols: ColumnSet, x: NDArray[np.float64], prep: Prepared) -> NDArray[np.float64]:
+    """The layer-1 linear friction, filtered like the torque, at the kept rows."""
+    full = linear_torque(cols, x, prep.q, prep.dq, prep.ddq, mask=cols.friction_mask)
+    return prep.filter(full)[prep.rows]
+
+
+def identify(
+    robot,
+    data: Dataset,
+    *,
+    method: str = "irls",
+    friction: str = "seed",
+    gmm: str | int = "auto",
+    preprocessing: Preprocessing | None = None,
+    armature: bool = True,
+    reference_weight: float = 0.0,
+    gmm_mode: str = "own",
+    random_state: int = 0,
+) -> IdentifiedModel:
+    """Identify a robot's dynamic model from data in three layers (see :class:`ThreeLayerModel`).
+
+    Parameters
+    ----------
+    robot : RobotModel
+        The robot that recorded the data.
+    data : Dataset
+        Measured data.
+    method : {"ols", "wls", "gls", "irls", "consistent"}
+        Layer-1 method.
+    friction : {"none", "linear", "seed", "stribeck", "sigmoid"}
+        Friction model.
+    gmm : "off" or "auto" or int
+        Layer-3 correction.
+    preprocessing : Preprocessing, optional
+        Filtering and differentiation.
+    armature : bool
+        Identify the armature.
+    reference_weight : float
+        Pull toward the URDF bodies in the consistent fit.
+    gmm_mode : {"own", "per_joint", "vector"}
+        Inputs of the mixture regression.
+    random_state : int
+        Seed of the mixture's EM.
+
+    Returns
+    -------
+    IdentifiedModel
+    """
+    return (
+        ThreeLayerModel(
+            robot=robot,
+            method=method,
+            friction=friction,
+            gmm=gmm,
+            preprocessing=preprocessing,
+            armature=armature,
+            reference_weight=reference_weight,
+            gmm_mode=gmm_mode,
+            random_state=random_state,
+        )
+        .fit(data)
+        .model_
+    )
+
+
+# ---------------------------------------------------------------------------- files
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
+
+
+def _clean(value: Any) -> Any:
+    """JSON-ready copy: arrays to lists, non-finite floats to None (JSON has no NaN)."""
+    if isinstance(value, dict):
+        return {str(k): _clean(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_clean(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _clean(value.tolist())
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
+
+
+def _write_temp(folder: Path, name: str, data: bytes) -> Path:
+    fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=folder)
+    try:
+        os.fchmod(fd, 0o644)
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return Path(tmp)
+
+
+def save_model(model: IdentifiedModel, path: str | os.PathLike[str]) -> tuple[Path, Path]:
+    """Write a model to ``path`` (JSON) and the arrays beside it (same name, ``.npz``), all or nothing.
+
+    Parameters
+    ----------
+    model : IdentifiedModel
+        The model.
+    path : str or path-like
+        The JSON file to write (its folder must exist).
+
+    Returns
+    -------
+    (Path, Path)
+        The JSON and the arrays file.
+    """
+    path = Path(path)
+    if not path.parent.is_dir():
+        raise ModelFileError(
+            f"cannot write {path.name}: the folder {path.parent} does not exist; create it first"
+        )
+    arrays_path = path.with_suffix(".npz")
+    arrays: dict[str, NDArray[Any]] = {"params": model.params, "cov": model.cov}
+    if model.gmr is not None:
+        arrays.update(model.gmr.to_arrays("gmr"))
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    blob = buf.getvalue()
+    doc = {
+        "format": FORMAT,
+        "version": VERSION,
+        **model.figures(),
+        "arrays": arrays_path.name,
+        "arrays_sha256": hashlib.sha256(blob).hexdigest(),
+    }
+    text = json.dumps(_clean(doc), indent=2, default=_jsonable, allow_nan=False) + "\n"
+    tmp_arrays = _write_temp(path.parent, arrays_path.name, blob)
+    try:
+        tmp_json = _write_temp(path.parent, path.name, text.encode())
+    except BaseException:
+        tmp_arrays.unlink(missing_ok=True)
+        raise
+    try:
+        os.replace(tmp_arrays, arrays_path)
+        os.replace(tmp_json, path)
+    except BaseException:
+        tmp_arrays.unlink(missing_ok=True)
+        tmp_json.unlink(missing_ok=True)
+        raise
+    return path, arrays_path
+
+
+def load_model(path: str | os.PathLike[str], robot=None) -> IdentifiedModel:
+    """Read a model written by :func:`save_model` (or ``dynid identify``).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The model's JSON file.
+    robot : RobotModel, optional
+        The robot to use; it must be the one the model was identified for.  Default: loaded from the
+        source recorded in the file (a built-in name or a URDF / table path).
+
+    Returns
+    -------
+    IdentifiedModel
+
+    Raises
+    ------
+    ModelFileError
+        Missing or corrupt file, arrays that do not match, another robot.
+    """
+    path = Path(path)
+    name = path.name
+    if not path.is_file():
+        raise ModelFileError(f"no model file at {path}; give the JSON written by 'dynid identify --out'")
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+        if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+            raise ValueError("no 'format: dynid-model' field")
+        if int(doc.get("version", 0)) > VERSION:
+            raise ModelFileError(
+                f"{name} is a version-{doc['version']} model file; this dynid reads up to version {VERSION}: upgrade dynid"
+            )
+        info_robot = doc["robot"]
+        arrays_path = path.parent / doc["arrays"]
+    except ModelFileError:
+        raise
+    except (ValueError, KeyError, TypeError, UnicodeDecodeError) as err:
+        raise ModelFileError(
+            f"{name} is not a readable dynid model file ({type(err).__name__}: {err}); write it again with 'dynid identify'"
+        ) from None
+    if robot is None:
+        from dynid.symbolic.robot import load_robot
+
+        try:
+            robot = load_robot(info_robot["source"])
+        except DynidError as err:
+            raise ModelFileError(
+                f"{name} was identified for the robot '{info_robot.get('name')}' from '{info_robot.get('source')}', "
+                f"which cannot be loaded here ({err}); pass that robot to load_model(path, robot=...)"
+            ) from None
+    if robot.key != info_robot.get("key") or robot.n != info_robot.get("n"):
+        raise ModelFileError(
+            f"{name} was identified for the robot '{info_robot.get('name')}' ({info_robot.get('n')} joints, key "
+            f"{info_robot.get('key')}), not for '{robot.name}' ({robot.n} joints, key {robot.key}); use the model "
+            "identified on this robot, or identify one"
+        )
+    try:
+        blob = arrays_path.read_bytes()
+    except OSError:
+        raise ModelFileError(
+            f"{name} keeps its arrays in {arrays_path.name}, which is missing; copy it beside {name} or identify again"
+        ) from None
+    if hashlib.sha256(blob).hexdigest() != doc.get("arrays_sha256"):
+        raise ModelFileError(
+            f"{arrays_path.name} is not the arrays file {name} was written with (checksum differs); copy the pair "
+            "together or identify again"
+        )
+    try:
+        with np.load(io.BytesIO(blob), allow_pickle=False) as npz:
+            arrays = {k: npz[k] for k in npz.files}
+        layer1 = doc["layer1"]
+        cols = column_set(robot, friction=bool(layer1["friction"]), armature=bool(layer1["armature"]))
+        names = [p["name"] for p in doc["parameters"]]
+        if names != list(cols.names):
+            raise ModelFileError(
+                f"{name} lists the parameters {', '.join(names[:4])}...; this dynid derives "
+                f"{', '.join(cols.names[:4])}... for '{robot.name}' (another base-parameter split): identify again"
+            )
+        params = np.asarray(arrays["params"], dtype=np.float64)
+        cov = np.asarray(arrays["cov"], dtype=np.float64)
+        if params.shape != (cols.p,) or cov.shape != (cols.p, cols.p):
+            raise ValueError(f"params {params.shape} / cov {cov.shape} do not fit {cols.p} parameters")
+        fr = doc["friction"]
+        friction = (
+            None
+            if fr["model"] == "none"
+            else FrictionLayer.from_dict({"model": fr["model"], "joints": fr["joints"]})
+        )
+        gmr = None
+        if doc.get("gmm") is not None:
+            gmr = GMRCorrection.from_arrays(arrays, "gmr", mode=doc["gmm"]["mode"])
+            gmr.fallback_ = doc["gmm"].get("fallback")
+        info = {
+            k: v for k, v in doc.items() if k in ("n_samples", "notes", "reference", "irls", "consistency")
+        }
+        if doc.get("gmm") is not None:
+            info["gmm_validation_rms"] = doc["gmm"].get("validation_rms")
+        return IdentifiedModel(
+            robot=robot,
+            columns=cols,
+            params=params,
+            cov=cov,
+            method=str(doc["method"]),
+            preprocessing=dict(doc["preprocessing"]),
+            friction=friction,
+            friction_source=str(fr["source"]),
+            gmr=gmr,
+            cond=float(doc["cond"]),
+            rms=np.asarray(doc["rms"], dtype=np.float64),
+            rms_layers=dict(doc["rms_layers"]),
+            info=info,
+        )
+    except ModelFileError:
+        raise
+    except (ValueError, KeyError, TypeError, OSError) as err:
+        raise ModelFileError(
+            f"{name} or its arrays are malformed ({type(err).__name__}: {err}); write them again with 'dynid identify'"
+        ) from None
