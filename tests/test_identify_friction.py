@@ -1,0 +1,87 @@
+"""Layer 2: friction models recover their coefficients from simulated friction data."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dynid.exceptions import DataError, UsageError
+from dynid.identify.friction import (
+    FrictionLayer,
+    LinearFriction,
+    SeedFriction,
+    SigmoidFriction,
+    StribeckFriction,
+    friction_model,
+)
+
+
+def velocities(rng: np.random.Generator, m: int = 20_000) -> np.ndarray:
+    """Joint speeds sweeping both directions and lingering near zero (rad/s)."""
+    t = np.linspace(0.0, 40.0, m)
+    return 1.5 * np.sin(2 * np.pi * 0.25 * t) * np.abs(np.sin(2 * np.pi * 0.05 * t)) + 0.02 * rng.normal(
+        size=m
+    )
+
+
+def with_coef(model, coef):
+    model.coef_ = np.asarray(coef, dtype=float)
+    return model
+
+
+def test_seed_model_recovers_its_coefficients_and_threshold(rng) -> None:
+    dq = velocities(rng)
+    truth = with_coef(SeedFriction(), [1.0, 0.8, 0.5, 0.2, 0.05, 1.6, 1.3, 0.08])
+    F = truth.predict(dq) + 0.02 * rng.normal(size=dq.size)
+    fit = SeedFriction().fit(dq, F)
+    np.testing.assert_allclose(fit.coef_[:2], truth.coef_[:2], rtol=0.03)  # Coulomb per direction
+    np.testing.assert_allclose(fit.coef_[5:7], truth.coef_[5:7], rtol=0.03)  # static levels
+    np.testing.assert_allclose(fit.coef_[7], truth.coef_[7], rtol=0.05)  # threshold lambda
+    np.testing.assert_allclose(fit.coef_[2], truth.coef_[2], rtol=0.1)
+    assert fit.rms_ < 0.021
+    # continuous at +-lambda
+    lam = fit.coef_[7]
+    for side in (1, -1):
+        below, above = fit.predict(np.array([side * lam * (1 - 1e-9), side * lam * (1 + 1e-9)]))
+        assert abs(below - above) < 1e-6
+
+
+def test_stribeck_sigmoid_and_linear_models_recover_their_coefficients(rng) -> None:
+    dq = velocities(rng)
+    noise = 0.02 * rng.normal(size=dq.size)
+    cases = [
+        (StribeckFriction, [1.0, 1.5, 0.4, 0.1, 0.05], 0.05),
+        (SigmoidFriction, [5.0, 8.0, 0.1], 0.02),
+        (LinearFriction, [0.7, 0.3, -0.2], 0.02),
+    ]
+    for klass, coef, rtol in cases:
+        F = with_coef(klass(), coef).predict(dq) + noise
+        np.testing.assert_allclose(klass().fit(dq, F).coef_, coef, rtol=rtol, atol=2e-3)
+
+
+def test_linear_friction_keeps_coulomb_and_viscous_non_negative(rng) -> None:
+    dq = velocities(rng)
+    F = -0.5 * np.sign(dq) + 0.1 + 0.01 * rng.normal(size=dq.size)  # "negative friction": unphysical
+    fit = LinearFriction().fit(dq, F)
+    assert fit.coef_[0] >= 0 and fit.coef_[1] >= 0
+
+
+def test_layer_round_trips_through_its_dict(rng) -> None:
+    dq = np.column_stack([velocities(rng, 4000), velocities(rng, 4000)])
+    F = 0.8 * np.sign(dq) + 0.3 * dq
+    layer = FrictionLayer(model="stribeck").fit(dq, F)
+    again = FrictionLayer.from_dict(layer.to_dict())
+    np.testing.assert_allclose(again.predict(dq), layer.predict(dq), rtol=0, atol=1e-12)
+    assert layer.rms_.shape == (2,)
+
+
+def test_bad_friction_input_is_refused(rng) -> None:
+    dq = velocities(rng, 100)
+    with pytest.raises(DataError, match="one friction torque"):
+        SeedFriction().fit(dq, np.zeros(99))
+    with pytest.raises(DataError, match="needs at least 20 samples"):
+        SeedFriction().fit(dq[:5], dq[:5])
+    with pytest.raises(UsageError, match="unknown friction model 'coulomb'"):
+        friction_model("coulomb")
+    with pytest.raises(DataError, match="joint 2: .*needs the joint to move"):
+        FrictionLayer(model="seed").fit(np.column_stack([dq, np.zeros(100)]), np.zeros((100, 2)))

@@ -1,0 +1,90 @@
+"""Layer 3: Gaussian mixture regression learns what is smooth and leaves noise alone."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.stats import multivariate_normal
+
+from dynid.exceptions import DataError, UsageError
+from dynid.identify.gmr import GMRCorrection, conditional_mean
+
+
+def motion(t: np.ndarray, phase: float) -> tuple[np.ndarray, np.ndarray]:
+    """Two joints' positions (rad) and velocities (rad/s) along t (s)."""
+    w = np.array([0.31, 0.53])
+    q = np.sin(np.outer(t, w) + phase) + 0.3 * np.sin(np.outer(t, 2.7 * w) + 2 * phase)
+    dq = np.cos(np.outer(t, w) + phase) * w + 0.3 * 2.7 * w * np.cos(np.outer(t, 2.7 * w) + 2 * phase)
+    return q, dq
+
+
+def unmodelled(q: np.ndarray, dq: np.ndarray) -> np.ndarray:
+    """A smooth torque the model lacks (N m): position ripple plus a velocity-dependent term."""
+    return 0.5 * np.sin(2 * q) + 0.3 * np.tanh(dq / 0.2)
+
+
+def test_conditional_mean_matches_the_textbook_formula(rng) -> None:
+    K, n_in, n_out = 3, 2, 2
+    w = rng.dirichlet(np.ones(K))
+    mu = rng.normal(size=(K, n_in + n_out))
+    A = rng.normal(size=(K, n_in + n_out, n_in + n_out))
+    S = A @ A.transpose(0, 2, 1) + 0.5 * np.eye(n_in + n_out)
+    u = rng.normal(size=(7, n_in))
+    expected = []
+    for x in u:
+        h = np.array([w[k] * multivariate_normal(mu[k, :n_in], S[k, :n_in, :n_in]).pdf(x) for k in range(K)])
+        h /= h.sum()
+        expected.append(
+            sum(
+                h[k]
+                * (mu[k, n_in:] + S[k, n_in:, :n_in] @ np.linalg.solve(S[k, :n_in, :n_in], x - mu[k, :n_in]))
+                for k in range(K)
+            )
+        )
+    np.testing.assert_allclose(conditional_mean(u, w, mu, S, n_in), np.array(expected), rtol=1e-10)
+
+
+def test_learns_a_smooth_unmodelled_torque(rng) -> None:
+    t = np.arange(12_000) * 0.01
+    q, dq = motion(t, 0.0)
+    y = unmodelled(q, dq) + 0.05 * rng.normal(size=q.shape)
+    gmr = GMRCorrection().fit(np.hstack([q, dq]), y)
+    assert gmr.active_.all() and gmr.fallback_ is None
+    t2 = np.arange(3000) * 0.01
+    q2, dq2 = motion(t2, 1.3)  # another motion: held out
+    y2 = unmodelled(q2, dq2) + 0.05 * rng.normal(size=q2.shape)
+    before = np.sqrt(np.mean(y2**2, axis=0))
+    after = np.sqrt(np.mean((y2 - gmr.predict(np.hstack([q2, dq2]))) ** 2, axis=0))
+    assert np.all(after < 0.4 * before)
+
+
+@pytest.mark.parametrize("mode", ["own", "vector"])
+def test_pure_noise_is_left_alone(rng, mode) -> None:
+    t = np.arange(8000) * 0.01
+    q, dq = motion(t, 0.0)
+    gmr = GMRCorrection(mode=mode).fit(np.hstack([q, dq]), 0.1 * rng.normal(size=q.shape))
+    assert not gmr.active_.any()
+    assert "did not lower the RMS" in gmr.fallback_
+    q2, dq2 = motion(np.arange(2000) * 0.01, 0.7)
+    y2 = 0.1 * rng.normal(size=q2.shape)
+    pred = gmr.predict(np.hstack([q2, dq2]))
+    assert np.sqrt(np.mean((y2 - pred) ** 2)) <= np.sqrt(np.mean(y2**2))
+
+
+def test_round_trip_through_arrays(rng) -> None:
+    t = np.arange(4000) * 0.01
+    q, dq = motion(t, 0.0)
+    u = np.hstack([q, dq])
+    gmr = GMRCorrection(n_components=3).fit(u, unmodelled(q, dq))
+    again = GMRCorrection.from_arrays(gmr.to_arrays())
+    np.testing.assert_allclose(again.predict(u), gmr.predict(u), atol=1e-12)
+
+
+def test_bad_gmr_input_is_refused(rng) -> None:
+    u = rng.normal(size=(100, 4))
+    with pytest.raises(DataError, match="needs at least 400 samples"):
+        GMRCorrection().fit(u, rng.normal(size=(100, 2)))
+    with pytest.raises(UsageError, match="mode is 'joint'; choose one of vector, per_joint, own"):
+        GMRCorrection(mode="joint").fit(u, rng.normal(size=(100, 2)))
+    with pytest.raises(DataError, match="u has 100 rows but the residual has 99"):
+        GMRCorrection().fit(u, rng.normal(size=(99, 2)))
