@@ -83,5 +83,5 @@ def test_bad_friction_input_is_refused(rng) -> None:
         SeedFriction().fit(dq[:5], dq[:5])
     with pytest.raises(UsageError, match="unknown friction model 'coulomb'"):
         friction_model("coulomb")
-    with pytest.raises(DataError, match="joint 2: .*needs the joint to move"):
+    with pytest.raises(DataError, match=r"joint 2: .*needs the joint to move"):
         FrictionLayer(model="seed").fit(np.column_stack([dq, np.zeros(100)]), np.zeros((100, 2)))

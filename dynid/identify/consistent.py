@@ -347,6 +347,7 @@ class ConsistentLS(LinkEstimator):
                 stacklevel=4,
             )
         phi_opt = np.asarray(ca.Function("phi", [z], [phi])(z_opt)).ravel()
+        phi_opt[10 * n + e_idx] = np.maximum(phi_opt[10 * n + e_idx], lb_e)  # IPOPT relaxes bounds by ~1e-8
         self._finish(
             system,
             unc,

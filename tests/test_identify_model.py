@@ -1,0 +1,162 @@
+"""Physically consistent fit, the three-layer pipeline, the model file and 'dynid identify'."""
+
+from __future__ import annotations
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+
+from dynid.cli import main
+from dynid.exceptions import ModelFileError
+from dynid.identify._synthetic import random_fourier, synthetic_dataset, true_parameters
+from dynid.identify.consistent import ConsistentLS, log_cholesky, pseudo_inertia, standard_from_pseudo_inertia
+from dynid.identify.dataset import save_dataset
+from dynid.identify.estimators import IRLS
+from dynid.identify.friction import SeedFriction
+from dynid.identify.linear_system import build_system, column_set
+from dynid.identify.model import identify, load_model, save_model
+
+
+def test_log_cholesky_round_trip(ur5) -> None:
+    for link in ur5.params.reshape(6, 10):
+        J = pseudo_inertia(link)
+        theta = log_cholesky(J)
+        U = np.triu(np.zeros((4, 4)))
+        U[np.triu_indices(4)] = [theta[0], *theta[1:4], theta[4], *theta[5:7], theta[7], theta[8], theta[9]]
+        U[np.diag_indices(4)] = np.exp(np.diag(U))
+        np.testing.assert_allclose(U @ U.T, J, atol=1e-14)
+        np.testing.assert_allclose(standard_from_pseudo_inertia(J), link, atol=1e-14)
+
+
+def test_consistent_fit_returns_a_consistent_estimate_unchanged(ur5) -> None:
+    rng = np.random.default_rng(21)
+    cols = column_set(ur5)
+    x = true_parameters(cols, rng)
+    ds = synthetic_dataset(cols, x, random_fourier(ur5, rng, periods=2), rate=50, rng=rng, noise=0.01)
+    system = build_system(ur5, ds)
+    fit = ConsistentLS(robot=ur5).fit(system)
+    unc = IRLS(robot=ur5).fit(system)
+    np.testing.assert_allclose(fit.params_, unc.params_, rtol=1e-9, atol=1e-12)
+    assert np.all(fit.min_eigenvalues_ > 0)
+    np.testing.assert_allclose(cols.P @ np.concatenate([fit.standard_, fit.extras_]), fit.params_, atol=1e-9)
+
+
+def test_consistent_fit_makes_an_impossible_estimate_physical(ur5) -> None:
+    rng = np.random.default_rng(22)
+    cols = column_set(ur5)
+    params = ur5.params.copy()
+    params[10 * 5 + 6] = -0.02  # Iyy6 < 0: no body has that, and Iyy6 is a base parameter alone
+    extras = np.concatenate([np.full(6, 0.02), rng.uniform(0.5, 3, 6), rng.uniform(0.2, 2, 6), np.zeros(6)])
+    x_bad = cols.P @ np.concatenate([params, extras])
+    ds = synthetic_dataset(cols, x_bad, random_fourier(ur5, rng), rate=10, rng=rng, noise=0.3)  # few, noisy
+    k = cols.names.index("Iyy6")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fit = ConsistentLS(robot=ur5, reference_weight=0.01).fit(ds)
+    assert fit.unconstrained_.params_[k] < 0  # the unconstrained estimate is inconsistent
+    assert np.all(fit.min_eigenvalues_ > 0)
+    assert np.all(np.linalg.eigvalsh(pseudo_inertia(fit.standard_.reshape(6, 10))) > 0)
+    assert fit.params_[k] >= 0
+    kinds = np.array(cols.kinds)
+    assert np.all(fit.params_[np.isin(kinds, ["armature", "coulomb", "viscous"])] >= 0)
+    assert fit.distance_["mahalanobis"] > 1 and np.mean(fit.distance_["rms_change"]) >= -1e-12
+
+
+@pytest.fixture(scope="module")
+def pipeline_data(ur5):
+    rng = np.random.default_rng(23)
+    cols = column_set(ur5, friction=False)
+    x = true_parameters(cols, rng)
+    frictions = [SeedFriction().__class__() for _ in range(6)]
+    for j, f in enumerate(frictions):
+        f.coef_ = np.array([1.0 + 0.2 * j, 0.8, 0.5, 0.2, 0.05, 1.6, 1.3, 0.08])
+
+    def extra(q, dq):  # the paper's friction (nonlinear, with a low-speed region) on every joint
+        return np.column_stack([f.predict(dq[:, j]) for j, f in enumerate(frictions)])
+
+    train = synthetic_dataset(
+        cols, x, random_fourier(ur5, rng, periods=3), rate=100, rng=rng, noise=0.1, extra=extra
+    )
+    test = synthetic_dataset(
+        cols, x, random_fourier(ur5, rng, periods=1), rate=100, rng=rng, noise=0.1, extra=extra
+    )
+    return train, test
+
+
+def heldout_rms(model, ds) -> float:
+    return float(np.sqrt(np.mean((model.predict(ds) - model.prepare(ds).tau_reference) ** 2)))
+
+
+def test_three_layers_beat_ols_on_held_out_data_and_survive_a_file(ur5, pipeline_data, tmp_path) -> None:
+    train, test = pipeline_data
+    ols = identify(ur5, train, method="ols", friction="linear", gmm="off")
+    full = identify(ur5, train, method="gls", friction="seed", gmm="auto")
+    noise = 0.1  # N m, the simulated white noise
+    excess_ols = heldout_rms(ols, test) ** 2 - noise**2
+    excess_full = heldout_rms(full, test) ** 2 - noise**2
+    assert excess_full < 0.75 * excess_ols  # the nonlinear friction is what OLS + linear friction misses
+    assert full.rms_layers["gmm"][0] <= full.rms_layers["friction"][0] <= full.rms_layers["link"][0]
+    json_path, _ = save_model(full, tmp_path / "M.json")
+    again = load_model(json_path)
+    np.testing.assert_allclose(again.predict(test), full.predict(test), atol=1e-10)
+    q, dq, ddq = test.q[:50], test.dq[:50], test.ddq[:50]
+    np.testing.assert_allclose(again.predict(q, dq, ddq), full.predict(q, dq, ddq), atol=1e-10)
+    doc = json.loads(json_path.read_text())
+    for key in ("base_params", "std_percent", "cond", "rms", "preprocessing", "friction", "robot"):
+        assert key in doc
+    assert doc["robot"]["key"] == ur5.key and doc["friction"]["model"] == "seed"
+
+
+def test_bad_model_files_give_one_clear_error(ur5, pipeline_data, tmp_path) -> None:
+    from dynid.symbolic import load_robot
+
+    train, _ = pipeline_data
+    model = identify(ur5, train, method="ols", friction="linear", gmm="off")
+    json_path, npz_path = save_model(model, tmp_path / "M.json")
+    with pytest.raises(ModelFileError, match=r"M.json was identified for the robot 'ur5' .*not for 'ur10'"):
+        load_model(json_path, robot=load_robot("ur10"))
+    npz_path.write_bytes(npz_path.read_bytes()[:-10])
+    with pytest.raises(ModelFileError, match=r"M.npz is not the arrays file M.json was written with"):
+        load_model(json_path)
+    json_path.write_text("{not json")
+    with pytest.raises(ModelFileError, match=r"M.json is not a readable dynid model file"):
+        load_model(json_path)
+    with pytest.raises(ModelFileError, match=r"the folder .* does not exist"):
+        save_model(model, tmp_path / "missing" / "M.json")
+    assert not (tmp_path / "missing").exists()
+
+
+def test_identify_command_writes_the_model_and_figures(ur5, pipeline_data, tmp_path, capsys) -> None:
+    train, _ = pipeline_data
+    data = save_dataset(train, tmp_path / "D.csv")
+    out, figs = tmp_path / "M.json", tmp_path / "F.json"
+    code = main(
+        [
+            "identify",
+            "--robot",
+            "ur5",
+            "--data",
+            str(data),
+            "--method",
+            "gls",
+            "--friction",
+            "linear",
+            "--gmm",
+            "off",
+            "--out",
+            str(out),
+            "--json",
+            str(figs),
+        ]
+    )
+    assert code == 0
+    figures = json.loads(figs.read_text())
+    assert set(figures) >= {"base_params", "std_percent", "cond", "rms"}
+    assert len(figures["rms"]) == 6 and figures["method"] == "gls"
+    assert load_model(out).method == "gls"
+    code = main(["identify", "--robot", "panda", "--data", str(data), "--out", str(tmp_path / "P.json")])
+    assert code == 2
+    assert "q has 6 columns; the robot 'panda' has 7 joints" in capsys.readouterr().err
+    assert not (tmp_path / "P.json").exists()
