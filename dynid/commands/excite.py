@@ -1,0 +1,161 @@
+"""``dynid excite``: design an optimised excitation trajectory (Fourier series, IPOPT) and its executable CSV."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from dynid.commands.common import add_json_argument, add_robot_arguments, robot_from_args
+from dynid.exceptions import UsageError
+
+HELP = "design an excitation trajectory (Fourier series optimised with IPOPT) and write it as JSON and CSV"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_robot_arguments(parser)
+    parser.add_argument("--harmonics", type=int, default=5, help="harmonics N per joint (default 5)")
+    parser.add_argument("--base-freq", type=float, default=0.1, metavar="HZ", help="base frequency (default 0.1 Hz)")
+    parser.add_argument(
+        "--criterion",
+        choices=("seed", "cond", "logdet"),
+        default="seed",
+        help="seed: the paper's weighted condition numbers; cond: cond(H*); logdet: D-optimality (default seed)",
+    )
+    parser.add_argument("--trajectories", type=int, default=1, metavar="K", help="design K complementary trajectories")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the random starts (default 0)")
+    parser.add_argument("--out", required=True, metavar="T.json", help="Fourier coefficients and metadata (JSON)")
+    parser.add_argument("--csv", metavar="T.csv", help="also write approach, excitation(s) and retreat sampled at --rate")
+    parser.add_argument("--rate", type=float, default=500.0, metavar="HZ", help="controller rate of the CSV (default 500)")
+    add_json_argument(parser)
+    group = parser.add_argument_group("problem")
+    group.add_argument("--grid", type=int, metavar="M", help="optimisation samples per period (default max(40, 12 N))")
+    group.add_argument("--noise-std", metavar="V[,V...]", help="torque noise std per joint (N m) weighting H*; default 1")
+    group.add_argument("--z-min", type=float, metavar="Z", help="keep the tool above this height (m, base frame)")
+    group.add_argument(
+        "--box", metavar="X0,Y0,Z0,X1,Y1,Z1", help="keep the tool inside this box (m, base frame): low and high corners"
+    )
+    group = parser.add_argument_group("search")
+    group.add_argument("--patience", type=int, default=15, help="tries without improvement before stopping (default 15)")
+    group.add_argument("--max-tries", type=int, default=60, help="most tries per trajectory (default 60)")
+    group.add_argument("--n-jobs", type=int, default=2, help="parallel tries (joblib; -1: every core; default 2)")
+    group.add_argument("--backend", help="joblib backend (loky, threading, dask, ...; default joblib's)")
+    group.add_argument(
+        "--baseline", type=int, default=100, help="random feasible trajectories to compare with (default 100)"
+    )
+    group = parser.add_argument_group("executable CSV")
+    group.add_argument("--home", metavar="Q[,Q...]", help="start and end pose (rad); default the middle of the ranges")
+    group.add_argument("--periods", type=int, default=1, help="periods of each excitation in the CSV (default 1)")
+    group.add_argument(
+        "--speed-fraction", type=float, default=0.5, help="fraction of the velocity/acceleration limits for approach"
+    )
+    group.add_argument("--jerk-factor", type=float, default=5.0, help="jerk limit of the approach as a multiple of ddq_max")
+
+
+def _floats(option: str, text: str | None, count: int | None = None) -> list[float] | None:
+    if text is None:
+        return None
+    try:
+        values = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise UsageError(f"--{option} is '{text}'; give numbers separated by commas.") from None
+    if count is not None and len(values) != count:
+        raise UsageError(f"--{option} has {len(values)} values; give {count}, separated by commas.")
+    return values
+
+
+def _check_folder(option: str, path: str | None) -> Path | None:
+    if path is None:
+        return None
+    out = Path(path)
+    if not out.parent.exists():
+        raise UsageError(f"the folder of --{option} '{out}' does not exist; create it or write elsewhere.")
+    if out.is_dir():
+        raise UsageError(f"--{option} '{out}' is a folder; give a file name.")
+    return out
+
+
+def output_paths(out: Path, count: int) -> list[Path]:
+    """``T.json`` for the first trajectory, ``T-2.json``, ``T-3.json``, ... for the others."""
+    return [out] + [out.with_name(f"{out.stem}-{k}{out.suffix}") for k in range(2, count + 1)]
+
+
+def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from dynid.cli import write_json
+    from dynid.optim.approach import check_pose, executable_trajectory
+    from dynid.optim.excitation import CartesianLimits, ExcitationProblem, design_excitation
+
+    out = _check_folder("out", args.out)
+    csv = _check_folder("csv", args.csv)
+    _check_folder("json", args.json)
+    if out.suffix.lower() != ".json":
+        raise UsageError(f"--out '{out}' must end in .json (the Fourier coefficients); the CSV goes to --csv.")
+    if not (args.rate > 0):
+        raise UsageError(f"--rate is {args.rate}; give the controller rate in Hz, e.g. 500.")
+    robot = robot_from_args(args)
+    home = _floats("home", args.home, robot.n)
+    home = check_pose(robot, home) if home is not None else None  # before the long design
+    box = _floats("box", args.box, 6)
+    cartesian = None
+    if args.z_min is not None or box is not None:
+        cartesian = CartesianLimits(
+            z_min=args.z_min, box_min=None if box is None else box[:3], box_max=None if box is None else box[3:]
+        )
+    noise = _floats("noise-std", args.noise_std)
+    problem = ExcitationProblem(
+        robot=robot,
+        harmonics=args.harmonics,
+        base_freq=args.base_freq,
+        criterion=args.criterion,
+        grid=args.grid,
+        noise_std=noise,
+        cartesian=cartesian,
+    )
+    print(
+        f"{robot.name}: {args.criterion} criterion, {problem.harmonics} harmonics at {problem.base_freq:g} Hz, "
+        f"{args.trajectories} trajectory(ies), {problem.grid} grid points per period"
+    )
+    result = design_excitation(
+        problem,
+        trajectories=args.trajectories,
+        seed=args.seed,
+        patience=args.patience,
+        max_tries=args.max_tries,
+        n_jobs=args.n_jobs,
+        backend=args.backend,
+        baseline=args.baseline,
+        progress=lambda line: print("  " + line, flush=True),
+    )
+    sampled = None
+    if csv is not None:  # built before anything is written: a failure leaves no file behind
+        sampled = executable_trajectory(
+            robot,
+            result.trajectories,
+            rate=args.rate,
+            home=home,
+            periods=args.periods,
+            speed_fraction=args.speed_fraction,
+            jerk_factor=args.jerk_factor,
+        )
+    paths = output_paths(out, len(result.trajectories))
+    figures = result.to_dict()
+    figures["files"] = [str(p) for p in paths]
+    for path, traj in zip(paths, result.trajectories, strict=True):
+        traj.meta["files"] = [p.name for p in paths]
+        traj.save(path)
+    if sampled is not None:
+        sampled.to_csv(csv)
+        figures["csv"] = {"path": str(csv), "rate": args.rate, "segments": sampled.meta["segments"]}
+    write_json(args.json, figures)
+    ratio = result.cond / result.baseline_cond
+    print(
+        f"cond {result.cond:.4g} (best of {args.baseline} random feasible: {result.baseline_cond:.4g}, ratio "
+        f"{ratio:.2f}); {args.criterion} objective {result.objective:.4g}; feasible: {result.feasible}; "
+        f"{result.seconds:.1f} s"
+    )
+    print(f"wrote {', '.join(str(p) for p in paths)}")
+    if sampled is not None:
+        parts = ", ".join(f"{s['kind']} {s['duration']:.2f} s" for s in sampled.meta["segments"])
+        print(f"wrote {csv}: {sampled.t.size} samples at {args.rate:g} Hz ({parts}); home {np.round(sampled.q[0], 3)}")
+    return 0
