@@ -1,0 +1,469 @@
+"""The catalogue of candidate effects of the gap diagnosis: their feature columns.
+
+Each effect of the catalogue (DESIGN.md; the simulator's :mod:`dynid.identify.effects` injects the
+same names) is a :class:`Candidate`: a rule that turns the states of a dataset into extra regressor
+columns, one or a few per joint, that are refitted *together with* the base parameters (so what
+re-identification absorbs is never credited to the effect).  Columns are computed at full rate, from
+the same states as the base regressor, and then low-passed with the torque's filter (parallel
+filtering, DIAGNOSIS.md section 3).
+
+========================  ===================================================  ===================
+effect                    columns on joint j (``s = sign``)                    hyper-parameter
+========================  ===================================================  ===================
+offset                    1                                                    -
+armature                  ddq_j                                                -
+stribeck                  s(dq_j) exp(-(|dq_j| / vs)^2)                        vs
+load_friction             s(dq_j) |tau_j|,  s(dq_j) |tau_j| s(dq_j tau_j)      -
+temperature               h(t) s(dq_j),  h(t) dq_j;  h = 1 - exp(-t / T)       T
+cogging                   sin(k N q_j), cos(k N q_j), k = 1, 2                 N (gear ratio)
+elasticity                d^2 tau_j / dt^2 (first order of q = theta - tau/K)  -
+backlash                  b_j, d^2 b_j / dt^2;  b_j = tanh(tau_j / eps)        eps
+delay                     d tau_j / dt (first order of tau(t - d))             -
+drive_gain                tau_j                                                -
+base_tilt                 d g(q) / d alpha about two horizontal axes (all j)   -
+coupled_friction          s(w), w on joints a and b, w = dq_a +- dq_b          pair and sign
+nonlinear_viscous         dq_j |dq_j|,  dq_j^3                                 -
+payload                   (absorbed by the base parameters: parametric test)   -
+========================  ===================================================  ===================
+
+``tau`` is the identified model's predicted torque (the "first fit").  Elasticity, backlash and delay
+are not linear in their parameters: the screen uses the first-order columns above, the refit
+(:mod:`dynid.validation.diagnosis`) fits their physical parameter by nonlinear least squares.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = [
+    "CANDIDATES",
+    "EFFECT_NAMES",
+    "PARAMETRIC_EFFECTS",
+    "Candidate",
+    "FeatureSource",
+    "candidate_columns",
+    "describe_hyper",
+    "enumerate_candidates",
+    "excitation_hint",
+]
+
+EFFECT_NAMES = (
+    "offset",
+    "armature",
+    "stribeck",
+    "load_friction",
+    "temperature",
+    "cogging",
+    "elasticity",
+    "backlash",
+    "delay",
+    "drive_gain",
+    "payload",
+    "base_tilt",
+    "coupled_friction",
+    "nonlinear_viscous",
+)
+"""The catalogue, in the order of DESIGN.md (the names ``dynid simulate --effects`` injects)."""
+
+PARAMETRIC_EFFECTS = ("drive_gain", "payload", "offset")
+"""Effects that re-identification can absorb, tested on the change of the base parameters."""
+
+_SIGN_EPS = 1e-3  # rad/s: velocities below this count as zero in sign(dq) (quantised encoders)
+
+
+@dataclass(eq=False)
+class FeatureSource:
+    """Full-rate signals of one dataset from which candidate columns are built.
+
+    Parameters
+    ----------
+    t : ndarray, shape (M,)
+        Time (s) from the start of the recording.
+    q, dq, ddq : ndarray, shape (M, n)
+        States the regressor is evaluated at (rad, rad/s, rad/s^2).
+    tau_pred : ndarray, shape (M, n)
+        The identified model's torque at those states (N m), unfiltered.
+    robot : RobotModel
+        The robot.
+    fs : float
+        Sampling rate (Hz).
+    runs : list of slice
+        Runs (signals are differentiated within a run only).
+    """
+
+    t: NDArray[np.float64]
+    q: NDArray[np.float64]
+    dq: NDArray[np.float64]
+    ddq: NDArray[np.float64]
+    tau_pred: NDArray[np.float64]
+    robot: Any
+    fs: float
+    runs: list[slice]
+    torque_at: (
+        Callable[[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]], NDArray[np.float64]] | None
+    ) = None
+    cache: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def n(self) -> int:
+        """Number of joints."""
+        return int(self.q.shape[1])
+
+    @property
+    def m(self) -> int:
+        """Number of samples."""
+        return int(self.q.shape[0])
+
+    def derivative(self, x: NDArray[np.float64], order: int = 1) -> NDArray[np.float64]:
+        """Central-difference derivative along time, run by run: shape of ``x``, unit per s^order."""
+        out = np.array(x, dtype=float, copy=True)
+        dt = 1.0 / self.fs
+        for _ in range(order):
+            res = np.empty_like(out)
+            for run in self.runs:
+                seg = out[run]
+                res[run] = np.gradient(seg, dt, axis=0) if len(seg) > 1 else 0.0
+            out = res
+        return out
+
+    def sign(self, v: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``sign(v)`` with |v| < 1e-3 counted as zero."""
+        return np.where(np.abs(v) < _SIGN_EPS, 0.0, np.sign(v))
+
+    def gravity_tilt(self) -> NDArray[np.float64]:
+        """``d g(q) / d alpha`` for gravity tilted about two horizontal axes: (M, n, 2) (N m/rad)."""
+        if "tilt" in self.cache:
+            return self.cache["tilt"]
+        import pinocchio as pin
+
+        model = self.robot.pin_model.copy()
+        data = model.createData()
+        g0 = np.array(model.gravity.linear, dtype=float)
+        up = g0 / max(np.linalg.norm(g0), 1e-12)
+        a1 = np.cross(up, [1.0, 0.0, 0.0])
+        if np.linalg.norm(a1) < 1e-6:
+            a1 = np.cross(up, [0.0, 1.0, 0.0])
+        a1 /= np.linalg.norm(a1)
+        a2 = np.cross(up, a1)
+        out = np.empty((self.m, self.n, 2))
+        for k, axis in enumerate((a1, a2)):
+            # Small rotation: g' = g + alpha (axis x g); derivative exact since g(q) is linear in g.
+            model.gravity.linear = np.cross(axis, g0)
+            for i in range(self.m):
+                out[i, :, k] = pin.computeGeneralizedGravity(model, data, self.q[i])
+        self.cache["tilt"] = out
+        return out
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One candidate effect: its columns and what it needs.
+
+    Attributes
+    ----------
+    effect : str
+        Catalogue name.
+    joint : int or None
+        Joint (0-based) it acts on, None for an effect of the whole arm.
+    joints : tuple of int
+        Joints (0-based) whose torque it changes.
+    hyper : dict
+        Hyper-parameter values (tuned on the training data).
+    label : str
+        Human label ("stribeck on joint 3").
+    """
+
+    effect: str
+    joint: int | None
+    joints: tuple[int, ...]
+    hyper: dict[str, float] = field(default_factory=dict)
+    label: str = ""
+
+    @property
+    def key(self) -> str:
+        """Effect and joint(s), e.g. ``stribeck@3`` or ``coupled_friction@5+6``."""
+        if self.joint is None and len(self.joints) == 0:
+            return self.effect
+        if self.joint is not None:
+            return f"{self.effect}@{self.joint + 1}"
+        return f"{self.effect}@" + "+".join(str(j + 1) for j in self.joints)
+
+
+def _on_joint(src: FeatureSource, j: int, cols: Sequence[NDArray[np.float64]]) -> NDArray[np.float64]:
+    out = np.zeros((src.m, src.n, len(cols)))
+    for k, c in enumerate(cols):
+        out[:, j, k] = c
+    return out
+
+
+def _warm(t: NDArray[np.float64], T: float) -> NDArray[np.float64]:
+    return 1.0 - np.exp(-np.maximum(t, 0.0) / T)
+
+
+Builder = Callable[[FeatureSource, Candidate], NDArray[np.float64]]
+
+
+def _offset(src, c):
+    return _on_joint(src, c.joint, [np.ones(src.m)])
+
+
+def _armature(src, c):
+    return _on_joint(src, c.joint, [src.ddq[:, c.joint]])
+
+
+def _stribeck(src, c):
+    v = src.dq[:, c.joint]
+    vs = c.hyper["vs"]
+    return _on_joint(src, c.joint, [src.sign(v) * np.exp(-((np.abs(v) / vs) ** 2))])
+
+
+def _load_friction(src, c):
+    j = c.joint
+    s = src.sign(src.dq[:, j])
+    a = np.abs(src.tau_pred[:, j])
+    drive = np.sign(src.dq[:, j] * src.tau_pred[:, j])
+    return _on_joint(src, j, [s * a, s * a * drive])
+
+
+def _temperature(src, c):
+    j = c.joint
+    h = _warm(src.t, c.hyper["T"])
+    return _on_joint(src, j, [h * src.sign(src.dq[:, j]), h * src.dq[:, j]])
+
+
+def _cogging(src, c):
+    j = c.joint
+    N = c.hyper["N"]
+    x = src.q[:, j]
+    return _on_joint(src, j, [f(k * N * x) for k in (1, 2) for f in (np.sin, np.cos)])
+
+
+def _shifted(src: FeatureSource, j: int, delta: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Change of the first-fit torque (M, n, 1) when the link angle of joint j lags the encoder by delta."""
+    if src.torque_at is None:
+        raise ValueError("the exact transmission columns need FeatureSource.torque_at")
+    q, dq, ddq = src.q.copy(), src.dq.copy(), src.ddq.copy()
+    q[:, j] -= delta
+    dq[:, j] -= src.derivative(delta, 1)
+    ddq[:, j] -= src.derivative(delta, 2)
+    return (src.torque_at(q, dq, ddq) - src.tau_pred)[:, :, None]
+
+
+def _elasticity(src, c):
+    j = c.joint
+    tau = src.tau_pred[:, j]
+    # The motor inertia of a flexible joint acts on the encoder side like an armature: its column
+    # goes with the spring's when the model has no armature of its own.
+    motor = [src.ddq[:, j]] if c.hyper.get("motor") else []
+    if "exact" in c.hyper:  # refit: the link angle is q = theta - c tau (spring compliance c = 1/K)
+        out = _shifted(src, j, c.hyper["c"] * tau)
+        return np.concatenate([out, _on_joint(src, j, motor)], axis=2) if motor else out
+    return _on_joint(src, j, [src.derivative(tau, 2), *motor])
+
+
+def _backlash(src, c):
+    j = c.joint
+    tau = src.tau_pred[:, j]
+    b = np.tanh(tau / c.hyper["eps"])
+    if "exact" in c.hyper:  # refit: half the gap a on the side the torque pushes, plus a compliance c
+        return _shifted(src, j, c.hyper["a"] * b + c.hyper["c"] * 1e-3 * tau / max(np.std(tau), 1e-12))
+    return _on_joint(src, j, [b, src.derivative(b, 2)])
+
+
+def _delay(src, c):
+    j = c.joint
+    tau = src.tau_pred[:, j]
+    if "exact" in c.hyper:  # refit: tau(t - d) - tau(t)
+        return _on_joint(src, j, [np.interp(src.t - c.hyper["d"], src.t, tau) - tau])
+    return _on_joint(src, j, [src.derivative(tau, 1)])
+
+
+def _drive_gain(src, c):
+    j = c.joint
+    return _on_joint(src, j, [src.tau_pred[:, j]])
+
+
+def _base_tilt(src, c):
+    return src.gravity_tilt()
+
+
+def _coupled(src, c):
+    a, b = c.joints
+    w = src.dq[:, a] + c.hyper["sign"] * src.dq[:, b]
+    s = src.sign(w)
+    out = np.zeros((src.m, src.n, 2))
+    out[:, a, 0] = s
+    out[:, a, 1] = w
+    # The coupled motor's friction reaches joint b through the same coupling sign.
+    out[:, b, 0] = c.hyper["sign"] * s
+    out[:, b, 1] = c.hyper["sign"] * w
+    return out
+
+
+def _nonlinear_viscous(src, c):
+    v = src.dq[:, c.joint]
+    return _on_joint(src, c.joint, [v * np.abs(v), v**3])
+
+
+_BUILDERS: dict[str, Builder] = {
+    "offset": _offset,
+    "armature": _armature,
+    "stribeck": _stribeck,
+    "load_friction": _load_friction,
+    "temperature": _temperature,
+    "cogging": _cogging,
+    "elasticity": _elasticity,
+    "backlash": _backlash,
+    "delay": _delay,
+    "drive_gain": _drive_gain,
+    "base_tilt": _base_tilt,
+    "coupled_friction": _coupled,
+    "nonlinear_viscous": _nonlinear_viscous,
+}
+
+
+def candidate_columns(src: FeatureSource, cand: Candidate) -> NDArray[np.float64]:
+    """Full-rate columns of a candidate: (M, n, k), zero on the joints it does not act on.
+
+    Parameters
+    ----------
+    src : FeatureSource
+        Signals of one dataset.
+    cand : Candidate
+        The candidate with its hyper-parameters.
+    """
+    return _BUILDERS[cand.effect](src, cand)
+
+
+@dataclass(frozen=True)
+class _Spec:
+    per_joint: bool
+    grid: Callable[[FeatureSource, int], list[dict[str, float]]] | None
+    excites: str
+
+
+def _stribeck_grid(src: FeatureSource, j: int) -> list[dict[str, float]]:
+    vmax = max(float(np.max(np.abs(src.dq[:, j]))), 1e-6)
+    return [{"vs": f * vmax} for f in (0.01, 0.02, 0.04, 0.08, 0.16)]
+
+
+def _temperature_grid(src: FeatureSource, j: int) -> list[dict[str, float]]:
+    span = max(float(src.t[-1]), 1.0)
+    return [{"T": f * span} for f in (0.25, 1.0, 4.0)]
+
+
+def _backlash_grid(src: FeatureSource, j: int) -> list[dict[str, float]]:
+    s = max(float(np.std(src.tau_pred[:, j])), 1e-9)
+    return [{"eps": f * s} for f in (0.02, 0.05, 0.15)]
+
+
+def _cogging_grid(src: FeatureSource, j: int) -> list[dict[str, float]]:
+    return [{"N": float(N)} for N in (50, 80, 100, 120, 160, 200)]
+
+
+CANDIDATES: dict[str, _Spec] = {
+    "offset": _Spec(True, None, "both directions of motion at every speed (a constant does not change sign)"),
+    "armature": _Spec(True, None, "large accelerations of joint {j}"),
+    "stribeck": _Spec(True, _stribeck_grid, "slow motion and many velocity reversals of joint {j}"),
+    "load_friction": _Spec(True, None, "large loads on joint {j}, both driving and back-driven"),
+    "temperature": _Spec(
+        True, _temperature_grid, "a longer run (minutes) so that friction drift and motion part"
+    ),
+    "cogging": _Spec(
+        True, _cogging_grid, "slow constant-speed sweeps of joint {j} over several gear periods"
+    ),
+    "elasticity": _Spec(True, None, "fast torque changes on joint {j} (harmonics near its resonance)"),
+    "backlash": _Spec(True, _backlash_grid, "torque reversals of joint {j} at low speed"),
+    "delay": _Spec(True, None, "faster excitation of joint {j} (a delay grows with frequency)"),
+    "drive_gain": _Spec(True, None, "large torques on joint {j} at several speeds"),
+    "payload": _Spec(False, None, "several tool orientations under gravity"),
+    "base_tilt": _Spec(False, None, "full turns of joint 1 in several arm configurations"),
+    "coupled_friction": _Spec(False, None, "wrist joints moving in equal and opposite directions"),
+    "nonlinear_viscous": _Spec(True, None, "high speeds of joint {j}"),
+}
+
+
+def excitation_hint(cand: Candidate) -> str:
+    """Words for the motion that excites a candidate."""
+    j = cand.joint + 1 if cand.joint is not None else (cand.joints[0] + 1 if cand.joints else 1)
+    return CANDIDATES[cand.effect].excites.format(j=j)
+
+
+def enumerate_candidates(
+    src: FeatureSource, effects: Sequence[str], *, skip: Sequence[str] = (), motor_inertia: bool = False
+) -> list[list[Candidate]]:
+    """Every candidate of the catalogue on every joint, each as its list of hyper-parameter variants.
+
+    Parameters
+    ----------
+    src : FeatureSource
+        Training signals (the grids of hyper-parameters are scaled from them).
+    effects : sequence of str
+        Effects to consider.
+    skip : sequence of str
+        Effects that the model already holds (their columns would duplicate the model's).
+    motor_inertia : bool
+        Give elasticity a motor-inertia column ``ddq_j`` (when the model has no armature).
+
+    Returns
+    -------
+    list of list of Candidate
+        One inner list per (effect, joint): the variants to tune among.
+    """
+    n = src.n
+    out: list[list[Candidate]] = []
+    for name in effects:
+        if name in skip or name == "payload":
+            continue
+        spec = CANDIDATES[name]
+        if spec.per_joint:
+            for j in range(n):
+                grid = spec.grid(src, j) if spec.grid else [{}]
+                if name == "elasticity" and motor_inertia:
+                    grid = [{**g, "motor": 1.0} for g in grid]
+                label = f"{name} on joint {j + 1}"
+                out.append([Candidate(name, j, (j,), g, label) for g in grid])
+        elif name == "base_tilt":
+            out.append([Candidate(name, None, tuple(range(n)), {}, "base tilt (gravity direction)")])
+        elif name == "coupled_friction" and n >= 2:
+            wrist = list(range(max(0, n - 3), n))
+            for ia, a in enumerate(wrist):
+                for b in wrist[ia + 1 :]:
+                    out.append(
+                        [
+                            Candidate(
+                                name,
+                                None,
+                                (a, b),
+                                {"sign": sgn},
+                                f"coupled friction of joints {a + 1} and {b + 1}",
+                            )
+                            for sgn in (1.0, -1.0)
+                        ]
+                    )
+    return out
+
+
+def describe_hyper(cand: Candidate) -> str:
+    """Hyper-parameters in words (``vs = 0.05 rad/s``)."""
+    units = {"vs": "rad/s", "T": "s", "N": "", "eps": "N m", "sign": ""}
+    parts = []
+    for k, v in cand.hyper.items():
+        if k in ("motor", "exact"):
+            continue
+        if k == "sign":
+            parts.append("w = dq_a + dq_b" if v > 0 else "w = dq_a - dq_b")
+        else:
+            parts.append(f"{k} = {v:.3g}{(' ' + units[k]) if units.get(k) else ''}")
+    return ", ".join(parts)
+
+
+def nominal_gear_period(N: float) -> float:
+    """Angle (rad) of one gear period for a ratio N."""
+    return 2 * math.pi / N

@@ -1,0 +1,346 @@
+"""Statistics of the gap diagnosis: tests that respect residuals which are not white.
+
+Identification residuals are low-passed (parallel filtering), coloured and often periodic, so every
+test here either works on a long-run (Newey-West) variance or resamples whole blocks:
+
+* :func:`newey_west_variance` and :func:`diebold_mariano`: is one model's held-out loss lower than
+  another's, sample by sample, beyond what the serial correlation of the loss difference allows?
+* :func:`holm`: Holm's step-down correction of several p-values (family-wise error rate).
+* :func:`block_bootstrap_ci`: interval of a ratio of means by the moving-block bootstrap.
+* :func:`ljung_box`: whiteness of a residual.
+* :func:`principal_angles`: how nearly two column spaces coincide.
+* :func:`structured_change_test`: a parameter change against linear hypotheses by chi^2 and BIC.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy import stats
+
+from dynid.exceptions import DataError
+
+__all__ = [
+    "DMResult",
+    "HypothesisFit",
+    "block_bootstrap_ci",
+    "default_lag",
+    "diebold_mariano",
+    "holm",
+    "ljung_box",
+    "newey_west_variance",
+    "principal_angles",
+    "structured_change_test",
+]
+
+
+def default_lag(m: int) -> int:
+    """Newey-West truncation lag for ``m`` observations: ``floor(4 (m / 100)^(2/9))``, at least 1."""
+    return max(1, math.floor(4.0 * (max(m, 1) / 100.0) ** (2.0 / 9.0)))
+
+
+def newey_west_variance(x: ArrayLike, lag: int | None = None) -> float:
+    """Long-run variance of a series: ``gamma_0 + 2 sum_k (1 - k / (L + 1)) gamma_k`` (Bartlett weights).
+
+    Parameters
+    ----------
+    x : array_like, shape (m,)
+        The series (any unit u).
+    lag : int, optional
+        Truncation lag L; default :func:`default_lag`.
+
+    Returns
+    -------
+    float
+        Long-run variance (u^2); the variance of the mean is this divided by m.
+    """
+    x = np.asarray(x, dtype=float)
+    m = x.size
+    if m < 2:
+        raise DataError(f"a long-run variance needs at least 2 values; got {m}: give a longer series.")
+    lag = default_lag(m) if lag is None else int(min(max(lag, 0), m - 1))
+    d = x - x.mean()
+    var = float(d @ d) / m
+    for k in range(1, lag + 1):
+        var += 2.0 * (1.0 - k / (lag + 1.0)) * float(d[k:] @ d[:-k]) / m
+    return max(var, 1e-300)
+
+
+@dataclass(frozen=True)
+class DMResult:
+    """Result of a Diebold-Mariano test.
+
+    Attributes
+    ----------
+    mean : float
+        Mean loss difference (loss of the reference minus loss of the alternative): positive when the
+        alternative is better.
+    stat : float
+        ``mean / sqrt(long-run variance / m)``.
+    p_value : float
+        One-sided p-value of "the alternative has a lower expected loss".
+    lag : int
+        Newey-West lag used (in blocks).
+    blocks : int
+        Number of block means the test ran on.
+    """
+
+    mean: float
+    stat: float
+    p_value: float
+    lag: int
+    blocks: int
+
+
+def diebold_mariano(
+    loss_ref: ArrayLike, loss_alt: ArrayLike, *, block: int = 1, lag: int | None = None
+) -> DMResult:
+    """One-sided Diebold-Mariano test: is ``loss_alt`` lower than ``loss_ref`` on average?
+
+    The per-sample loss difference is first averaged over consecutive blocks of ``block`` samples
+    (a low-passed residual is correlated over many samples; block means keep the Newey-West lag
+    short), then its mean is compared with its Newey-West standard error.
+
+    Parameters
+    ----------
+    loss_ref, loss_alt : array_like, shape (m,)
+        Per-sample losses of the reference and of the alternative model on the same samples.
+    block : int
+        Samples per block mean (1: none).
+    lag : int, optional
+        Newey-West lag on the block means; default :func:`default_lag` of the block count.
+
+    Returns
+    -------
+    DMResult
+    """
+    d = np.asarray(loss_ref, dtype=float) - np.asarray(loss_alt, dtype=float)
+    block = max(1, int(block))
+    count = d.size // block
+    if count < 8:
+        raise DataError(
+            f"the loss difference has {d.size} samples, {count} blocks of {block}; a Diebold-Mariano test "
+            "needs at least 8 blocks: give longer held-out data."
+        )
+    means = d[: count * block].reshape(count, block).mean(axis=1)
+    lag = default_lag(count) if lag is None else int(lag)
+    var = newey_west_variance(means, lag)
+    mean = float(means.mean())
+    stat = mean / math.sqrt(var / count)
+    # Student t with count - 1 degrees of freedom: conservative for few blocks (Harvey et al. 1997).
+    p = float(stats.t.sf(stat, df=count - 1))
+    return DMResult(mean=mean, stat=stat, p_value=p, lag=lag, blocks=count)
+
+
+def holm(p_values: ArrayLike) -> NDArray[np.float64]:
+    """Holm's step-down adjusted p-values (controls the family-wise error rate).
+
+    Parameters
+    ----------
+    p_values : array_like, shape (k,)
+
+    Returns
+    -------
+    ndarray, shape (k,)
+        Adjusted p-values in the input order; reject where ``adjusted < alpha``.
+    """
+    p = np.asarray(p_values, dtype=float)
+    k = p.size
+    if k == 0:
+        return p.copy()
+    order = np.argsort(p)
+    adj = np.empty(k)
+    running = 0.0
+    for rank, idx in enumerate(order):
+        running = max(running, min(1.0, (k - rank) * p[idx]))
+        adj[idx] = running
+    return adj
+
+
+def block_bootstrap_ci(
+    num: ArrayLike,
+    den: float,
+    *,
+    block: int,
+    level: float = 0.9,
+    reps: int = 200,
+    rng: np.random.Generator | None = None,
+) -> tuple[float, float, float]:
+    """Moving-block bootstrap interval of ``mean(num) / den``.
+
+    Parameters
+    ----------
+    num : array_like, shape (m,)
+        Per-sample values (e.g. squared residuals, N^2 m^2).
+    den : float
+        Fixed denominator (e.g. the noise variance, same unit).
+    block : int
+        Block length (samples).
+    level : float
+        Coverage of the interval.
+    reps : int
+        Bootstrap replications.
+    rng : numpy.random.Generator, optional
+        Default ``np.random.default_rng(0)`` (reproducible).
+
+    Returns
+    -------
+    (estimate, low, high) : tuple of float
+    """
+    x = np.asarray(num, dtype=float)
+    m = x.size
+    est = float(x.mean() / den) if m else float("nan")
+    if m < 2:
+        return est, float("nan"), float("nan")
+    rng = np.random.default_rng(0) if rng is None else rng
+    block = int(min(max(block, 1), m))
+    starts_max = m - block + 1
+    count = max(1, math.ceil(m / block))
+    csum = np.concatenate([[0.0], np.cumsum(x)])
+    block_sums = csum[block:] - csum[:-block]  # (starts_max,)
+    picks = rng.integers(0, starts_max, size=(reps, count))
+    means = block_sums[picks].sum(axis=1) / (count * block)
+    lo, hi = np.quantile(means / den, [(1 - level) / 2, (1 + level) / 2])
+    return est, float(lo), float(hi)
+
+
+def ljung_box(x: ArrayLike, lags: int = 20) -> tuple[float, float]:
+    """Ljung-Box statistic and p-value of "the series is white" over ``lags`` lags.
+
+    Parameters
+    ----------
+    x : array_like, shape (m,)
+    lags : int
+
+    Returns
+    -------
+    (Q, p_value) : tuple of float
+    """
+    x = np.asarray(x, dtype=float)
+    m = x.size
+    lags = int(min(lags, m - 2))
+    if lags < 1:
+        return float("nan"), float("nan")
+    d = x - x.mean()
+    c0 = float(d @ d)
+    if c0 <= 0:
+        return 0.0, 1.0
+    rho = np.array([float(d[k:] @ d[:-k]) / c0 for k in range(1, lags + 1)])
+    q = m * (m + 2) * float(np.sum(rho**2 / (m - np.arange(1, lags + 1))))
+    return q, float(stats.chi2.sf(q, lags))
+
+
+def principal_angles(A: ArrayLike, B: ArrayLike) -> NDArray[np.float64]:
+    """Principal angles (rad, ascending) between the column spaces of A and B (same row count).
+
+    Parameters
+    ----------
+    A : array_like, shape (r, ka)
+    B : array_like, shape (r, kb)
+
+    Returns
+    -------
+    ndarray, shape (min(ka, kb),)
+    """
+    qa = _orth(np.asarray(A, dtype=float))
+    qb = _orth(np.asarray(B, dtype=float))
+    if qa.shape[1] == 0 or qb.shape[1] == 0:
+        return np.array([math.pi / 2])
+    s = np.linalg.svd(qa.T @ qb, compute_uv=False)
+    return np.arccos(np.clip(s, -1.0, 1.0))
+
+
+def _orth(A: NDArray[np.float64]) -> NDArray[np.float64]:
+    if A.size == 0:
+        return A.reshape(A.shape[0], 0)
+    u, s, _ = np.linalg.svd(A, full_matrices=False)
+    keep = s > max(s.max(), 1e-300) * 1e-10
+    return u[:, keep]
+
+
+@dataclass(frozen=True)
+class HypothesisFit:
+    """Fit of one structured hypothesis ``delta = A theta`` to a parameter change.
+
+    Attributes
+    ----------
+    name : str
+    k : int
+        Free parameters of the hypothesis.
+    chi2 : float
+        ``min_theta (delta - A theta)^T C^-1 (delta - A theta)``.
+    dof : int
+        Degrees of freedom left.
+    p_value : float
+        Goodness of fit (chi^2 with ``dof`` degrees of freedom).
+    bic : float
+        ``chi2 + k ln(n_obs)``.
+    theta : ndarray, shape (k,)
+        Fitted values.
+    """
+
+    name: str
+    k: int
+    chi2: float
+    dof: int
+    p_value: float
+    bic: float
+    theta: NDArray[np.float64]
+
+
+def structured_change_test(
+    delta: ArrayLike, cov: ArrayLike, hypotheses: dict[str, ArrayLike], *, n_obs: int
+) -> list[HypothesisFit]:
+    """Fit a parameter change against linear hypotheses by generalised least squares.
+
+    Parameters
+    ----------
+    delta : array_like, shape (p,)
+        Identified minus nominal parameters.
+    cov : array_like, shape (p, p)
+        Covariance of delta.
+    hypotheses : dict of str to array_like (p, k)
+        ``delta = A theta`` for each hypothesis; ``"none"`` (A with no column) is always added.
+    n_obs : int
+        Number of observations behind the estimate (the BIC penalty is ``k ln(n_obs)``).
+
+    Returns
+    -------
+    list of HypothesisFit
+        Sorted by BIC (best first).
+    """
+    delta = np.asarray(delta, dtype=float)
+    cov = np.asarray(cov, dtype=float)
+    p = delta.size
+    # Whitening by the pseudo-inverse square root (the covariance may be near singular).
+    w, v = np.linalg.eigh(0.5 * (cov + cov.T))
+    keep = w > max(w.max(), 1e-300) * 1e-12
+    W = (v[:, keep] / np.sqrt(w[keep])).T
+    dw = W @ delta
+    rank = int(keep.sum())
+    out = []
+    for name, A in {"none": np.zeros((p, 0)), **hypotheses}.items():
+        A = np.asarray(A, dtype=float).reshape(p, -1)
+        Aw = W @ A
+        if Aw.shape[1]:
+            theta, *_ = np.linalg.lstsq(Aw, dw, rcond=1e-10)
+            k = int(np.linalg.matrix_rank(Aw, tol=1e-8 * max(np.abs(Aw).max(), 1e-300)))
+        else:
+            theta, k = np.zeros(0), 0
+        chi2 = float(np.sum((dw - Aw @ theta) ** 2)) if Aw.shape[1] else float(dw @ dw)
+        dof = max(rank - k, 1)
+        out.append(
+            HypothesisFit(
+                name=name,
+                k=k,
+                chi2=chi2,
+                dof=dof,
+                p_value=float(stats.chi2.sf(chi2, dof)),
+                bic=chi2 + k * math.log(max(n_obs, 2)),
+                theta=theta,
+            )
+        )
+    return sorted(out, key=lambda h: h.bic)
