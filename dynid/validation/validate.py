@@ -1,0 +1,707 @@
+"""Validation of identified models on held-out data: the engine of ``dynid validate``.
+
+>>> result = validate(load_model("M.json"), load_dataset("V.csv", 6))
+>>> result.figures()["rms"]                     # N m per joint, on the measured torque as compared
+>>> table = compare([result, validate(load_model("M_ols.json"), data)])
+
+How a prediction is compared
+----------------------------
+An identified model predicts a dataset as it was identified (:meth:`IdentifiedModel.predict`): the
+states are reconstructed and, with parallel filtering, the rigid-body part is filtered like the
+torque, trimmed and decimated.  The measured torque is compared after the same treatment (its
+``reference``: ``raw``, or e.g. ``filtered and trimmed``); ``--predictions`` writes exactly the two
+signals that were compared.
+
+The prediction is split into its layers, so a report can show each of them:
+
+* ``link``: the rigid-body part (base parameters and armature), filtered like the torque;
+* ``friction``: layer 2 (or the linear friction identified with the links, filtered likewise);
+* ``gmm``: the layer-3 correction.
+
+The noise floor
+---------------
+What no model can predict, measured on the compared torque (never assumed):
+
+* data that repeat a period (a periodic excitation, ``period`` given or read from the simulator's
+  sidecar ``<data>.truth.json``) with at least two whole periods kept: the spread across periods at the
+  same phase (:func:`dynid.validation.metrics.noise_floor`);
+* otherwise the white-noise level of the spectrum: of the compared torque itself when it is raw; of the
+  raw torque above twice the cut-off, carried through the filter's noise bandwidth, when it was
+  filtered (the filtered torque has no high band left to measure).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import time
+import warnings
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.signal import sosfreqz
+
+from dynid.exceptions import DataError, ModelFileError, ShapeError, UsageError
+from dynid.identify.dataset import Dataset
+from dynid.identify.friction import FrictionLayer
+from dynid.identify.linear_system import Prepared, Preprocessing, column_set, linear_torque, prepare
+from dynid.identify.model import IdentifiedModel, identify
+from dynid.validation.metrics import NoiseFloor, noise_floor, torque_metrics
+
+__all__ = [
+    "COMPARISON",
+    "IdentifiedMethod",
+    "ValidationResult",
+    "check_same_robot",
+    "compare",
+    "compare_methods",
+    "describe_model",
+    "identify_methods",
+    "nominal_model",
+    "reference_noise_floor",
+    "sidecar_period",
+    "validate",
+    "write_predictions",
+]
+
+
+def _finite(values: NDArray[np.float64]) -> list[float | None]:
+    return [float(v) if np.isfinite(v) else None for v in np.ravel(values)]
+
+
+def describe_model(model: IdentifiedModel) -> str:
+    """One line naming a model's three layers, e.g. ``consistent + seed friction + GMM (joints 1, 2)``.
+
+    Parameters
+    ----------
+    model : IdentifiedModel
+        The model.
+    """
+    parts = [model.method]
+    if model.friction is None:
+        parts.append("no friction")
+    elif model.friction_source == "layer1":
+        parts.append("linear friction")
+    else:
+        parts.append(f"{model.friction.model} friction")
+    if model.gmr is None:
+        parts.append("no GMM")
+    elif model.gmr.active_.any():
+        parts.append("GMM (joints " + ", ".join(str(j + 1) for j in np.flatnonzero(model.gmr.active_)) + ")")
+    else:
+        parts.append("GMM (no joint helped)")
+    return " + ".join(parts)
+
+
+@dataclass(frozen=True, eq=False)
+class ValidationResult:
+    """A model's prediction of held-out data, split into layers, with its error figures.
+
+    Attributes
+    ----------
+    label : str
+        Name of the model in tables and legends.
+    model : IdentifiedModel
+        The model validated.
+    t : ndarray, shape (m,)
+        Time stamps of the compared samples (s).
+    q, dq : ndarray, shape (m, n)
+        States there (rad, rad/s), as reconstructed by the model's preprocessing.
+    tau : ndarray, shape (m, n)
+        Measured torque as compared (N m): treated as described by ``reference``.
+    tau_pred : ndarray, shape (m, n)
+        Predicted torque (N m); ``tau_link + tau_friction + tau_gmm``.
+    tau_link, tau_friction, tau_gmm : ndarray, shape (m, n)
+        Rigid-body, friction and GMM parts of the prediction (N m).
+    metrics : dict
+        :func:`dynid.validation.metrics.torque_metrics` of ``tau`` against ``tau_pred``.
+    metrics_before_gmm : dict
+        The same without the GMM part.
+    noise : NoiseFloor
+        Measured noise floor of ``tau``.
+    reference : str
+        How the measured torque was treated ("raw", "filtered and trimmed", ...).
+    data : str
+        Where the data came from (a file name or a description).
+    info : dict
+        Anything else worth reporting (the model file, ...).
+    """
+
+    label: str
+    model: IdentifiedModel
+    t: NDArray[np.float64]
+    q: NDArray[np.float64]
+    dq: NDArray[np.float64]
+    tau: NDArray[np.float64]
+    tau_pred: NDArray[np.float64]
+    tau_link: NDArray[np.float64]
+    tau_friction: NDArray[np.float64]
+    tau_gmm: NDArray[np.float64]
+    metrics: dict[str, Any]
+    metrics_before_gmm: dict[str, Any]
+    noise: NoiseFloor
+    reference: str
+    data: str
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def n(self) -> int:
+        """Number of joints."""
+        return self.tau.shape[1]
+
+    @property
+    def residual(self) -> NDArray[np.float64]:
+        """``tau - tau_pred`` (N m), shape (m, n)."""
+        return self.tau - self.tau_pred
+
+    @property
+    def residual_before_gmm(self) -> NDArray[np.float64]:
+        """``tau - tau_link - tau_friction`` (N m): the residual the GMM layer is given."""
+        return self.tau - self.tau_link - self.tau_friction
+
+    @property
+    def friction_estimate(self) -> NDArray[np.float64]:
+        """``tau - tau_link`` (N m): the friction torque the data show, as layer 2 sees it."""
+        return self.tau - self.tau_link
+
+    @property
+    def has_gmm(self) -> bool:
+        """Whether the model's GMM layer corrects at least one joint."""
+        return self.model.gmr is not None and bool(self.model.gmr.active_.any())
+
+    def summary(self) -> dict[str, Any]:
+        """The figures of this model alone (a row of a comparison): JSON-ready."""
+        m = self.metrics
+        return {
+            "label": self.label,
+            "description": describe_model(self.model),
+            "method": self.model.method,
+            "friction": "none" if self.model.friction is None else self.model.friction.model,
+            "friction_source": self.model.friction_source,
+            "gmm": self.has_gmm,
+            "cond": float(self.model.cond) if np.isfinite(self.model.cond) else None,
+            "rms": _finite(m["rms"]),
+            "rms_mean": float(m["rms_mean"]),
+            "nrms": _finite(m["nrms"]),
+            "r2": _finite(m["r2"]),
+            "max_error": _finite(m["max_error"]),
+            "rms_before_gmm": _finite(self.metrics_before_gmm["rms"]),
+            "rms_mean_before_gmm": float(self.metrics_before_gmm["rms_mean"]),
+            **({"model_file": self.info["model_file"]} if "model_file" in self.info else {}),
+        }
+
+    def figures(self) -> dict[str, Any]:
+        """The ``dynid validate`` figures (DESIGN.md): JSON-ready.
+
+        Keys: ``rms`` (per joint, N m), ``rms_mean``, ``nrms``, ``r2``, ``max_error``, ``noise_floor``
+        (per joint, N m), ``noise_floor_mean``, ``noise_floor_method``, ``noise_floor_detail``,
+        ``rms_over_noise``, ``reference``, ``n_samples``, ``duration_s``, ``data``, ``robot``, and the
+        model's ``label``, ``description``, ``method``, ``cond``, ``rms_before_gmm``.
+        """
+        row = self.summary()
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(self.noise.std > 0, self.metrics["rms"] / self.noise.std, np.inf)
+        return {
+            **row,
+            "noise_floor": _finite(self.noise.std),
+            "noise_floor_mean": float(self.noise.rms_mean),
+            "noise_floor_method": self.noise.method,
+            "noise_floor_detail": self.noise.detail,
+            "rms_over_noise": _finite(ratio),
+            "reference": self.reference,
+            "n_samples": int(self.t.size),
+            "duration_s": float(self.t[-1] - self.t[0]) if self.t.size else 0.0,
+            "data": self.data,
+            "robot": self.model.robot.name,
+        }
+
+
+# ---------------------------------------------------------------------------- checks
+def _sidecar(data: Dataset) -> dict[str, Any] | None:
+    source = data.meta.get("source")
+    if not source:
+        return None
+    path = Path(str(source))
+    sidecar = path.with_name(path.name + ".truth.json")
+    if not sidecar.is_file():
+        return None
+    try:
+        doc = json.loads(sidecar.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return doc if isinstance(doc, dict) else None
+
+
+def check_same_robot(model: IdentifiedModel, data: Dataset, *, model_name: str = "the model") -> None:
+    """Refuse data recorded on another robot than the model's.
+
+    The joint counts must agree; a simulated dataset's sidecar (``<data>.truth.json``) also names its
+    robot, which must be the model's.
+
+    Parameters
+    ----------
+    model : IdentifiedModel
+        The model.
+    data : Dataset
+        The data.
+    model_name : str
+        Name of the model in the message (e.g. its file).
+
+    Raises
+    ------
+    ModelFileError
+        Another robot.
+    """
+    robot = model.robot
+    data_name = Path(str(data.meta.get("source", "the data"))).name
+    if data.n != robot.n:
+        raise ModelFileError(
+            f"{model_name} was identified for '{robot.name}' ({robot.n} joints) but {data_name} has {data.n} "
+            "joints; validate a model on data recorded on the robot it was identified for."
+        )
+    side = _sidecar(data)
+    if side is not None:
+        source, name = side.get("source"), side.get("robot")
+        if source is not None and name is not None and source != robot.source and name != robot.name:
+            raise ModelFileError(
+                f"{model_name} was identified for '{robot.name}' but {data_name} was simulated on '{name}' "
+                f"(its {data_name}.truth.json says so); validate a model on data of the robot it was identified for."
+            )
+
+
+def sidecar_period(data: Dataset) -> float | None:
+    """Period (s) of the trajectory a simulated dataset followed, from its sidecar, or None.
+
+    A Fourier trajectory repeats after its duration (a whole number of its periods): enough for the
+    spread across repeats.
+
+    Parameters
+    ----------
+    data : Dataset
+        Data read by :func:`dynid.identify.dataset.load_dataset` (its ``meta["source"]`` names the file).
+    """
+    side = _sidecar(data)
+    traj = (side or {}).get("trajectory") or {}
+    if traj.get("type") == "FourierTrajectory" and traj.get("duration"):
+        return float(traj["duration"])
+    return None
+
+
+# ---------------------------------------------------------------------------- noise floor
+def _filter_noise_bandwidth(prep: Prepared) -> float:
+    """Noise-equivalent bandwidth (Hz) of the zero-phase torque filter: integral of |H(f)|^4."""
+    sos = prep.sos
+    assert sos is not None
+    freqs, h = sosfreqz(sos, worN=8192, fs=prep.fs)
+    return float(np.trapezoid(np.abs(h) ** 4, freqs))
+
+
+def _longest_run(prep: Prepared) -> slice:
+    return max(prep.runs, key=lambda run: run.stop - run.start)
+
+
+def reference_noise_floor(prep: Prepared, *, period: float | None = None) -> NoiseFloor:
+    """Noise floor of the torque as compared (see the module docstring).
+
+    Parameters
+    ----------
+    prep : Prepared
+        The prepared data (:meth:`IdentifiedModel.prepare`).
+    period : float, optional
+        Period (s) of the motion, if it repeats.
+
+    Returns
+    -------
+    NoiseFloor
+    """
+    run = _longest_run(prep)
+    rows = prep.rows[(prep.rows >= run.start) & (prep.rows < run.stop)]
+    t_kept, ref = prep.t[rows], prep.tau_reference[np.isin(prep.rows, rows)]
+    if period is not None and period > 0:
+        floor = noise_floor(t_kept, ref, period=period)
+        if floor.method == "periods":
+            return floor
+    if not prep.parallel_filter:
+        return noise_floor(t_kept, ref)
+    cutoff = float(prep.settings["cutoff_hz"])
+    nyquist = prep.fs / 2
+    band = max(2.0 * cutoff, nyquist / 4)
+    if band >= 0.9 * nyquist:
+        band = 0.5 * (cutoff + nyquist)
+    raw = noise_floor(prep.t[run], prep.tau[run], band_start=band)
+    # raw.std^2 = level * nyquist (white); through the filter: level * ENBW.
+    std = raw.std * np.sqrt(_filter_noise_bandwidth(prep) / nyquist)
+    return NoiseFloor(
+        std=std,
+        method="spectrum",
+        detail=(
+            f"white level of the raw torque above {band:g} Hz, through the {cutoff:g} Hz filter "
+            "(a lower bound when the noise is coloured)"
+        ),
+    )
+
+
+# ---------------------------------------------------------------------------- validation
+def _parts(model: IdentifiedModel, prep: Prepared) -> tuple[NDArray[np.float64], ...]:
+    cols, rows = model.columns, prep.rows
+    link = prep.filter(linear_torque(cols, model.params, prep.q, prep.dq, prep.ddq, mask=cols.link_mask))[rows]
+    q_k, dq_k = prep.q[rows], prep.dq[rows]
+    if model.friction is None:
+        fric = np.zeros_like(link)
+    elif model.friction_source == "layer1":
+        full = linear_torque(cols, model.params, prep.q, prep.dq, prep.ddq, mask=cols.friction_mask)
+        fric = prep.filter(full)[rows]
+    else:
+        fric = model.friction.predict(dq_k)
+    gmm = np.zeros_like(link) if model.gmr is None else model.gmr.predict(np.hstack([q_k, dq_k]))
+    return link, fric, gmm
+
+
+def validate(
+    model: IdentifiedModel,
+    data: Dataset,
+    *,
+    period: float | None = None,
+    label: str | None = None,
+    info: dict[str, Any] | None = None,
+) -> ValidationResult:
+    """Predict held-out data with a model and measure the error against the noise floor.
+
+    Parameters
+    ----------
+    model : IdentifiedModel
+        The identified model (:func:`dynid.identify.model.load_model`).
+    data : Dataset
+        Held-out data of the same robot (not the identification data).
+    period : float, optional
+        Period (s) of a repeating motion, for the noise floor; default from the simulator's sidecar of
+        the data file, else the spectrum is used.
+    label : str, optional
+        Name of the model in tables (default: its description).
+    info : dict, optional
+        Extra facts kept with the result (e.g. ``{"model_file": "M.json"}``).
+
+    Returns
+    -------
+    ValidationResult
+
+    Raises
+    ------
+    ModelFileError
+        Data of another robot.
+    DataError
+        Data the model's preprocessing cannot use (too short for its filter, ...).
+    """
+    if not isinstance(model, IdentifiedModel):
+        raise UsageError(
+            f"model is a {type(model).__name__}; give an IdentifiedModel (identify(...) or load_model(path))."
+        )
+    if not isinstance(data, Dataset):
+        raise UsageError(f"data is a {type(data).__name__}; give a Dataset (load_dataset(path)).")
+    check_same_robot(model, data, model_name=(info or {}).get("model_file", "the model"))
+    prep = model.prepare(data)
+    if prep.m < 2:
+        raise DataError(
+            f"the data keep {prep.m} sample(s) after the model's preprocessing; validate on a longer recording."
+        )
+    link, fric, gmm = _parts(model, prep)
+    tau = prep.tau_reference
+    pred = link + fric + gmm
+    if period is None:
+        period = sidecar_period(data)
+    source = data.meta.get("source")
+    return ValidationResult(
+        label=label or describe_model(model),
+        model=model,
+        t=prep.t[prep.rows],
+        q=prep.q[prep.rows],
+        dq=prep.dq[prep.rows],
+        tau=tau,
+        tau_pred=pred,
+        tau_link=link,
+        tau_friction=fric,
+        tau_gmm=gmm,
+        metrics=torque_metrics(tau, pred),
+        metrics_before_gmm=torque_metrics(tau, link + fric),
+        noise=reference_noise_floor(prep, period=period),
+        reference=prep.reference,
+        data=Path(str(source)).name if source else str(data.meta.get("recording", "held-out data")),
+        info=dict(info or {}),
+    )
+
+
+def compare(results: Sequence[ValidationResult]) -> list[dict[str, Any]]:
+    """One row per model validated on the same data: the table of ``--compare``.
+
+    Parameters
+    ----------
+    results : sequence of ValidationResult
+        Results on one dataset (same samples and reference).
+
+    Returns
+    -------
+    list of dict
+        :meth:`ValidationResult.summary` of each, in order.
+
+    Raises
+    ------
+    ShapeError
+        Results on different samples: the models were identified with different preprocessing, so
+        their errors are not on the same torque.
+    """
+    if not results:
+        return []
+    first = results[0]
+    for other in results[1:]:
+        if other.tau.shape != first.tau.shape or not np.allclose(other.tau, first.tau, rtol=1e-9, atol=1e-9):
+            raise ShapeError(
+                f"'{other.label}' is compared on another torque than '{first.label}' (different filtering, "
+                "trimming or decimation); identify the models with the same preprocessing to compare them."
+            )
+    return [r.summary() for r in results]
+
+
+# ---------------------------------------------------------------------------- files
+def write_predictions(result: ValidationResult, path: str | os.PathLike[str]) -> Path:
+    """Write ``t, tau_1..tau_n, tau_pred_1..tau_pred_n`` (the compared signals) as CSV, atomically.
+
+    Parameters
+    ----------
+    result : ValidationResult
+        The validation.
+    path : str or path-like
+        CSV file in an existing folder.
+
+    Returns
+    -------
+    Path
+    """
+    from dynid.optim.trajectory import write_atomic
+
+    n = result.n
+    header = ["t", *(f"tau_{j + 1}" for j in range(n)), *(f"tau_pred_{j + 1}" for j in range(n))]
+    buf = io.StringIO()
+    np.savetxt(
+        buf,
+        np.column_stack([result.t, result.tau, result.tau_pred]),
+        delimiter=",",
+        header=",".join(header),
+        comments="",
+        fmt="%.10g",
+    )
+    path = Path(path)
+    write_atomic(path, buf.getvalue())
+    return path
+
+
+# ---------------------------------------------------------------------------- a reference model
+def nominal_model(
+    robot,
+    data: Dataset,
+    *,
+    preprocessing: Preprocessing | None = None,
+    friction: str = "linear",
+) -> IdentifiedModel:
+    """The robot's own (URDF) parameters with a friction model fitted to the data: a baseline.
+
+    The rigid-body part comes unchanged from the robot description (its link parameters and armature);
+    only the friction is fitted, to ``tau - tau_link`` on ``data``, as layer 2 would.  An identified
+    model should predict held-out data better than this.
+
+    Parameters
+    ----------
+    robot : RobotModel
+        The robot, with the parameters of its description.
+    data : Dataset
+        Data to fit the friction on (the identification data, not the held-out ones).
+    preprocessing : Preprocessing, optional
+        As for the identified models it is compared with.
+    friction : str
+        Friction model (default ``linear``: Coulomb, viscous and offset per joint).
+
+    Returns
+    -------
+    IdentifiedModel
+        With ``method="urdf"`` and a zero covariance (nothing of the rigid body was estimated).
+    """
+    cols = column_set(robot, friction=False, armature=True)
+    n = robot.n
+    phi = np.concatenate([np.asarray(robot.params, float), np.asarray(robot.armature, float), np.zeros(3 * n)])
+    x = cols.P @ phi
+    prep = prepare(data, preprocessing, n_joints=n)
+    rows = prep.rows
+    link = prep.filter(linear_torque(cols, x, prep.q, prep.dq, prep.ddq))[rows]
+    resid = prep.tau_reference - link
+    layer = FrictionLayer(model=friction).fit(prep.dq[rows], resid)
+    after = resid - layer.predict(prep.dq[rows])
+
+    def rms(r: NDArray[np.float64]) -> list[float]:
+        return [float(v) for v in np.sqrt(np.mean(r**2, axis=0))]
+
+    return IdentifiedModel(
+        robot=robot,
+        columns=cols,
+        params=x,
+        cov=np.zeros((cols.p, cols.p)),
+        method="urdf",
+        preprocessing=dict(prep.settings),
+        friction=layer,
+        friction_source="layer2",
+        gmr=None,
+        cond=float("nan"),
+        rms=np.array(rms(after)),
+        rms_layers={"link": rms(resid), "friction": rms(after), "gmm": rms(after)},
+        info={"n_samples": len(rows), "notes": ["rigid body from the robot description"], "reference": prep.reference},
+    )
+
+
+# ---------------------------------------------------------------------------- methods side by side
+COMPARISON: tuple[tuple[str, str, str, str | int], ...] = (
+    ("full", "consistent", "seed", "auto"),
+    ("OLS", "ols", "linear", "off"),
+    ("IRLS", "irls", "linear", "off"),
+)
+"""The paper's comparison, as (label, layer-1 method, friction, gmm): the full method (physically
+consistent links with IRLS weighting, the paper's friction model, the GMM layer) first, then OLS and
+IRLS with linear friction identified with the links."""
+
+
+@dataclass(frozen=True, eq=False)
+class IdentifiedMethod:
+    """A model identified by one of several methods (:func:`identify_methods`).
+
+    Attributes
+    ----------
+    label : str
+        Its name in tables (``full``, ``OLS``, ...).
+    model : IdentifiedModel
+        The model.
+    seconds : float
+        Identification time (s).
+    warnings : list of str
+        Warnings raised while identifying (e.g. IPOPT stopped at its iteration limit).
+    """
+
+    label: str
+    model: IdentifiedModel
+    seconds: float
+    warnings: list[str]
+
+
+def identify_methods(
+    robot,
+    train: Dataset,
+    *,
+    methods: Sequence[tuple[str, str, str, str | int]] = COMPARISON,
+    preprocessing: Preprocessing | None = None,
+    random_state: int = 0,
+    progress: Callable[[str], None] | None = None,
+) -> list[IdentifiedMethod]:
+    """Identify a robot by several methods on the same data (the same preprocessing for all).
+
+    Parameters
+    ----------
+    robot : RobotModel
+        The robot that recorded the data.
+    train : Dataset
+        Identification data.
+    methods : sequence of (label, method, friction, gmm)
+        The models to identify (default :data:`COMPARISON`).
+    preprocessing : Preprocessing, optional
+        Filtering and decimation, the same for every model.
+    random_state : int
+        Seed of the GMM layer's EM.
+    progress : callable, optional
+        Receives a line per model (with its time) and one per warning.
+
+    Returns
+    -------
+    list of IdentifiedMethod
+    """
+    out = []
+    for label, method, friction, gmm in methods:
+        start = time.perf_counter()
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            model = identify(
+                robot,
+                train,
+                method=method,
+                friction=friction,
+                gmm=gmm,
+                preprocessing=preprocessing,
+                random_state=random_state,
+            )
+        seconds = time.perf_counter() - start
+        notes = list(dict.fromkeys(str(w.message) for w in caught))
+        if progress is not None:
+            progress(f"{label}: {describe_model(model)}, {seconds:.1f} s")
+            for note in notes:
+                progress(f"  note: {note}")
+        out.append(IdentifiedMethod(label=label, model=model, seconds=seconds, warnings=notes))
+    return out
+
+
+def compare_methods(
+    robot,
+    train: Dataset,
+    heldout: Dataset,
+    *,
+    methods: Sequence[tuple[str, str, str, str | int]] = COMPARISON,
+    preprocessing: Preprocessing | None = None,
+    baseline: bool = False,
+    period: float | None = None,
+    random_state: int = 0,
+    progress: Callable[[str], None] | None = None,
+) -> list[ValidationResult]:
+    """Identify a robot by several methods on the same data and validate each on held-out data.
+
+    Parameters
+    ----------
+    robot : RobotModel
+        The robot that recorded the data.
+    train : Dataset
+        Identification data.
+    heldout : Dataset
+        Held-out data (another run, or the later part of one).
+    methods : sequence of (label, method, friction, gmm)
+        The models to identify (default :data:`COMPARISON`); the first is the one a report shows in
+        detail.
+    preprocessing : Preprocessing, optional
+        The same for every model, so that their errors are on the same torque.
+    baseline : bool
+        Also validate the robot description's own parameters with linear friction fitted on ``train``
+        (:func:`nominal_model`), labelled ``URDF``, last.
+    period : float, optional
+        Period (s) of the held-out motion, for the noise floor.
+    random_state : int
+        Seed of the GMM layer's EM.
+    progress : callable, optional
+        Receives a line per model identified (with its time and any warning).
+
+    Returns
+    -------
+    list of ValidationResult
+        One per model, in order; ``info`` holds ``seconds`` (identification time) and ``warnings``.
+    """
+    fitted = identify_methods(
+        robot, train, methods=methods, preprocessing=preprocessing, random_state=random_state, progress=progress
+    )
+    if baseline:
+        start = time.perf_counter()
+        model = nominal_model(robot, train, preprocessing=preprocessing)
+        seconds = time.perf_counter() - start
+        if progress is not None:
+            progress(f"URDF: the robot description's parameters with linear friction fitted, {seconds:.1f} s")
+        fitted.append(IdentifiedMethod(label="URDF", model=model, seconds=seconds, warnings=[]))
+    results = [
+        validate(f.model, heldout, period=period, label=f.label, info={"seconds": f.seconds, "warnings": f.warnings})
+        for f in fitted
+    ]
+    compare(results)
+    return results
