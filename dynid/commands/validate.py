@@ -1,0 +1,137 @@
+"""``dynid validate``: how well identified models predict held-out data, against the measured noise floor."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from dynid.commands.common import add_json_argument
+from dynid.exceptions import UsageError
+
+HELP = "validate identified models on held-out data: RMS, NRMS, R^2 per joint, noise floor, HTML report"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--model", required=True, metavar="M.json", help="model file written by 'dynid identify'")
+    parser.add_argument(
+        "--data", required=True, metavar="V.csv", help="held-out dataset (.csv or .npz), not the identification data"
+    )
+    parser.add_argument(
+        "--compare",
+        nargs="+",
+        action="extend",
+        default=[],
+        metavar="M2.json",
+        help="more models to compare on the same data, in one table and the same figures",
+    )
+    parser.add_argument(
+        "--report", metavar="R.html", help="write a self-contained HTML report (or a PDF: R.pdf)"
+    )
+    parser.add_argument(
+        "--predictions",
+        metavar="P.csv",
+        help="write t, tau_i (the measured torque as compared) and tau_pred_i of the model",
+    )
+    parser.add_argument(
+        "--period",
+        type=float,
+        metavar="S",
+        help="period (s) of the motion if it repeats, for the noise floor (default: from a simulated "
+        "dataset's sidecar, else the spectrum)",
+    )
+    parser.add_argument(
+        "--robot",
+        help="robot to load the models with (default: the one recorded in each model file)",
+    )
+    add_json_argument(parser)
+
+
+def _output(option: str, path: str | None, suffixes: tuple[str, ...]) -> Path | None:
+    if path is None:
+        return None
+    out = Path(path)
+    if out.suffix.lower() not in suffixes:
+        raise UsageError(
+            f"--{option} '{out}' has the extension '{out.suffix}'; give a file name ending in {' or '.join(suffixes)}."
+        )
+    if not out.parent.is_dir():
+        raise UsageError(f"the folder of --{option} '{out}' does not exist; create it or write elsewhere.")
+    if out.is_dir():
+        raise UsageError(f"--{option} '{out}' is a folder; give a file name.")
+    return out
+
+
+def _row(values, fmt: str = "{:>10.4g}") -> str:
+    return " ".join("         -" if v is None else fmt.format(v) for v in values)
+
+
+def run(args: argparse.Namespace) -> int:
+    from dynid.cli import write_json
+    from dynid.identify.dataset import load_dataset
+    from dynid.identify.model import load_model
+    from dynid.validation.report import check_report_path, json_ready, render_report
+    from dynid.validation.validate import compare, validate, write_predictions
+
+    # Every output is checked before any work, and written only once everything is computed.
+    report_path = None if args.report is None else check_report_path(args.report)
+    predictions_path = _output("predictions", args.predictions, (".csv",))
+    json_path = _output("json", args.json, (".json",))
+    if args.period is not None and not args.period > 0:
+        raise UsageError(f"--period is {args.period}; give the period of the motion in seconds (> 0).")
+
+    robot = None
+    if args.robot is not None:
+        from dynid.symbolic.robot import load_robot
+
+        robot = load_robot(args.robot)
+    files = [args.model, *args.compare]
+    models = [load_model(path, robot=robot) for path in files]
+    data = load_dataset(args.data)
+    stems = [Path(f).stem for f in files]
+    labels = [s if stems.count(s) == 1 else str(f) for s, f in zip(stems, files, strict=True)]
+    results = [
+        validate(model, data, period=args.period, label=label, info={"model_file": Path(path).name})
+        for model, label, path in zip(models, labels, files, strict=True)
+    ]
+    rows = compare(results)
+    first = results[0]
+    figures = {
+        **first.figures(),
+        "model": str(args.model),
+        "data": str(args.data),
+        "models": rows,
+        "report": None if report_path is None else str(report_path),
+        "predictions": None if predictions_path is None else str(predictions_path),
+    }
+    figures = json_ready(figures)
+    report = None
+    if report_path is not None:
+        report = render_report(results, figures=figures, pdf=report_path.suffix.lower() == ".pdf")
+
+    n = first.n
+    print(
+        f"{first.model.robot.name}: '{first.label}' ({figures['description']}) on {first.data}, "
+        f"{figures['n_samples']} samples over {figures['duration_s']:.4g} s, torque {first.reference}"
+    )
+    print(f"noise floor: {first.noise.method} ({first.noise.detail})")
+    print(f"{'joint':>5} {'rms':>10} {'nrms':>10} {'r2':>10} {'max err':>10} {'noise':>10} {'rms/noise':>10}")
+    for j in range(n):
+        print(
+            f"{j + 1:>5} "
+            + _row([figures[k][j] for k in ("rms", "nrms", "r2", "max_error", "noise_floor", "rms_over_noise")])
+        )
+    print(f"{'mean':>5} {figures['rms_mean']:>10.4g} {'':>43}{figures['noise_floor_mean']:>10.4g}")
+    if len(results) > 1:
+        width = max(len(r["label"]) for r in rows)
+        print(f"\n{'model':<{width}} " + " ".join(f"{'rms ' + str(j + 1):>10}" for j in range(n)) + f" {'mean':>10}")
+        for r in rows:
+            print(f"{r['label']:<{width}} " + _row(r["rms"]) + f" {r['rms_mean']:>10.4g}")
+
+    if predictions_path is not None:
+        write_predictions(first, predictions_path)
+        print(f"wrote {predictions_path}")
+    if report is not None and report_path is not None:
+        report.write(report_path)
+        print(f"wrote {report_path}")
+    write_json(json_path, figures)
+    return 0
