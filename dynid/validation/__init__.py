@@ -1,1 +1,34 @@
-"""dynid.validation."""
+"""dynid.validation: held-out validation, reports and the gap diagnosis.
+
+The submodules are imported on first use (matplotlib and scikit-learn are slow to import):
+:mod:`dynid.validation.metrics` (error figures, the noise floor), :mod:`dynid.validation.validate`
+(a model's prediction of held-out data, methods side by side), :mod:`dynid.validation.report` and
+:mod:`dynid.validation.plots` (the HTML report and its figures).
+"""
+
+from __future__ import annotations
+
+_EXPORTS = {
+    "NoiseFloor": "metrics",
+    "noise_floor": "metrics",
+    "torque_metrics": "metrics",
+    "COMPARISON": "validate",
+    "ValidationResult": "validate",
+    "compare": "validate",
+    "compare_methods": "validate",
+    "identify_methods": "validate",
+    "nominal_model": "validate",
+    "validate": "validate",
+    "write_predictions": "validate",
+    "Report": "report",
+    "render_report": "report",
+}
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        import importlib
+
+        return getattr(importlib.import_module(f"dynid.validation.{_EXPORTS[name]}"), name)
+    raise AttributeError(f"module 'dynid.validation' has no attribute {name!r}")
