@@ -1,0 +1,317 @@
+"""Tests of the validation engine and of ``dynid validate``."""
+
+from __future__ import annotations
+
+import csv
+import inspect
+import json
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from validation_cases import PERIOD, simulated_case
+
+from dynid.cli import main
+from dynid.exceptions import DataError, ModelFileError, ShapeError, UsageError
+from dynid.identify.dataset import Dataset, load_dataset, save_dataset
+from dynid.identify.linear_system import Preprocessing, prepare
+from dynid.identify.model import load_model
+from dynid.validation import plots, report
+from dynid.validation import validate as validate_module
+from dynid.validation.metrics import torque_metrics
+from dynid.validation.validate import (
+    compare,
+    nominal_model,
+    reference_noise_floor,
+    validate,
+    write_predictions,
+)
+
+
+@pytest.fixture(scope="module")
+def case(tmp_path_factory):
+    return simulated_case(tmp_path_factory.getbasetemp())
+
+
+@pytest.fixture(scope="module")
+def heldout(case):
+    return load_dataset(case.heldout)
+
+
+@pytest.fixture(scope="module")
+def full(case):
+    return load_model(case.full)
+
+
+@pytest.fixture(scope="module")
+def result(full, heldout):
+    return validate(full, heldout, label="full")
+
+
+# ---------------------------------------------------------------------------- the engine
+def test_layers_add_up_to_the_models_own_prediction(full, heldout, result):
+    np.testing.assert_allclose(result.tau_pred, full.predict(heldout), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(result.tau_link + result.tau_friction + result.tau_gmm, result.tau_pred, atol=1e-12)
+    prep = full.prepare(heldout)
+    np.testing.assert_array_equal(result.tau, prep.tau_reference)
+    assert result.reference == prep.reference == "filtered, decimated and trimmed"
+    assert result.has_gmm == bool(full.gmr.active_.any())
+    np.testing.assert_allclose(result.residual_before_gmm - result.residual, result.tau_gmm, atol=1e-12)
+
+
+def test_figures_are_the_metrics_of_the_compared_signals(result):
+    expected = torque_metrics(result.tau, result.tau_pred)
+    figures = result.figures()
+    for key in ("rms", "nrms", "r2", "max_error"):
+        np.testing.assert_allclose(figures[key], expected[key], rtol=1e-12)
+    assert figures["rms_mean"] == pytest.approx(float(np.mean(expected["rms"])), rel=1e-12)
+    assert {"rms", "rms_mean", "nrms", "r2", "noise_floor", "reference"} <= figures.keys()
+    json.dumps(figures, allow_nan=False)  # JSON-ready: no NaN, no inf, no arrays
+
+
+def test_noise_floor_uses_the_periods_the_sidecar_names(result):
+    # V.csv repeats a 5 s trajectory twice; its sidecar says so.
+    assert result.noise.method == "periods"
+    assert "2 periods of 5 s" in result.noise.detail
+    assert np.all(result.noise.std > 0)
+    # No model predicts below the noise floor (here the model is good but not perfect).
+    assert np.all(np.asarray(result.metrics["rms"]) > result.noise.std)
+
+
+def _noisy_sine(rng, *, fs=1000.0, seconds=12.0, sigma=(0.05, 0.2), period=None):
+    t = np.arange(int(seconds * fs)) / fs
+    q = np.column_stack([0.3 * np.sin(2 * np.pi * t / 3.0), 0.2 * np.cos(2 * np.pi * t / 4.0)])
+    clean = np.column_stack([np.sin(2 * np.pi * t / (period or 3.0)), 2 * np.cos(2 * np.pi * t / (period or 4.0))])
+    noise = rng.standard_normal(clean.shape) * np.asarray(sigma)
+    return t, q, clean, noise
+
+
+@pytest.mark.parametrize("period", [None, 3.0])
+def test_noise_floor_of_a_filtered_torque_is_the_filtered_noise(rng, period):
+    t, q, clean, noise = _noisy_sine(rng, period=period)
+    ds = Dataset(t, q, clean + noise)
+    prep = prepare(ds, Preprocessing(cutoff=20.0, decimate=2))
+    floor = reference_noise_floor(prep, period=period)
+    assert floor.method == ("periods" if period else "spectrum")
+    # What the noise alone becomes through the same filter, trimming and decimation.
+    truth = np.std(prep.filter(noise)[prep.rows], axis=0)
+    np.testing.assert_allclose(floor.std, truth, rtol=0.15)
+
+
+def test_noise_floor_of_a_raw_torque_is_its_white_level(rng):
+    t, q, clean, noise = _noisy_sine(rng)
+    prep = prepare(Dataset(t, q, clean + noise, dq=q * 0, ddq=q * 0), Preprocessing(cutoff=None))
+    assert prep.reference == "raw"
+    floor = reference_noise_floor(prep)
+    np.testing.assert_allclose(floor.std, [0.05, 0.2], rtol=0.1)
+
+
+def test_urdf_baseline_predicts_a_robot_that_is_its_urdf(tmp_path):
+    from dynid.identify.simulate import simulate
+    from dynid.optim.excitation import ExcitationProblem
+    from dynid.symbolic import load_robot
+
+    robot = load_robot("ur5").with_limits(dq_max=2.0, ddq_max=6.0)
+    traj = ExcitationProblem(robot=robot, harmonics=4, base_freq=0.2).random_trajectory(np.random.default_rng(1))
+    ds = simulate(robot, traj, friction="linear", noise="off", duration=5.0).to_dataset()
+    model = nominal_model(robot, ds)
+    assert model.method == "urdf" and model.friction.model == "linear"
+    result = validate(model, ds)
+    assert np.all(np.asarray(result.metrics["r2"]) > 0.998)
+    # Without sensor noise the measured floor is (almost) nothing.
+    assert np.all(result.noise.std < 1e-3 * np.std(result.tau, axis=0))
+
+
+def test_compare_refuses_models_prepared_differently(case, heldout):
+    from dynid.identify.model import identify
+
+    robot = load_model(case.full).robot
+    other = identify(robot, load_dataset(case.train), method="ols", friction="linear", gmm="off")  # no decimation
+    a = validate(load_model(case.ols), heldout, label="ols")
+    b = validate(other, heldout, label="undecimated")
+    with pytest.raises(ShapeError, match="'undecimated' is compared on another torque than 'ols'"):
+        compare([a, b])
+
+
+def test_predictions_file_holds_the_compared_signals(result, tmp_path):
+    path = write_predictions(result, tmp_path / "P.csv")
+    with path.open() as f:
+        header = next(csv.reader(f))
+    n = result.n
+    assert header == ["t", *(f"tau_{j}" for j in range(1, n + 1)), *(f"tau_pred_{j}" for j in range(1, n + 1))]
+    table = np.loadtxt(path, delimiter=",", skiprows=1)
+    np.testing.assert_allclose(table[:, 0], result.t, rtol=1e-9)
+    np.testing.assert_allclose(table[:, 1 : n + 1], result.tau, rtol=1e-8, atol=1e-12)
+    np.testing.assert_allclose(table[:, n + 1 :], result.tau_pred, rtol=1e-8, atol=1e-12)
+
+
+# ---------------------------------------------------------------------------- bad input (API)
+def test_data_of_another_robot_is_refused(full, tmp_path, rng):
+    t = np.arange(2000) / 1000.0
+    ds = Dataset(t, 0.1 * rng.standard_normal((2000, 7)), rng.standard_normal((2000, 7)))
+    with pytest.raises(ModelFileError, match=r"identified for 'ur5' \(6 joints\) but the data has 7 joints"):
+        validate(full, ds)
+
+
+def test_simulated_data_of_another_robot_is_refused_by_its_sidecar(case, full, tmp_path):
+    data = tmp_path / "V10.csv"
+    shutil.copy(case.heldout, data)
+    side = json.loads(Path(str(case.heldout) + ".truth.json").read_text())
+    side.update(robot="ur10", source="ur10")
+    Path(str(data) + ".truth.json").write_text(json.dumps(side))
+    with pytest.raises(ModelFileError, match=r"but V10.csv was simulated on 'ur10'"):
+        validate(full, load_dataset(data), info={"model_file": "M.json"})
+
+
+def test_too_short_data_is_refused(full, heldout):
+    short = heldout.select_rows(np.arange(100))
+    with pytest.raises(DataError, match=r"trimming \d+ samples from both ends leaves 0 of run 0 \(100 samples\)"):
+        validate(full, short)
+
+
+def test_validate_needs_a_model(heldout):
+    with pytest.raises(UsageError, match="model is a str; give an IdentifiedModel"):
+        validate("M.json", heldout)
+
+
+# ---------------------------------------------------------------------------- the command
+def test_validate_command_writes_what_it_prints(case, tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    argv = [
+        "validate",
+        "--model",
+        str(case.full),
+        "--compare",
+        str(case.ols),
+        "--data",
+        str(case.heldout),
+        "--predictions",
+        str(out / "P.csv"),
+        "--json",
+        str(out / "F.json"),
+    ]
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    figures = json.loads((out / "F.json").read_text())
+    assert figures["noise_floor_method"] == "periods"
+    assert [m["label"] for m in figures["models"]] == ["M", "M_ols"]
+    assert figures["models"][0]["rms"] == figures["rms"]
+    # The full method beats OLS on the held-out run.
+    assert figures["models"][0]["rms_mean"] < figures["models"][1]["rms_mean"]
+    # The predictions file reproduces the RMS of the JSON.
+    table = np.loadtxt(out / "P.csv", delimiter=",", skiprows=1)
+    n = len(figures["rms"])
+    rms = np.sqrt(np.mean((table[:, 1 : n + 1] - table[:, n + 1 :]) ** 2, axis=0))
+    np.testing.assert_allclose(rms, figures["rms"], rtol=1e-6)
+    assert f"{figures['rms_mean']:.4g}" in text
+    assert "noise floor: periods" in text
+    assert sorted(p.name for p in out.iterdir()) == ["F.json", "P.csv"]
+
+
+def _run_fails(argv, capsys) -> str:
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    return err
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--report", "{tmp}/missing/R.html"], r"the folder '.*missing' of the report does not exist"),
+        (["--report", "{tmp}/R.txt"], r"has the extension '.txt'; give a file name ending in .html"),
+        (["--predictions", "{tmp}/missing/P.csv"], r"the folder of --predictions '.*P.csv' does not exist"),
+        (["--json", "{tmp}/missing/F.json"], r"the folder of --json '.*F.json' does not exist"),
+        (["--period", "-1"], r"--period is -1.0; give the period"),
+    ],
+)
+def test_bad_output_paths_fail_before_any_work(case, tmp_path, capsys, extra, message):
+    out = tmp_path / "out"
+    out.mkdir()
+    argv = ["validate", "--model", str(case.full), "--data", str(case.heldout)]
+    argv += [a.format(tmp=out) for a in extra]
+    argv += ["--predictions", str(out / "P.csv")] if "--predictions" not in extra else []
+    err = _run_fails(argv, capsys)
+    assert re.search(message, err), err
+    assert err.startswith("dynid validate: error: ")
+    assert not any(out.rglob("*")), "nothing may be written"
+
+
+def test_model_of_another_robot_than_the_data(case, tmp_path, capsys, rng):
+    t = np.arange(2000) / 1000.0
+    data = save_dataset(Dataset(t, 0.1 * rng.standard_normal((2000, 7)), rng.standard_normal((2000, 7))), tmp_path / "V7.csv")
+    report = tmp_path / "R.html"
+    err = _run_fails(
+        ["validate", "--model", str(case.full), "--data", str(data), "--report", str(report)], capsys
+    )
+    assert re.search(r"M.json was identified for 'ur5' \(6 joints\) but V7.csv has 7 joints; validate a model", err)
+    assert not report.exists()
+
+
+def test_corrupt_model_file(case, tmp_path, capsys):
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"format": "dynid-model", "version": 1, "robot": ')
+    report = tmp_path / "R.html"
+    err = _run_fails(["validate", "--model", str(bad), "--data", str(case.heldout), "--report", str(report)], capsys)
+    assert re.search(r"bad.json is not a readable dynid model file \(JSONDecodeError", err)
+    assert not report.exists()
+
+
+def test_model_whose_arrays_were_replaced(case, tmp_path, capsys):
+    shutil.copy(case.full, tmp_path / "M.json")
+    shutil.copy(case.ols.with_suffix(".npz"), tmp_path / "M.npz")
+    err = _run_fails(["validate", "--model", str(tmp_path / "M.json"), "--data", str(case.heldout)], capsys)
+    assert "M.npz is not the arrays file M.json was written with (checksum differs)" in err
+
+
+# ---------------------------------------------------------------------------- API hygiene
+def _documented(obj) -> set[str]:
+    doc = inspect.getdoc(obj) or ""
+    names: set[str] = set()
+    for section in ("Parameters", "Attributes"):
+        match = re.search(rf"^{section}\n-+\n(.*?)(?:\n\n[A-Z][a-z]+\n-+\n|\Z)", doc, flags=re.S | re.M)
+        if match:
+            for line in match.group(1).splitlines():
+                if line and not line.startswith(" ") and " : " in line:
+                    names.update(name.strip() for name in line.split(" : ")[0].split(","))
+    return names
+
+
+CASES = [
+    (f"{module.__name__}.{name}", getattr(module, name))
+    for module in (validate_module, report, plots)
+    for name in module.__all__
+    if inspect.isfunction(getattr(module, name)) or inspect.isclass(getattr(module, name))
+]
+
+
+@pytest.mark.parametrize(("name", "obj"), CASES, ids=[name for name, _ in CASES])
+def test_every_argument_is_documented(name, obj):
+    target = obj.__init__ if inspect.isclass(obj) else obj
+    wanted = {
+        p.name
+        for p in inspect.signature(target).parameters.values()
+        if p.name not in ("self", "cls") and p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)
+    }
+    missing = wanted - _documented(obj)
+    assert not missing, f"{name} does not document {sorted(missing)}"
+    if inspect.isclass(obj):
+        for attr, member in vars(obj).items():
+            if inspect.isfunction(member) and not attr.startswith("_"):
+                params = set(inspect.signature(member).parameters) - {"self"}
+                assert params <= _documented(member), f"{name}.{attr} does not document {sorted(params)}"
+
+
+def test_every_module_lists_its_public_names():
+    for module in (validate_module, report, plots):
+        for name in module.__all__:
+            assert hasattr(module, name), f"{module.__name__}.__all__ names {name}, which does not exist"
+
+
+def test_period_default_is_the_sidecars(heldout):
+    from dynid.validation.validate import sidecar_period
+
+    assert sidecar_period(heldout) == pytest.approx(PERIOD)
