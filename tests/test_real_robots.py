@@ -1,0 +1,70 @@
+"""The real recordings under ../shared/data: identify, validate on the later part, write the reports.
+
+Runs ``scripts/identify_panda.py`` and ``scripts/identify_tx40.py`` (their ``main``) and checks what
+they claim; skipped, with the reason, when the recordings are not there (a user's fresh clone).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import runpy
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.realdata
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _script(name: str):
+    return runpy.run_path(str(REPO / "scripts" / name), run_name="dynid_script")["main"]
+
+
+@pytest.fixture(scope="module")
+def panda(shared_data, tmp_path_factory):
+    out = tmp_path_factory.mktemp("panda")
+    with contextlib.redirect_stdout(io.StringIO()):
+        results = _script("identify_panda.py")(out, root=shared_data)
+    return results, out
+
+
+@pytest.fixture(scope="module")
+def tx40(shared_data, tmp_path_factory):
+    out = tmp_path_factory.mktemp("tx40")
+    with contextlib.redirect_stdout(io.StringIO()):
+        results = _script("identify_tx40.py")(out, root=shared_data)
+    return results, out
+
+
+def test_panda_identified_model_beats_its_urdf_on_every_joint(panda):
+    results, _ = panda
+    by_label = {r.label: r for r in results}
+    assert list(by_label) == ["full", "OLS", "IRLS", "URDF"]
+    full, urdf = by_label["full"], by_label["URDF"]
+    # Held-out, on the last 30 % of the run: the identified model is better than Gaz et al.'s feasible
+    # parameters with a linear friction fitted on the same training data, joint by joint.
+    assert np.all(full.metrics["rms"] < urdf.metrics["rms"]), (full.metrics["rms"], urdf.metrics["rms"])
+    assert np.all(np.asarray(full.metrics["r2"]) > 0.9)
+    assert full.reference.startswith("resampled, filtered")
+
+
+def test_panda_report_and_model_are_written(panda):
+    _, out = panda
+    html = (out / "panda_report.html").read_text(encoding="utf-8")
+    assert html.count('<img src="data:image/png;base64,') == 4
+    assert (out / "panda_model.json").is_file() and (out / "panda_model.npz").is_file()
+    assert "Physically consistent link parameters" in html
+
+
+def test_tx40_identified_model_beats_its_urdf(tx40):
+    results, out = tx40
+    by_label = {r.label: r for r in results}
+    full, urdf = by_label["full"], by_label["URDF"]
+    # The arm's first three joints are well explained; the coupled wrist (joints 5 and 6) is not
+    # modelled by any of these, so only the mean and the first joints are held to a bar.
+    assert full.metrics["rms_mean"] < 0.8 * urdf.metrics["rms_mean"]
+    assert np.all(full.metrics["rms"][:3] < urdf.metrics["rms"][:3])
+    assert np.all(np.asarray(full.metrics["r2"][:4]) > 0.9)
+    assert (out / "tx40_report.html").is_file() and (out / "tx40_model.json").is_file()
