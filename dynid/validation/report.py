@@ -594,38 +594,38 @@ def render_report(
         f'<p class="lead">dynid report, {html.escape(_dt.datetime.now().strftime("%Y-%m-%d %H:%M"))}. '
         "Everything is in this one file; it needs no network.</p>",
         _context_table(first, figures, context),
-        '<h2 id="error">Held-out error per joint</h2>',
+        '<h2 id="section-error">Held-out error per joint</h2>',
         f'<p class="note">Model \'{html.escape(first.label)}\'. NRMS: RMS over the standard deviation of the '
         "measured torque; R^2: share of its variance explained; RMS / noise: 1 is as good as the sensor allows.</p>",
         _metrics_table(figures, first.n),
-        '<h2 id="methods">Methods side by side</h2>',
+        '<h2 id="section-methods">Methods side by side</h2>',
         _methods_table(results),
         _figure_html(by_key["methods"]),
-        f'<h2 id="torque">{html.escape(by_key["torque"].title)}</h2>',
+        f'<h2 id="section-torque">{html.escape(by_key["torque"].title)}</h2>',
         _figure_html(by_key["torque"]),
-        f'<h2 id="residual">{html.escape(by_key["residual"].title)}</h2>',
+        f'<h2 id="section-residual">{html.escape(by_key["residual"].title)}</h2>',
         _figure_html(by_key["residual"]),
-        f'<h2 id="friction">{html.escape(by_key["friction"].title)}</h2>',
+        f'<h2 id="section-friction">{html.escape(by_key["friction"].title)}</h2>',
         _figure_html(by_key["friction"]),
-        '<h2 id="conditions">Condition numbers</h2>',
+        '<h2 id="section-conditions">Condition numbers</h2>',
         '<p class="note">Of the noise-weighted regressor each model was identified from (lower is better '
         "conditioned; the URDF baseline estimated no rigid-body parameter).</p>",
         html_table(["", "condition number"], cond_rows, table_id="conditions"),
     ]
     for section_title, fragment in sections:
         anchor = "".join(ch if ch.isalnum() else "-" for ch in section_title.lower()).strip("-")
-        parts += [f'<h2 id="{html.escape(anchor)}">{html.escape(section_title)}</h2>', fragment]
+        parts += [f'<h2 id="section-{html.escape(anchor)}">{html.escape(section_title)}</h2>', fragment]
     parts += [
-        '<h2 id="parameters">Base parameters</h2>',
+        '<h2 id="section-parameters">Base parameters</h2>',
         f'<p class="note">Model \'{html.escape(first.label)}\' ({html.escape(first.model.method)}): identified '
         "parameters with their standard deviation from the identification's covariance; std (%) relative to "
         "|value| (large: poorly excited by the data).</p>",
         _parameter_table(first),
-        '<h2 id="consistent">Physically consistent link parameters</h2>',
+        '<h2 id="section-consistent">Physically consistent link parameters</h2>',
         _consistent_section(results),
     ]
     if notes:
-        parts += ['<h2 id="notes">Notes</h2>', "<ul>" + "".join(f"<li>{html.escape(x)}</li>" for x in notes) + "</ul>"]
+        parts += ['<h2 id="section-notes">Notes</h2>', "<ul>" + "".join(f"<li>{html.escape(x)}</li>" for x in notes) + "</ul>"]
     parts += [
         f'<script type="application/json" id="dynid-figures">{payload}</script>',
         "</body>",
