@@ -108,6 +108,20 @@ def test_noise_floor_of_a_raw_torque_is_its_white_level(rng):
     np.testing.assert_allclose(floor.std, [0.05, 0.2], rtol=0.1)
 
 
+def test_a_floor_that_cannot_be_measured_is_reported_as_such(full, heldout):
+    short = heldout.select_rows(np.arange(3000))  # 3 s: under one period, too short for the spectrum
+    result = validate(full, short)
+    figures = result.figures()
+    assert result.noise.method == "unmeasured"
+    assert "cannot measure the noise floor" in figures["noise_floor_detail"]
+    assert figures["noise_floor"] == [None] * 6 and figures["noise_floor_mean"] is None
+    assert figures["rms_over_noise"] == [None] * 6
+    json.dumps(figures, allow_nan=False)
+    from dynid.validation.report import render_report
+
+    assert render_report([result]).html.count("data:image/png;base64,") == 4
+
+
 def test_urdf_baseline_predicts_a_robot_that_is_its_urdf(tmp_path):
     from dynid.identify.simulate import simulate
     from dynid.optim.excitation import ExcitationProblem

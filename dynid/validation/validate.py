@@ -20,14 +20,11 @@ The prediction is split into its layers, so a report can show each of them:
 
 The noise floor
 ---------------
-What no model can predict, measured on the compared torque (never assumed):
-
-* data that repeat a period (a periodic excitation, ``period`` given or read from the simulator's
-  sidecar ``<data>.truth.json``) with at least two whole periods kept: the spread across periods at the
-  same phase (:func:`dynid.validation.metrics.noise_floor`);
-* otherwise the white-noise level of the spectrum: of the compared torque itself when it is raw; of the
-  raw torque above twice the cut-off, carried through the filter's noise bandwidth, when it was
-  filtered (the filtered torque has no high band left to measure).
+What no model can predict, measured on the compared torque (never assumed), exactly as the gap
+diagnosis measures it (:func:`dynid.validation.diagnosis.measure_noise`): the spread across periods
+when the data repeat a motion (``period`` given, read from the simulator's sidecar
+``<data>.truth.json``, or detected from the angles) at least twice; otherwise the white-noise level
+of the raw torque's spectrum carried through the filter.
 """
 
 from __future__ import annotations
@@ -44,14 +41,13 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.signal import sosfreqz
 
 from dynid.exceptions import DataError, ModelFileError, ShapeError, UsageError
 from dynid.identify.dataset import Dataset
 from dynid.identify.friction import FrictionLayer
 from dynid.identify.linear_system import Prepared, Preprocessing, column_set, linear_torque, prepare
 from dynid.identify.model import IdentifiedModel, identify
-from dynid.validation.metrics import NoiseFloor, noise_floor, torque_metrics
+from dynid.validation.metrics import NoiseFloor, torque_metrics
 
 __all__ = [
     "COMPARISON",
@@ -204,12 +200,13 @@ class ValidationResult:
         model's ``label``, ``description``, ``method``, ``cond``, ``rms_before_gmm``.
         """
         row = self.summary()
+        std = self.noise.std
         with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = np.where(self.noise.std > 0, self.metrics["rms"] / self.noise.std, np.inf)
+            ratio = np.where(std > 0, self.metrics["rms"] / std, np.where(std == 0, np.inf, np.nan))
         return {
             **row,
             "noise_floor": _finite(self.noise.std),
-            "noise_floor_mean": float(self.noise.rms_mean),
+            "noise_floor_mean": _finite(np.array([self.noise.rms_mean]))[0],
             "noise_floor_method": self.noise.method,
             "noise_floor_detail": self.noise.detail,
             "rms_over_noise": _finite(ratio),
@@ -293,57 +290,32 @@ def sidecar_period(data: Dataset) -> float | None:
 
 
 # ---------------------------------------------------------------------------- noise floor
-def _filter_noise_bandwidth(prep: Prepared) -> float:
-    """Noise-equivalent bandwidth (Hz) of the zero-phase torque filter: integral of |H(f)|^4."""
-    sos = prep.sos
-    assert sos is not None
-    freqs, h = sosfreqz(sos, worN=8192, fs=prep.fs)
-    return float(np.trapezoid(np.abs(h) ** 4, freqs))
-
-
-def _longest_run(prep: Prepared) -> slice:
-    return max(prep.runs, key=lambda run: run.stop - run.start)
-
-
 def reference_noise_floor(prep: Prepared, *, period: float | None = None) -> NoiseFloor:
-    """Noise floor of the torque as compared (see the module docstring).
+    """Noise floor of the torque as compared: the gap diagnosis' measurement, never an error.
+
+    The same figure as :func:`dynid.validation.diagnosis.measure_noise` (spread across periods, the
+    period given or detected from the angles; else the raw spectrum through the filter's noise gain),
+    so a validation and a diagnosis of the same data agree.  Data whose floor cannot be measured (no
+    repeated period and too few samples for the spectrum) get NaN with the reason, not an error: the
+    prediction error is still worth reporting.
 
     Parameters
     ----------
     prep : Prepared
         The prepared data (:meth:`IdentifiedModel.prepare`).
     period : float, optional
-        Period (s) of the motion, if it repeats.
+        Period (s) of the motion, if known.
 
     Returns
     -------
     NoiseFloor
     """
-    run = _longest_run(prep)
-    rows = prep.rows[(prep.rows >= run.start) & (prep.rows < run.stop)]
-    t_kept, ref = prep.t[rows], prep.tau_reference[np.isin(prep.rows, rows)]
-    if period is not None and period > 0:
-        floor = noise_floor(t_kept, ref, period=period)
-        if floor.method == "periods":
-            return floor
-    if not prep.parallel_filter:
-        return noise_floor(t_kept, ref)
-    cutoff = float(prep.settings["cutoff_hz"])
-    nyquist = prep.fs / 2
-    band = max(2.0 * cutoff, nyquist / 4)
-    if band >= 0.9 * nyquist:
-        band = 0.5 * (cutoff + nyquist)
-    raw = noise_floor(prep.t[run], prep.tau[run], band_start=band)
-    # raw.std^2 = level * nyquist (white); through the filter: level * ENBW.
-    std = raw.std * np.sqrt(_filter_noise_bandwidth(prep) / nyquist)
-    return NoiseFloor(
-        std=std,
-        method="spectrum",
-        detail=(
-            f"white level of the raw torque above {band:g} Hz, through the {cutoff:g} Hz filter "
-            "(a lower bound when the noise is coloured)"
-        ),
-    )
+    from dynid.validation.diagnosis import measure_noise
+
+    try:
+        return measure_noise(prep, period=period)
+    except DataError as err:
+        return NoiseFloor(std=np.full(prep.tau.shape[1], np.nan), method="unmeasured", detail=str(err))
 
 
 # ---------------------------------------------------------------------------- validation
