@@ -96,11 +96,17 @@ def _cell(value: Any, *, key: str | None = None, joint: int | None = None, text:
         attrs.append(f'data-joint="{joint}"')
     if value is not None and not (isinstance(value, float) and math.isnan(value)):
         attrs.append(f'data-value="{float(value)!r}"')
-    return f"<td {' '.join(attrs)}>{format_number(value)}</td>" if attrs else f"<td>{format_number(value)}</td>"
+    return (
+        f"<td {' '.join(attrs)}>{format_number(value)}</td>" if attrs else f"<td>{format_number(value)}</td>"
+    )
 
 
 def html_table(
-    headers: Sequence[str], rows: Sequence[Sequence[Any]], *, table_id: str | None = None, text_columns: int = 1
+    headers: Sequence[str],
+    rows: Sequence[Sequence[Any]],
+    *,
+    table_id: str | None = None,
+    text_columns: int = 1,
 ) -> str:
     """An HTML table; the first ``text_columns`` columns are text, the others numbers.
 
@@ -189,7 +195,9 @@ class Report:
         path = check_report_path(path, pdf=self.pdf is not None)
         if path.suffix.lower() == ".pdf":
             if self.pdf is None:
-                raise UsageError(f"the report '{path}' is a PDF but it was rendered without pdf=True; render it again.")
+                raise UsageError(
+                    f"the report '{path}' is a PDF but it was rendered without pdf=True; render it again."
+                )
             _write_bytes(path, self.pdf)
         else:
             _write_bytes(path, self.html.encode("utf-8"))
@@ -236,7 +244,9 @@ def check_report_path(path: str | os.PathLike[str], *, pdf: bool = True) -> Path
             f"the report '{path}' has the extension '{path.suffix}'; give a file name ending in {' or '.join(allowed)}."
         )
     if not path.parent.is_dir():
-        raise UsageError(f"the folder '{path.parent}' of the report does not exist; create it or write elsewhere.")
+        raise UsageError(
+            f"the folder '{path.parent}' of the report does not exist; create it or write elsewhere."
+        )
     if path.is_dir():
         raise UsageError(f"the report '{path}' is a folder; give a file name.")
     return path
@@ -284,7 +294,9 @@ def _render_figures(results: Sequence[ValidationResult], pdf_pages: Any | None) 
 
     fig = Figure(figsize=(11, 3.6), layout="constrained")
     ax = fig.subplots()
-    plot_method_rms(ax, [r.label for r in results], [r.metrics["rms"] for r in results], noise=first.noise.std)
+    plot_method_rms(
+        ax, [r.label for r in results], [r.metrics["rms"] for r in results], noise=first.noise.std
+    )
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0))
     emit(
         "methods",
@@ -333,7 +345,9 @@ def _render_figures(results: Sequence[ValidationResult], pdf_pages: Any | None) 
     # friction against velocity
     fig, axes = joint_grid(n, sharex=False, height=2.6)
     for j, ax in enumerate(axes):
-        plot_friction(ax, first.dq[:, j], first.friction_estimate[:, j], _friction_curves(results, j), joint=j + 1)
+        plot_friction(
+            ax, first.dq[:, j], first.friction_estimate[:, j], _friction_curves(results, j), joint=j + 1
+        )
     axes[0].legend(fontsize=7, loc="best", markerscale=3)
     emit(
         "friction",
@@ -365,7 +379,7 @@ def _metrics_table(figures: Mapping[str, Any], n: int) -> str:
     )
     mean = (
         f'<tr class="mean"><td class="text">mean</td>{_cell(figures["rms_mean"], key="rms_mean")}'
-        f'<td></td><td></td><td></td>{_cell(figures["noise_floor_mean"], key="noise_floor_mean")}<td></td></tr>'
+        f"<td></td><td></td><td></td>{_cell(figures['noise_floor_mean'], key='noise_floor_mean')}<td></td></tr>"
     )
     return body.replace("</tbody>", mean + "</tbody>")
 
@@ -403,7 +417,10 @@ def _parameter_table(result: ValidationResult) -> str:
     ):
         rows.append([name, kind, expr, float(v), float(s), float(pct)])
     return html_table(
-        ["name", "kind", "expression", "value (SI)", "std", "std (%)"], rows, table_id="parameters", text_columns=3
+        ["name", "kind", "expression", "value (SI)", "std", "std (%)"],
+        rows,
+        table_id="parameters",
+        text_columns=3,
     )
 
 
@@ -442,10 +459,12 @@ def _consistent_section(results: Sequence[ValidationResult]) -> str:
             ]
         )
     note = (
-        f'<p class="note">Model \'{html.escape(r.label)}\': distance from the unconstrained estimate '
+        f"<p class=\"note\">Model '{html.escape(r.label)}': distance from the unconstrained estimate "
         f"{format_number(c.get('mahalanobis'))} standard deviations (relative {format_number(c.get('relative_distance'))}); "
         "inertias about the joint frame (kg m^2), centre of mass in the joint frame (m); the last column is "
-        "the smallest eigenvalue of each link's pseudo-inertia (positive: physically consistent).</p>"
+        "the smallest eigenvalue of each link's pseudo-inertia (positive: physically consistent). The data "
+        "determine only the base parameters (combinations of these); this is one physically consistent split "
+        "of them, pulled toward the URDF where the model was fitted with a reference weight.</p>"
     )
     return note + html_table(
         [
@@ -473,13 +492,16 @@ def _context_table(first: ValidationResult, figures: Mapping[str, Any], context:
         ["robot", f"{first.model.robot.name} ({first.n} joints)"],
         ["model", first.info.get("model_file", first.label)],
         ["layers", figures.get("description", "")],
-        ["held-out data", f"{first.data}: {first.t.size} samples over {figures.get('duration_s', 0.0):.4g} s"],
+        [
+            "held-out data",
+            f"{first.data}: {first.t.size} samples over {figures.get('duration_s', 0.0):.4g} s",
+        ],
         ["measured torque compared", first.reference],
         ["noise floor", f"{first.noise.method}: {first.noise.detail}"],
     ]
     rows += [[str(k), str(v)] for k, v in context.items()]
     return html_table(["", ""], rows, table_id="context", text_columns=2).replace(
-        "<thead><tr><th class=\"text\"></th><th class=\"text\"></th></tr></thead>", ""
+        '<thead><tr><th class="text"></th><th class="text"></th></tr></thead>', ""
     )
 
 
@@ -492,14 +514,18 @@ def _figure_html(fig: ReportFigure) -> str:
     )
 
 
-def _pdf_table_page(pdf_pages: Any, title: str, headers: Sequence[str], rows: Sequence[Sequence[str]]) -> None:
+def _pdf_table_page(
+    pdf_pages: Any, title: str, headers: Sequence[str], rows: Sequence[Sequence[str]]
+) -> None:
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(11, 0.5 + 0.3 * (len(rows) + 2)))
     ax = fig.subplots()
     ax.axis("off")
     ax.set_title(title, loc="left")
-    table = ax.table(cellText=[list(r) for r in rows], colLabels=list(headers), loc="upper left", cellLoc="right")
+    table = ax.table(
+        cellText=[list(r) for r in rows], colLabels=list(headers), loc="upper left", cellLoc="right"
+    )
     table.auto_set_font_size(False)
     table.set_fontsize(8)
     pdf_pages.savefig(fig)
@@ -562,10 +588,20 @@ def render_report(
                 title,
                 ["model", *(f"RMS {j + 1}" for j in range(n)), "mean"],
                 [
-                    [r.label[:40], *(format_number(v) for v in r.metrics["rms"]), format_number(r.metrics["rms_mean"])]
+                    [
+                        r.label[:40],
+                        *(format_number(v) for v in r.metrics["rms"]),
+                        format_number(r.metrics["rms_mean"]),
+                    ]
                     for r in results
                 ]
-                + [["noise floor", *(format_number(v) for v in first.noise.std), format_number(first.noise.rms_mean)]],
+                + [
+                    [
+                        "noise floor",
+                        *(format_number(v) for v in first.noise.std),
+                        format_number(first.noise.rms_mean),
+                    ]
+                ],
             )
         figs = _render_figures(results, pdf_pages)
     finally:
@@ -595,7 +631,7 @@ def render_report(
         "Everything is in this one file; it needs no network.</p>",
         _context_table(first, figures, context),
         '<h2 id="section-error">Held-out error per joint</h2>',
-        f'<p class="note">Model \'{html.escape(first.label)}\'. NRMS: RMS over the standard deviation of the '
+        f"<p class=\"note\">Model '{html.escape(first.label)}'. NRMS: RMS over the standard deviation of the "
         "measured torque; R^2: share of its variance explained; RMS / noise: 1 is as good as the sensor allows.</p>",
         _metrics_table(figures, first.n),
         '<h2 id="section-methods">Methods side by side</h2>',
@@ -617,7 +653,7 @@ def render_report(
         parts += [f'<h2 id="section-{html.escape(anchor)}">{html.escape(section_title)}</h2>', fragment]
     parts += [
         '<h2 id="section-parameters">Base parameters</h2>',
-        f'<p class="note">Model \'{html.escape(first.label)}\' ({html.escape(first.model.method)}): identified '
+        f"<p class=\"note\">Model '{html.escape(first.label)}' ({html.escape(first.model.method)}): identified "
         "parameters with their standard deviation from the identification's covariance; std (%) relative to "
         "|value| (large: poorly excited by the data).</p>",
         _parameter_table(first),
@@ -625,13 +661,18 @@ def render_report(
         _consistent_section(results),
     ]
     if notes:
-        parts += ['<h2 id="section-notes">Notes</h2>', "<ul>" + "".join(f"<li>{html.escape(x)}</li>" for x in notes) + "</ul>"]
+        parts += [
+            '<h2 id="section-notes">Notes</h2>',
+            "<ul>" + "".join(f"<li>{html.escape(x)}</li>" for x in notes) + "</ul>",
+        ]
     parts += [
         f'<script type="application/json" id="dynid-figures">{payload}</script>',
         "</body>",
         "</html>",
     ]
-    return Report(html="\n".join(parts) + "\n", figures=tuple(figs), pdf=None if pdf_buf is None else pdf_buf.getvalue())
+    return Report(
+        html="\n".join(parts) + "\n", figures=tuple(figs), pdf=None if pdf_buf is None else pdf_buf.getvalue()
+    )
 
 
 def json_ready(value: Any) -> Any:

@@ -37,7 +37,7 @@ import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -52,6 +52,7 @@ from dynid.validation.metrics import NoiseFloor, torque_metrics
 __all__ = [
     "COMPARISON",
     "IdentifiedMethod",
+    "MethodSpec",
     "ValidationResult",
     "check_same_robot",
     "compare",
@@ -321,7 +322,9 @@ def reference_noise_floor(prep: Prepared, *, period: float | None = None) -> Noi
 # ---------------------------------------------------------------------------- validation
 def _parts(model: IdentifiedModel, prep: Prepared) -> tuple[NDArray[np.float64], ...]:
     cols, rows = model.columns, prep.rows
-    link = prep.filter(linear_torque(cols, model.params, prep.q, prep.dq, prep.ddq, mask=cols.link_mask))[rows]
+    link = prep.filter(linear_torque(cols, model.params, prep.q, prep.dq, prep.ddq, mask=cols.link_mask))[
+        rows
+    ]
     q_k, dq_k = prep.q[rows], prep.dq[rows]
     if model.friction is None:
         fric = np.zeros_like(link)
@@ -503,7 +506,9 @@ def nominal_model(
     """
     cols = column_set(robot, friction=False, armature=True)
     n = robot.n
-    phi = np.concatenate([np.asarray(robot.params, float), np.asarray(robot.armature, float), np.zeros(3 * n)])
+    phi = np.concatenate(
+        [np.asarray(robot.params, float), np.asarray(robot.armature, float), np.zeros(3 * n)]
+    )
     x = cols.P @ phi
     prep = prepare(data, preprocessing, n_joints=n)
     rows = prep.rows
@@ -528,19 +533,48 @@ def nominal_model(
         cond=float("nan"),
         rms=np.array(rms(after)),
         rms_layers={"link": rms(resid), "friction": rms(after), "gmm": rms(after)},
-        info={"n_samples": len(rows), "notes": ["rigid body from the robot description"], "reference": prep.reference},
+        info={
+            "n_samples": len(rows),
+            "notes": ["rigid body from the robot description"],
+            "reference": prep.reference,
+        },
     )
 
 
 # ---------------------------------------------------------------------------- methods side by side
-COMPARISON: tuple[tuple[str, str, str, str | int], ...] = (
-    ("full", "consistent", "seed", "auto"),
-    ("OLS", "ols", "linear", "off"),
-    ("IRLS", "irls", "linear", "off"),
+class MethodSpec(NamedTuple):
+    """One model of a comparison: its label and how :func:`dynid.identify.model.identify` makes it.
+
+    Parameters
+    ----------
+    label : str
+        Name in tables and legends.
+    method : str
+        Layer-1 method (``ols``, ``wls``, ``gls``, ``irls``, ``consistent``).
+    friction : str
+        Friction model (``none``, ``linear``, ``seed``, ``stribeck``, ``sigmoid``).
+    gmm : str or int
+        Layer 3: ``off``, ``auto`` or a number of components.
+    reference_weight : float
+        Consistent method: pull toward the URDF bodies.
+    """
+
+    label: str
+    method: str
+    friction: str
+    gmm: str | int
+    reference_weight: float = 0.0
+
+
+COMPARISON: tuple[MethodSpec, ...] = (
+    MethodSpec("full", "consistent", "seed", "auto", reference_weight=0.1),
+    MethodSpec("OLS", "ols", "linear", "off"),
+    MethodSpec("IRLS", "irls", "linear", "off"),
 )
-"""The paper's comparison, as (label, layer-1 method, friction, gmm): the full method (physically
-consistent links with IRLS weighting, the paper's friction model, the GMM layer) first, then OLS and
-IRLS with linear friction identified with the links."""
+"""The paper's comparison: the full method first (physically consistent links with IRLS weighting and
+a weak pull toward the URDF bodies, so that what the data cannot tell apart stays physical and IPOPT
+converges; the paper's friction model; the GMM layer), then OLS and IRLS with linear friction
+identified with the links."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -569,7 +603,7 @@ def identify_methods(
     robot,
     train: Dataset,
     *,
-    methods: Sequence[tuple[str, str, str, str | int]] = COMPARISON,
+    methods: Sequence[MethodSpec | tuple] = COMPARISON,
     preprocessing: Preprocessing | None = None,
     random_state: int = 0,
     progress: Callable[[str], None] | None = None,
@@ -582,8 +616,9 @@ def identify_methods(
         The robot that recorded the data.
     train : Dataset
         Identification data.
-    methods : sequence of (label, method, friction, gmm)
-        The models to identify (default :data:`COMPARISON`).
+    methods : sequence of MethodSpec
+        The models to identify (default :data:`COMPARISON`); plain tuples
+        ``(label, method, friction, gmm[, reference_weight])`` work too.
     preprocessing : Preprocessing, optional
         Filtering and decimation, the same for every model.
     random_state : int
@@ -596,17 +631,20 @@ def identify_methods(
     list of IdentifiedMethod
     """
     out = []
-    for label, method, friction, gmm in methods:
+    for spec in methods:
+        spec = MethodSpec(*spec)
+        label = spec.label
         start = time.perf_counter()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             model = identify(
                 robot,
                 train,
-                method=method,
-                friction=friction,
-                gmm=gmm,
+                method=spec.method,
+                friction=spec.friction,
+                gmm=spec.gmm,
                 preprocessing=preprocessing,
+                reference_weight=spec.reference_weight,
                 random_state=random_state,
             )
         seconds = time.perf_counter() - start
@@ -624,7 +662,7 @@ def compare_methods(
     train: Dataset,
     heldout: Dataset,
     *,
-    methods: Sequence[tuple[str, str, str, str | int]] = COMPARISON,
+    methods: Sequence[MethodSpec | tuple] = COMPARISON,
     preprocessing: Preprocessing | None = None,
     baseline: bool = False,
     period: float | None = None,
@@ -641,7 +679,7 @@ def compare_methods(
         Identification data.
     heldout : Dataset
         Held-out data (another run, or the later part of one).
-    methods : sequence of (label, method, friction, gmm)
+    methods : sequence of MethodSpec
         The models to identify (default :data:`COMPARISON`); the first is the one a report shows in
         detail.
     preprocessing : Preprocessing, optional
@@ -662,7 +700,12 @@ def compare_methods(
         One per model, in order; ``info`` holds ``seconds`` (identification time) and ``warnings``.
     """
     fitted = identify_methods(
-        robot, train, methods=methods, preprocessing=preprocessing, random_state=random_state, progress=progress
+        robot,
+        train,
+        methods=methods,
+        preprocessing=preprocessing,
+        random_state=random_state,
+        progress=progress,
     )
     if baseline:
         start = time.perf_counter()
@@ -672,7 +715,13 @@ def compare_methods(
             progress(f"URDF: the robot description's parameters with linear friction fitted, {seconds:.1f} s")
         fitted.append(IdentifiedMethod(label="URDF", model=model, seconds=seconds, warnings=[]))
     results = [
-        validate(f.model, heldout, period=period, label=f.label, info={"seconds": f.seconds, "warnings": f.warnings})
+        validate(
+            f.model,
+            heldout,
+            period=period,
+            label=f.label,
+            info={"seconds": f.seconds, "warnings": f.warnings},
+        )
         for f in fitted
     ]
     compare(results)
