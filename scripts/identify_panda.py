@@ -52,7 +52,11 @@ def main(out: Path, root: Path | None = None) -> list[ValidationResult]:
     print(f"\nheld-out RMS (N m) on the last {heldout.duration:.1f} s; torque {full.reference}")
     print(f"{'model':<6}" + "".join(f"{'joint ' + str(j + 1):>9}" for j in range(robot.n)) + f"{'mean':>9}")
     for r in results:
-        print(f"{r.label:<6}" + "".join(f"{v:>9.4f}" for v in r.metrics["rms"]) + f"{r.metrics['rms_mean']:>9.4f}")
+        print(
+            f"{r.label:<6}"
+            + "".join(f"{v:>9.4f}" for v in r.metrics["rms"])
+            + f"{r.metrics['rms_mean']:>9.4f}"
+        )
     print(f"{'noise':<6}" + "".join(f"{v:>9.4f}" for v in full.noise.std) + f"   ({full.noise.method})")
 
     out.mkdir(parents=True, exist_ok=True)

@@ -96,7 +96,15 @@ def test_demo_writes_its_files(demo):
 def test_demo_models_can_be_validated_again(demo, tmp_path):
     _, _, figures, run = demo
     out = tmp_path / "again.json"
-    argv = ["validate", "--model", str(run / "model.json"), "--data", str(run / "validation.csv"), "--json", str(out)]
+    argv = [
+        "validate",
+        "--model",
+        str(run / "model.json"),
+        "--data",
+        str(run / "validation.csv"),
+        "--json",
+        str(out),
+    ]
     assert main(argv) == 0
     again = json.loads(out.read_text())
     assert again["rms"] == pytest.approx(figures["rms"], rel=1e-9)

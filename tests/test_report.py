@@ -133,7 +133,16 @@ def test_report_is_valid_html_with_every_figure_embedded(command_outputs):
         width, height = png_size(uri)
         assert width >= 800 and height >= 300
     assert {f"figure-{key}" for key in FIGURES} <= doc.ids
-    for section in ("error", "methods", "torque", "residual", "friction", "conditions", "parameters", "consistent"):
+    for section in (
+        "error",
+        "methods",
+        "torque",
+        "residual",
+        "friction",
+        "conditions",
+        "parameters",
+        "consistent",
+    ):
         assert f"section-{section}" in doc.ids, section
     # self-contained: nothing fetched from elsewhere
     assert not re.search(r"""(src|href)=["'](https?:|//|file:)""", text)
@@ -167,7 +176,10 @@ def test_report_shows_the_physically_consistent_links(command_outputs):
     assert table is not None
     rows = re.findall(r"<tr><td class=\"text\">link (\d)</td>", table.group(1))
     assert rows == [str(j) for j in range(1, 7)]
-    masses = [float(v) for v in re.findall(r'<tr><td class="text">link \d</td><td data-value="([^"]+)"', table.group(1))]
+    masses = [
+        float(v)
+        for v in re.findall(r'<tr><td class="text">link \d</td><td data-value="([^"]+)"', table.group(1))
+    ]
     assert all(m > 0 for m in masses)
 
 
@@ -205,7 +217,9 @@ def test_report_path_errors(tmp_path, name, message):
 
 def test_html_report_cannot_be_written_as_pdf_unless_rendered_so(case, tmp_path):
     report = render_report([validate(load_model(case.ols), load_dataset(case.heldout))])
-    with pytest.raises(UsageError, match=r"has the extension '\.pdf'; give a file name ending in \.html or \.htm\."):
+    with pytest.raises(
+        UsageError, match=r"has the extension '\.pdf'; give a file name ending in \.html or \.htm\."
+    ):
         report.write(tmp_path / "R.pdf")
     assert not list(tmp_path.iterdir())
 

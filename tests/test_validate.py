@@ -53,7 +53,9 @@ def result(full, heldout):
 # ---------------------------------------------------------------------------- the engine
 def test_layers_add_up_to_the_models_own_prediction(full, heldout, result):
     np.testing.assert_allclose(result.tau_pred, full.predict(heldout), rtol=0, atol=1e-9)
-    np.testing.assert_allclose(result.tau_link + result.tau_friction + result.tau_gmm, result.tau_pred, atol=1e-12)
+    np.testing.assert_allclose(
+        result.tau_link + result.tau_friction + result.tau_gmm, result.tau_pred, atol=1e-12
+    )
     prep = full.prepare(heldout)
     np.testing.assert_array_equal(result.tau, prep.tau_reference)
     assert result.reference == prep.reference == "filtered, decimated and trimmed"
@@ -83,7 +85,9 @@ def test_noise_floor_uses_the_periods_the_sidecar_names(result):
 def _noisy_sine(rng, *, fs=1000.0, seconds=12.0, sigma=(0.05, 0.2), period=None):
     t = np.arange(int(seconds * fs)) / fs
     q = np.column_stack([0.3 * np.sin(2 * np.pi * t / 3.0), 0.2 * np.cos(2 * np.pi * t / 4.0)])
-    clean = np.column_stack([np.sin(2 * np.pi * t / (period or 3.0)), 2 * np.cos(2 * np.pi * t / (period or 4.0))])
+    clean = np.column_stack(
+        [np.sin(2 * np.pi * t / (period or 3.0)), 2 * np.cos(2 * np.pi * t / (period or 4.0))]
+    )
     noise = rng.standard_normal(clean.shape) * np.asarray(sigma)
     return t, q, clean, noise
 
@@ -128,7 +132,9 @@ def test_urdf_baseline_predicts_a_robot_that_is_its_urdf(tmp_path):
     from dynid.symbolic import load_robot
 
     robot = load_robot("ur5").with_limits(dq_max=2.0, ddq_max=6.0)
-    traj = ExcitationProblem(robot=robot, harmonics=4, base_freq=0.2).random_trajectory(np.random.default_rng(1))
+    traj = ExcitationProblem(robot=robot, harmonics=4, base_freq=0.2).random_trajectory(
+        np.random.default_rng(1)
+    )
     ds = simulate(robot, traj, friction="linear", noise="off", duration=5.0).to_dataset()
     model = nominal_model(robot, ds)
     assert model.method == "urdf" and model.friction.model == "linear"
@@ -142,7 +148,9 @@ def test_compare_refuses_models_prepared_differently(case, heldout):
     from dynid.identify.model import identify
 
     robot = load_model(case.full).robot
-    other = identify(robot, load_dataset(case.train), method="ols", friction="linear", gmm="off")  # no decimation
+    other = identify(
+        robot, load_dataset(case.train), method="ols", friction="linear", gmm="off"
+    )  # no decimation
     a = validate(load_model(case.ols), heldout, label="ols")
     b = validate(other, heldout, label="undecimated")
     with pytest.raises(ShapeError, match="'undecimated' is compared on another torque than 'ols'"):
@@ -154,7 +162,11 @@ def test_predictions_file_holds_the_compared_signals(result, tmp_path):
     with path.open() as f:
         header = next(csv.reader(f))
     n = result.n
-    assert header == ["t", *(f"tau_{j}" for j in range(1, n + 1)), *(f"tau_pred_{j}" for j in range(1, n + 1))]
+    assert header == [
+        "t",
+        *(f"tau_{j}" for j in range(1, n + 1)),
+        *(f"tau_pred_{j}" for j in range(1, n + 1)),
+    ]
     table = np.loadtxt(path, delimiter=",", skiprows=1)
     np.testing.assert_allclose(table[:, 0], result.t, rtol=1e-9)
     np.testing.assert_allclose(table[:, 1 : n + 1], result.tau, rtol=1e-8, atol=1e-12)
@@ -181,7 +193,9 @@ def test_simulated_data_of_another_robot_is_refused_by_its_sidecar(case, full, t
 
 def test_too_short_data_is_refused(full, heldout):
     short = heldout.select_rows(np.arange(100))
-    with pytest.raises(DataError, match=r"trimming \d+ samples from both ends leaves 0 of run 0 \(100 samples\)"):
+    with pytest.raises(
+        DataError, match=r"trimming \d+ samples from both ends leaves 0 of run 0 \(100 samples\)"
+    ):
         validate(full, short)
 
 
@@ -256,12 +270,16 @@ def test_bad_output_paths_fail_before_any_work(case, tmp_path, capsys, extra, me
 
 def test_model_of_another_robot_than_the_data(case, tmp_path, capsys, rng):
     t = np.arange(2000) / 1000.0
-    data = save_dataset(Dataset(t, 0.1 * rng.standard_normal((2000, 7)), rng.standard_normal((2000, 7))), tmp_path / "V7.csv")
+    data = save_dataset(
+        Dataset(t, 0.1 * rng.standard_normal((2000, 7)), rng.standard_normal((2000, 7))), tmp_path / "V7.csv"
+    )
     report = tmp_path / "R.html"
     err = _run_fails(
         ["validate", "--model", str(case.full), "--data", str(data), "--report", str(report)], capsys
     )
-    assert re.search(r"M.json was identified for 'ur5' \(6 joints\) but V7.csv has 7 joints; validate a model", err)
+    assert re.search(
+        r"M.json was identified for 'ur5' \(6 joints\) but V7.csv has 7 joints; validate a model", err
+    )
     assert not report.exists()
 
 
@@ -269,7 +287,9 @@ def test_corrupt_model_file(case, tmp_path, capsys):
     bad = tmp_path / "bad.json"
     bad.write_text('{"format": "dynid-model", "version": 1, "robot": ')
     report = tmp_path / "R.html"
-    err = _run_fails(["validate", "--model", str(bad), "--data", str(case.heldout), "--report", str(report)], capsys)
+    err = _run_fails(
+        ["validate", "--model", str(bad), "--data", str(case.heldout), "--report", str(report)], capsys
+    )
     assert re.search(r"bad.json is not a readable dynid model file \(JSONDecodeError", err)
     assert not report.exists()
 

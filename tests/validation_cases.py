@@ -44,7 +44,9 @@ def simulated_case(base: Path) -> Case:
     rng = np.random.default_rng(11)
     train_traj, heldout_traj = problem.random_trajectory(rng), problem.random_trajectory(rng)
     truth = build_truth(robot, friction="seed", perturb=0.1, truth_seed=3)
-    train, _ = write_simulation(simulate(robot, train_traj, truth=truth, seed=1, duration=8.0), folder / "D.csv")
+    train, _ = write_simulation(
+        simulate(robot, train_traj, truth=truth, seed=1, duration=8.0), folder / "D.csv"
+    )
     heldout, _ = write_simulation(
         simulate(robot, heldout_traj, truth=truth, seed=2, duration=2 * PERIOD + 0.5), folder / "V.csv"
     )
@@ -58,4 +60,6 @@ def simulated_case(base: Path) -> Case:
         ols = identify(robot, data, method="ols", friction="linear", gmm="off", preprocessing=pre)
     save_model(full, folder / "M.json")
     save_model(ols, folder / "M_ols.json")
-    return Case(folder=folder, train=train, heldout=heldout, full=folder / "M.json", ols=folder / "M_ols.json")
+    return Case(
+        folder=folder, train=train, heldout=heldout, full=folder / "M.json", ols=folder / "M_ols.json"
+    )

@@ -55,7 +55,10 @@ _DECIMATE = 4  # 1 kHz -> 250 Hz after the 20 Hz filter: the same information, a
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "--out", default="dynid-demo", metavar="DIR", help="folder for every file the demo writes (default dynid-demo)"
+        "--out",
+        default="dynid-demo",
+        metavar="DIR",
+        help="folder for every file the demo writes (default dynid-demo)",
     )
     parser.add_argument(
         "--quick", action="store_true", help="shorter trajectories and search (every stage still runs)"
@@ -105,14 +108,18 @@ class Stages:
         try:
             summary = fn()
         except NotBuilt as why:
-            self.rows.append({"stage": label, "status": "not built", "summary": f"not built yet ({why})", "seconds": 0.0})
+            self.rows.append(
+                {"stage": label, "status": "not built", "summary": f"not built yet ({why})", "seconds": 0.0}
+            )
             print(f"      not built yet ({why})", flush=True)
             return
         except DynidError as err:
             if not may_fail:
                 raise
             elapsed = time.perf_counter() - start
-            self.rows.append({"stage": label, "status": "failed", "summary": f"failed: {err}", "seconds": elapsed})
+            self.rows.append(
+                {"stage": label, "status": "failed", "summary": f"failed: {err}", "seconds": elapsed}
+            )
             print(f"      failed: {err} ({elapsed:.1f} s)", flush=True)
             return
         elapsed = time.perf_counter() - start
@@ -121,7 +128,9 @@ class Stages:
 
     def _not_built(self, label: str, why: str) -> None:
         print(f"{self._head()} {label}: not built yet ({why})", flush=True)
-        self.rows.append({"stage": label, "status": "not built", "summary": f"not built yet ({why})", "seconds": 0.0})
+        self.rows.append(
+            {"stage": label, "status": "not built", "summary": f"not built yet ({why})", "seconds": 0.0}
+        )
 
     @property
     def missing(self) -> list[str]:
@@ -200,7 +209,9 @@ def run(args: argparse.Namespace) -> int:
         q, dq, ddq = rng.uniform(-1, 1, size=(3, 500, robot.n))
         tau = lib.rnea(q, dq, ddq)
         model, data = robot.pin_model, robot.pin_model.createData()
-        err = max(float(np.abs(tau[k] - pin.rnea(model, data, q[k], dq[k], ddq[k])).max()) for k in range(len(q)))
+        err = max(
+            float(np.abs(tau[k] - pin.rnea(model, data, q[k], dq[k], ddq[k])).max()) for k in range(len(q))
+        )
         state["base"] = base
         figures["n_base"] = base.n_base
         figures["c_export_max_error"] = err
@@ -247,6 +258,7 @@ def run(args: argparse.Namespace) -> int:
             raise NotBuilt(f"it needs the {stage}, which did not run")
 
     def simulate_runs() -> str:
+        from dynid.identify.dataset import load_dataset
         from dynid.identify.simulate import build_truth, simulate, write_simulation
 
         needs("trajectory", "excitation design")
@@ -270,7 +282,8 @@ def run(args: argparse.Namespace) -> int:
             path, _ = write_simulation(result, out / f"{name}.csv")
             runs[name] = (result, path)
         state["truth"] = truth
-        state["data"] = {k: r.to_dataset() for k, (r, _) in runs.items()}
+        # Read back what was written: the rest of the demo sees the files a user would pass to dynid.
+        state["data"] = {k: load_dataset(p, robot.n) for k, (_, p) in runs.items()}
         state["val_period"] = other.period
         state["paths"] = {k: p for k, (_, p) in runs.items()}
         ident, val = runs["identification"][0], runs["validation"][0]
@@ -358,7 +371,10 @@ def run(args: argparse.Namespace) -> int:
 
         full = state["results"][0]
         result = diagnose(
-            full.model, state["data"]["identification"], state["data"]["validation"], period=state["val_period"]
+            full.model,
+            state["data"]["identification"],
+            state["data"]["validation"],
+            period=state["val_period"],
         )
         state["diagnosis"] = result
         figures["diagnosis"] = result.to_dict()
@@ -382,7 +398,11 @@ def run(args: argparse.Namespace) -> int:
         )
         stage_rows = [[r["stage"], r["status"], r["summary"], r["seconds"]] for r in stages.rows]
         truth_rows = [
-            [r.label, state["truth_errors"][r.label]["rigid_body"], state["truth_errors"][r.label]["worst_joint_torque"]]
+            [
+                r.label,
+                state["truth_errors"][r.label]["rigid_body"],
+                state["truth_errors"][r.label]["worst_joint_torque"],
+            ]
             for r in results
         ]
         sections = [
@@ -392,11 +412,15 @@ def run(args: argparse.Namespace) -> int:
                 "rigid-body parameters (base parameters and armature, weighted by how much torque each one "
                 "makes on the held-out motion): the RMS over joints of Y(x - x_true) over the RMS of Y x_true, "
                 "and the largest joint's.</p>"
-                + html_table(["model", "relative error (all joints)", "worst joint"], truth_rows, table_id="truth"),
+                + html_table(
+                    ["model", "relative error (all joints)", "worst joint"], truth_rows, table_id="truth"
+                ),
             ),
             (
                 "How this report was made",
-                html_table(["stage", "status", "summary", "seconds"], stage_rows, table_id="stages", text_columns=3),
+                html_table(
+                    ["stage", "status", "summary", "seconds"], stage_rows, table_id="stages", text_columns=3
+                ),
             ),
         ]
         if "diagnosis" in state:
@@ -433,10 +457,14 @@ def run(args: argparse.Namespace) -> int:
     with threadpool_limits(limits=1):
         stages.run("symbolic dynamics, base parameters and compiled C (Pinocchio on CasADi)", symbolic)
         stages.run("excitation design (Fourier series, IPOPT)", excite, needs=("dynid.optim.excitation",))
-        stages.run("simulated identification and validation runs", simulate_runs, needs=("dynid.identify.simulate",))
+        stages.run(
+            "simulated identification and validation runs", simulate_runs, needs=("dynid.identify.simulate",)
+        )
         stages.run("identification: the full three-layer method, OLS and IRLS", identify_models)
         stages.run("validation on the held-out run", validation)
-        stages.run("sim-to-real gap diagnosis", diagnosis, needs=("dynid.validation.diagnosis",), may_fail=True)
+        stages.run(
+            "sim-to-real gap diagnosis", diagnosis, needs=("dynid.validation.diagnosis",), may_fail=True
+        )
         stages.run("HTML report", report)
 
     total = time.perf_counter() - started
@@ -499,7 +527,10 @@ def _diagnosis_html(result: Any, label: str) -> str:
         f"<p>Model '{html.escape(label)}' on the held-out run; verdict: "
         f"<strong>{html.escape(', '.join(doc.get('verdict', [])))}</strong>.</p><ul>{lines}</ul>"
         + html_table(
-            ["candidate effect", "joint", "accepted", "closure", "p (Holm)"], rows, table_id="diagnosis", text_columns=3
+            ["candidate effect", "joint", "accepted", "closure", "p (Holm)"],
+            rows,
+            table_id="diagnosis",
+            text_columns=3,
         )
     )
 
@@ -512,11 +543,19 @@ def _print_summary(state: dict[str, Any], stages: Stages, total: float) -> None:
     if results:
         n = results[0].n
         print("\nheld-out RMS per joint (N m), validation run on another trajectory")
-        print(f"  {'model':<12}" + "".join(f"{'joint ' + str(j + 1):>10}" for j in range(n)) + f"{'mean':>10}")
+        print(
+            f"  {'model':<12}" + "".join(f"{'joint ' + str(j + 1):>10}" for j in range(n)) + f"{'mean':>10}"
+        )
         for r in results:
-            print(f"  {r.label:<12}" + "".join(f"{v:>10.4g}" for v in r.metrics["rms"]) + f"{r.metrics['rms_mean']:>10.4g}")
+            print(
+                f"  {r.label:<12}"
+                + "".join(f"{v:>10.4g}" for v in r.metrics["rms"])
+                + f"{r.metrics['rms_mean']:>10.4g}"
+            )
         noise = results[0].noise
-        print(f"  {'noise floor':<12}" + "".join(f"{v:>10.4g}" for v in noise.std) + f"{noise.rms_mean:>10.4g}")
+        print(
+            f"  {'noise floor':<12}" + "".join(f"{v:>10.4g}" for v in noise.std) + f"{noise.rms_mean:>10.4g}"
+        )
     if "report" in state:
         print(f"\nreport: {Path(state['report']).resolve()}")
     print(f"total {total:.1f} s", file=sys.stdout)

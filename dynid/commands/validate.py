@@ -12,9 +12,14 @@ HELP = "validate identified models on held-out data: RMS, NRMS, R^2 per joint, n
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--model", required=True, metavar="M.json", help="model file written by 'dynid identify'")
     parser.add_argument(
-        "--data", required=True, metavar="V.csv", help="held-out dataset (.csv or .npz), not the identification data"
+        "--model", required=True, metavar="M.json", help="model file written by 'dynid identify'"
+    )
+    parser.add_argument(
+        "--data",
+        required=True,
+        metavar="V.csv",
+        help="held-out dataset (.csv or .npz), not the identification data",
     )
     parser.add_argument(
         "--compare",
@@ -118,12 +123,18 @@ def run(args: argparse.Namespace) -> int:
     for j in range(n):
         print(
             f"{j + 1:>5} "
-            + _row([figures[k][j] for k in ("rms", "nrms", "r2", "max_error", "noise_floor", "rms_over_noise")])
+            + _row(
+                [figures[k][j] for k in ("rms", "nrms", "r2", "max_error", "noise_floor", "rms_over_noise")]
+            )
         )
     print(f"{'mean':>5} {figures['rms_mean']:>10.4g} {'':>43}{figures['noise_floor_mean']:>10.4g}")
     if len(results) > 1:
         width = max(len(r["label"]) for r in rows)
-        print(f"\n{'model':<{width}} " + " ".join(f"{'rms ' + str(j + 1):>10}" for j in range(n)) + f" {'mean':>10}")
+        print(
+            f"\n{'model':<{width}} "
+            + " ".join(f"{'rms ' + str(j + 1):>10}" for j in range(n))
+            + f" {'mean':>10}"
+        )
         for r in rows:
             print(f"{r['label']:<{width}} " + _row(r["rms"]) + f" {r['rms_mean']:>10.4g}")
 

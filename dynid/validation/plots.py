@@ -145,7 +145,12 @@ def plot_torque(
     ax.plot(t[s], tau[s], color="black", linewidth=2.4, alpha=0.35, label="measured")
     for k, (label, pred) in enumerate(predictions.items()):
         ax.plot(
-            t[s], np.asarray(pred, float)[s], color=COLORS[k % len(COLORS)], linewidth=0.9, label=label, alpha=0.9
+            t[s],
+            np.asarray(pred, float)[s],
+            color=COLORS[k % len(COLORS)],
+            linewidth=0.9,
+            label=label,
+            alpha=0.9,
         )
     ax.set_title(f"joint {joint}", fontsize=10, loc="left")
     ax.set_xlabel("time (s)")
