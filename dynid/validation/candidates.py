@@ -271,9 +271,11 @@ def _backlash(src, c):
     j = c.joint
     tau = src.tau_pred[:, j]
     b = np.tanh(tau / c.hyper["eps"])
+    motor = [src.ddq[:, j]] if c.hyper.get("motor") else []
     if "exact" in c.hyper:  # refit: half the gap a on the side the torque pushes, plus a compliance c
-        return _shifted(src, j, c.hyper["a"] * b + c.hyper["c"] * 1e-3 * tau / max(np.std(tau), 1e-12))
-    return _on_joint(src, j, [b, src.derivative(b, 2)])
+        out = _shifted(src, j, c.hyper["a"] * b + c.hyper["c"] * 1e-3 * tau / max(np.std(tau), 1e-12))
+        return np.concatenate([out, _on_joint(src, j, motor)], axis=2) if motor else out
+    return _on_joint(src, j, [b, src.derivative(b, 2), *motor])
 
 
 def _delay(src, c):
@@ -409,7 +411,7 @@ def enumerate_candidates(
     skip : sequence of str
         Effects that the model already holds (their columns would duplicate the model's).
     motor_inertia : bool
-        Give elasticity a motor-inertia column ``ddq_j`` (when the model has no armature).
+        Give elasticity and backlash a motor-inertia column ``ddq_j`` (when the model has no armature).
 
     Returns
     -------
@@ -425,7 +427,7 @@ def enumerate_candidates(
         if spec.per_joint:
             for j in range(n):
                 grid = spec.grid(src, j) if spec.grid else [{}]
-                if name == "elasticity" and motor_inertia:
+                if name in ("elasticity", "backlash") and motor_inertia:
                     grid = [{**g, "motor": 1.0} for g in grid]
                 label = f"{name} on joint {j + 1}"
                 out.append([Candidate(name, j, (j,), g, label) for g in grid])

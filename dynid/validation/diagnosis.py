@@ -113,15 +113,17 @@ def detect_period(t: NDArray[np.float64], q: NDArray[np.float64], *, min_period:
     lags = np.arange(lo, hi + 1)
     score = ac[lags] / (m - lags)
     order = np.argsort(score)[::-1][:20]
+
+    def mismatch(k: int) -> float:
+        return float(np.mean((x[k:] - x[:-k]) ** 2))
+
     for L in sorted(lags[order]):
-        d = x[L:] - x[:-L]
-        if float(np.sum(d**2) / d.shape[0]) < _PERIOD_TOL**2 * spread * 1e2:
-            # refine: the smallest lag around L with the least mismatch
-            best = min(
-                range(max(lo, L - 2), min(hi, L + 2) + 1),
-                key=lambda k: float(np.mean((x[k:] - x[:-k]) ** 2)),
-            )
-            return best * dt
+        if mismatch(L) < 0.1 * spread:
+            # The exact period: the least mismatch in a window around the peak.
+            width = max(3, int(0.01 * L))
+            best = min(range(max(lo, L - width), min(hi, L + width) + 1), key=mismatch)
+            if mismatch(best) < _PERIOD_TOL**2 * spread * 1e2:
+                return best * dt
     return None
 
 
@@ -492,6 +494,19 @@ def _clean(value: Any) -> Any:
     return value
 
 
+def _describe_refit(r: RankedCandidate) -> str:
+    """The fitted physical parameters of an accepted effect, in words."""
+    eff = r.refit.get("effective")
+    if not eff:
+        return describe_hyper(r.candidate)
+    e = r.candidate.effect
+    if e == "delay":
+        return f"delay {1000 * eff['d']:.2g} ms"
+    if e == "elasticity":
+        return f"stiffness {r.refit['stiffness']:.3g} N m/rad"
+    return f"half gap {1000 * eff['a']:.2g} mrad"
+
+
 def verdict_text(d: Diagnosis) -> str:
     """Plain-words account of a diagnosis (a few lines)."""
     dec = d.decomposition
@@ -515,7 +530,7 @@ def verdict_text(d: Diagnosis) -> str:
             )
     else:
         for r in d.accepted:
-            hyper = describe_hyper(r.candidate)
+            hyper = _describe_refit(r)
             lines.append(
                 f"{r.candidate.label}{' (' + hyper + ')' if hyper else ''}: closes {100 * r.closure:.0f} % of the "
                 f"gap on its joint(s) (Holm-adjusted p = {r.p_holm:.2g})."
@@ -541,11 +556,11 @@ def diagnose(
     alpha: float = 0.05,
     max_effects: int = 3,
     min_gain: float = 0.15,
-    min_closure: float = 0.5,
-    excess_tol: float = 0.5,
+    min_closure: float = 0.3,
+    excess_tol: float = 1.0,
     period: float | None = None,
     max_samples: int = 12000,
-    block_seconds: float = 0.25,
+    block_seconds: float = 0.1,
     refit: bool = True,
     confound_deg: float = 15.0,
     stick_fraction: float = 0.02,
@@ -647,7 +662,10 @@ def _check_inputs(model, robot, train, heldout, effects) -> tuple[Any, ColumnSet
             )
     unknown = [e for e in effects if e not in EFFECT_NAMES]
     if unknown:
-        raise UsageError(f"unknown effect {', '.join(unknown)}; the catalogue is {', '.join(EFFECT_NAMES)}.")
+        raise UsageError(
+            f"unknown effect {', '.join(repr(u) for u in unknown)}; the catalogue is {', '.join(EFFECT_NAMES)}: "
+            "use those names."
+        )
     if model is not None:
         cols = model.columns
         settings = dict(model.preprocessing)
@@ -724,15 +742,9 @@ def _diagnose(
 ) -> Diagnosis:
     robot, cols, settings, shape = _check_inputs(model, robot, train, heldout, effects)
     n = robot.n
+    _check_training_length(cols, shape, settings, train)
     tr = _side(robot, cols, shape, settings, train, max_samples, "training")
     ho = _side(robot, cols, shape, settings, heldout, max_samples, "held-out")
-    k0 = tr.X0.shape[2]
-    if tr.y.shape[0] * n < 3 * (k0 + 8):
-        raise IdentificationError(
-            f"the training data give {tr.y.shape[0]} samples after preprocessing, too few to refit {k0} baseline "
-            f"parameters with a candidate effect; give at least {3 * (k0 + 8) // n + 1} samples (in practice "
-            "several periods of an exciting trajectory)."
-        )
     noise = measure_noise(ho.prep, period=period)
     sigma = np.maximum(noise.std, 1e-12)
     dt_rows = float(np.median(np.diff(ho.t))) if len(ho.t) > 1 else 1.0 / ho.prep.fs
@@ -808,6 +820,7 @@ def _diagnose(
     current_fit = fit
     L_cur = L_base
     mse_cur = mse_base
+    r_cur = r_base
     ranking0: list[RankedCandidate] = []
     notes: list[str] = []
     tuned: dict[int, tuple[Candidate, NDArray[np.float64]]] = {}
@@ -823,7 +836,7 @@ def _diagnose(
                 tuned[gi] = _tune(ctx, current_fit, group)
             cand, C_tr = tuned[gi]
             C_ho = _columns(ho, cand)
-            rc = _score(ctx, current_fit, acc_tr, acc_ho, C_tr, C_ho, cand, L_cur, mse_cur, rnd)
+            rc = _score(ctx, current_fit, acc_tr, acc_ho, C_tr, C_ho, cand, r_cur, mse_cur, rnd)
             scored.append((gi, rc, C_tr, C_ho))
         if not scored:
             break
@@ -844,7 +857,7 @@ def _diagnose(
         gi, rc, C_tr, C_ho = best
         if refit:
             cand, C_tr2, C_ho2, info = _refine(ctx, current_fit, rc.candidate, C_tr)
-            rc2 = _score(ctx, current_fit, acc_tr, acc_ho, C_tr2, C_ho2, cand, L_cur, mse_cur, rnd)
+            rc2 = _score(ctx, current_fit, acc_tr, acc_ho, C_tr2, C_ho2, cand, r_cur, mse_cur, rnd)
             if rc2.gain >= rc.gain:
                 rc2.p_holm, rc2.significant = rc.p_holm, rc.significant
                 rc2.refit = info
@@ -904,7 +917,7 @@ def _diagnose(
         "closure_overall": closure_all if accepted_final else 0.0,
         "units": "N^2 m^2 (mean squared torque error on the filtered held-out data)",
     }
-    par = _parametric(cols, fit, x0, robot, block, alpha, sigma)
+    par = _parametric(tr.src.ddq[tr.rows], cols, fit, x0, robot, block, alpha, sigma)
     gmap = gap_map(
         t=ho.t,
         q=ho.src.q[ho.rows],
@@ -945,9 +958,29 @@ def _diagnose(
         residuals={
             "t": ho.t,
             "before": r_base,
-            "after": ho.y - (ho.y - r_base) if not accepted_final else None,
+            "after": r_cur if accepted_final else r_base,
+            "noise_std": sigma,
         },
     )
+
+
+_MIN_TRAIN_SECONDS = 2.0
+
+
+def _check_training_length(cols: ColumnSet, shape, settings: dict[str, Any], train: Dataset) -> None:
+    """Refuse training data too short to refit the baseline with a candidate and tune its hyper-parameters."""
+    n = cols.n
+    k = cols.p + (n if shape is not None else 0) + 8  # baseline + the largest candidate, with margin
+    trim = float(settings.get("trim_s") or 0.0)
+    usable = max(train.duration - 2 * trim, 0.0)
+    samples = int(usable / train.dt) // max(int(settings.get("decimate") or 1), 1)
+    need = max(_MIN_TRAIN_SECONDS, 10.0 * k / n * train.dt * max(int(settings.get("decimate") or 1), 1))
+    if usable < need or samples * n < 10 * k:
+        raise IdentificationError(
+            f"the training data give {usable:.2g} s ({samples} samples) after trimming, too few to refit the "
+            f"{cols.p} model parameters with a candidate effect and tune it; give at least {need + 2 * trim:.2g} s "
+            "(in practice several periods of an exciting trajectory)."
+        )
 
 
 def _in_model(cols: ColumnSet, shape) -> tuple[str, ...]:
@@ -1000,15 +1033,19 @@ def _cogging_prescreen(ctx: _Ctx, fit: _Fit, group: list[Candidate]) -> list[Can
     return [replace(group[0], hyper={"N": float(N)}) for N in top]
 
 
-def _score(ctx, fit: _Fit, acc_tr, acc_ho, C_tr, C_ho, cand, L_cur, mse_cur, rnd) -> RankedCandidate:
+def _score(ctx, fit: _Fit, acc_tr, acc_ho, C_tr, C_ho, cand, r_cur, mse_cur, rnd) -> RankedCandidate:
+    """Held-out score of a candidate refitted with the current model: loss on the joints it acts on."""
     # ``fit`` already holds the accepted columns in its baseline; solve with the candidate alone.
     x, beta, _ = fit.solve(C_tr)
     X_ho = np.concatenate([ctx.ho.X0, acc_ho], axis=2) if acc_ho.shape[2] else ctx.ho.X0
     r = ctx.ho.y - _predict(X_ho, x, C_ho, beta)
-    L = _losses(r, ctx.sigma, ctx.mask)
+    js = list(cand.joints) if cand.joints else list(range(len(ctx.sigma)))
+    # The refit moves every joint's prediction a little (shared base parameters); scoring the joints the
+    # candidate acts on keeps that variance out of the test.
+    L = _losses(r[:, js], ctx.sigma[js], ctx.mask[:, js])
+    L_cur = _losses(r_cur[:, js], ctx.sigma[js], ctx.mask[:, js])
     dm = st.diebold_mariano(L_cur, L, block=ctx.block)
     mse = _mse(r, ctx.mask)
-    js = list(cand.joints) if cand.joints else list(range(len(ctx.sigma)))
     noise_var = ctx.sigma**2
     gap = float(np.sum(mse_cur[js] - noise_var[js]))
     closure = float(np.sum(mse_cur[js] - mse[js]) / gap) if gap > 0 else float("nan")
@@ -1129,7 +1166,23 @@ def _refine(ctx: _Ctx, fit: _Fit, cand: Candidate, C_tr):
     except (ValueError, np.linalg.LinAlgError) as err:  # pragma: no cover - defensive
         return cand, C_tr, _columns(ctx.ho, cand), {"method": f"refit failed ({err}); screen columns kept"}
     best = make(theta)
-    return best, _columns(ctx.tr, best), _columns(ctx.ho, best), info
+    C_best = _columns(ctx.tr, best)
+    if e in ("elasticity", "backlash", "delay"):
+        # The column's coefficient is free: (theta, beta) and (-theta, -beta) fit alike to first order,
+        # so the physical value is theta times the coefficient.
+        _, beta, _ = fit.solve(C_best)
+        coef = float(beta[0]) if beta.size else 1.0
+        info["coefficient"] = coef
+        info["effective"] = {k: float(v) * coef for k, v in zip(names, theta, strict=True) if k != "eps"}
+        if e == "elasticity":
+            c_eff = info["effective"]["c"]
+            info["stiffness"] = 1.0 / c_eff if c_eff != 0 else float("inf")
+            info["units"] = "c in rad/(N m), stiffness in N m/rad"
+        elif e == "delay":
+            info["units"] = "d in s"
+        else:
+            info["units"] = "a (half the gap) in rad, eps in N m"
+    return best, C_best, _columns(ctx.ho, best), info
 
 
 def _first_order_delay(ctx, fit, cand, C_tr) -> float:
@@ -1174,6 +1227,7 @@ def _absorbed_armature(cols: ColumnSet) -> NDArray[np.float64]:
 
 
 def _parametric(
+    ddq_train: NDArray[np.float64],
     cols: ColumnSet,
     fit: _Fit,
     x: NDArray[np.float64],
@@ -1265,30 +1319,50 @@ def _parametric(
             "hypothesis (common gain, payload, armature) explains the change: the nominal inertial parameters "
             "are off."
         )
-    off_idx = [k for k, kind in enumerate(cols.kinds) if kind == "offset"]
-    if off_idx:
-        xo = x[off_idx]
-        so = np.sqrt(np.maximum(np.diag(cov)[off_idx], 1e-300))
-        joints = [int(cols.joints[k]) for k in off_idx]
-        p_holm = st.holm(2 * stats.norm.sf(np.abs(xo) / so))
-        offsets = [
+    # Per-joint parameters the model holds: torque offsets (nominal 0) and armatures (nominal: the URDF's).
+    ddq_rms = np.sqrt(np.mean(ddq_train**2, axis=0))
+    flagged = []
+    for kind, unit in (("offset", "N m"), ("armature", "kg m^2")):
+        idx_k = [k for k, kd in enumerate(cols.kinds) if kd == kind]
+        if not idx_k:
+            continue
+        joints_k = [int(cols.joints[k]) for k in idx_k]
+        nominal = (
+            np.zeros(len(idx_k)) if kind == "offset" else np.array([robot.armature[j - 1] for j in joints_k])
+        )
+        change = x[idx_k] - nominal
+        sd = np.sqrt(np.maximum(np.diag(cov)[idx_k], 1e-300))
+        p_holm = st.holm(2 * stats.norm.sf(np.abs(change) / sd))
+        torque = np.abs(change) * (1.0 if kind == "offset" else ddq_rms[np.array(joints_k) - 1])
+        rows = [
             {
                 "joint": jt,
                 "value": float(v),
-                "std": float(sd),
+                "nominal": float(nm),
+                "std": float(d),
                 "p_value": float(p),
-                "relevant": bool(abs(v) >= 0.5 * sigma[jt - 1]),
+                "size_noise": float(tq / sigma[jt - 1]),
+                "relevant": bool(tq >= 0.5 * sigma[jt - 1]),
             }
-            for jt, v, sd, p in zip(joints, xo, so, p_holm, strict=True)
+            for jt, v, nm, d, p, tq in zip(joints_k, x[idx_k], nominal, sd, p_holm, torque, strict=True)
         ]
-        out["offsets"] = offsets
-        sig = [o for o in offsets if o["p_value"] < alpha and o["relevant"]]
-        if sig and finding in ("none", "unstructured"):
-            finding = "offset"
-            joint = sig[0]["joint"] if len(sig) == 1 else None
-            text = "Torque offsets absorbed by the model's offset parameters: " + ", ".join(
-                f"joint {o['joint']}: {o['value']:.3g} +- {o['std']:.2g} N m" for o in sig
+        out[kind + "s"] = rows
+        # A stricter level than alpha: the block covariance is optimistic for filtered, coloured residuals.
+        flagged += [(kind, unit, r) for r in rows if r["p_value"] < min(alpha, 1e-3) and r["relevant"]]
+    if flagged and finding in ("none", "unstructured"):
+        kind = max(flagged, key=lambda f: f[2]["size_noise"])[0]
+        sig = [f for f in flagged if f[0] == kind]
+        finding = kind
+        joint = sig[0][2]["joint"] if len(sig) == 1 else None
+        what = "torque offsets" if kind == "offset" else "armatures (rotor inertias)"
+        text = (
+            f"Absorbed by the model's {kind} parameters: {what} "
+            + ", ".join(
+                f"joint {r['joint']}: {r['value'] - r['nominal']:.3g} +- {r['std']:.2g} {unit}"
+                for _, unit, r in sig
             )
+            + " (change from nominal)."
+        )
     out["finding"] = finding
     out["joint"] = joint
     out["text"] = text

@@ -1,0 +1,92 @@
+"""``dynid diagnose``: where an identified model's held-out error lies, which effect causes it, how far adding it
+shrinks the gap."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from dynid.commands.common import add_json_argument
+
+HELP = "diagnose the sim-to-real gap of a model: gap map, the effect behind it, its closure; HTML report"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--model", required=True, metavar="M.json", help="model file written by 'dynid identify'"
+    )
+    parser.add_argument(
+        "--data", required=True, metavar="D.csv", help="the training data the model was identified on"
+    )
+    parser.add_argument(
+        "--heldout",
+        required=True,
+        metavar="V.csv",
+        help="held-out data of the same robot (best: several periods of a periodic excitation)",
+    )
+    parser.add_argument("--report", metavar="R.html", help="write a self-contained HTML report")
+    parser.add_argument(
+        "--effects",
+        metavar="NAME[,NAME...]",
+        help="candidate effects to consider (default: the whole catalogue)",
+    )
+    parser.add_argument(
+        "--period", type=float, metavar="S", help="period (s) of the held-out motion (default: detected)"
+    )
+    parser.add_argument(
+        "--alpha", type=float, default=0.05, help="family-wise error rate of the tests (default 0.05)"
+    )
+    parser.add_argument("--max-effects", type=int, default=3, help="most effects accepted (default 3)")
+    add_json_argument(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    from dynid.cli import write_json
+    from dynid.exceptions import UsageError
+    from dynid.identify.dataset import load_dataset
+    from dynid.identify.model import load_model
+    from dynid.validation.candidates import EFFECT_NAMES
+    from dynid.validation.diagnosis import diagnose
+    from dynid.validation.diagnosis_report import check_report_path, write_diagnosis_report
+
+    report = check_report_path(args.report) if args.report else None
+    if args.json is not None and not Path(args.json).parent.is_dir():
+        raise UsageError(f"the folder of --json '{args.json}' does not exist; create it or write elsewhere.")
+    effects = EFFECT_NAMES
+    if args.effects:
+        effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
+    if not 0 < args.alpha < 1:
+        raise UsageError(f"--alpha is {args.alpha}; give a probability between 0 and 1, e.g. 0.05.")
+    model = load_model(args.model)
+    train = load_dataset(args.data)
+    heldout = load_dataset(args.heldout)
+    result = diagnose(
+        model,
+        train,
+        heldout,
+        effects=effects,
+        period=args.period,
+        alpha=args.alpha,
+        max_effects=args.max_effects,
+    )
+    print(f"verdict: {', '.join(result.verdict)}")
+    print(result.summary())
+    dec = result.decomposition
+    print("joint  excess  closure")
+    for j in range(model.robot.n):
+        c = dec["closure"][j]
+        print(f"{j + 1:>5}  {result.excess['ratio'][j]:6.2f}  {'-' if c != c else f'{c:6.2f}'}")
+    write_json(args.json, result.to_dict())
+    if report is not None:
+        write_diagnosis_report(
+            result,
+            report,
+            context={
+                "model": args.model,
+                "training data": args.data,
+                "held-out data": args.heldout,
+                "robot": model.robot.name,
+            },
+        )
+        print(f"report written to {report}")
+    return 0

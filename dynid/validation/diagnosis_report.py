@@ -1,0 +1,412 @@
+"""The gap diagnosis as a self-contained HTML report (figures embedded as base64 PNG).
+
+>>> write_diagnosis_report(result, "gap.html")
+
+Sections: the verdict in plain words; the decomposition of the held-out error per joint (noise floor,
+parametric, attributed, unexplained) and the closure; the gap map as pictures (excess over the noise
+floor per bin with bootstrap intervals, one joint per panel); the residual before and after the
+accepted effects (one joint per panel); the candidate ranking; the parameter-change test; the global
+flags (whiteness, delay, cogging).
+"""
+
+from __future__ import annotations
+
+import html
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dynid.exceptions import UsageError
+
+__all__ = ["diagnosis_figures", "render_diagnosis_html", "write_diagnosis_report"]
+
+_STYLE = """
+body { font-family: sans-serif; max-width: 1100px; margin: 2em auto; color: #222; }
+table { border-collapse: collapse; margin: 0.6em 0 1.2em 0; font-size: 0.92em; }
+th, td { border: 1px solid #ccc; padding: 3px 8px; text-align: right; }
+th { background: #f3f3f3; } td.text { text-align: left; }
+figure { margin: 1em 0; } figure img { max-width: 100%; } figcaption { font-size: 0.9em; color: #555; }
+.verdict { font-size: 1.15em; padding: 0.6em 1em; background: #f6f8fa; border-left: 4px solid #1f77b4; }
+"""
+
+
+def check_report_path(path: str | os.PathLike[str]) -> Path:
+    """Check that the report can be written at ``path`` (an ``.html`` file in an existing folder).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The report file.
+
+    Raises
+    ------
+    UsageError
+        Another extension, a missing folder, or a folder given as the file.
+    """
+    path = Path(path)
+    if path.suffix.lower() not in (".html", ".htm"):
+        raise UsageError(
+            f"the report '{path}' has the extension '{path.suffix}'; give a file name ending in .html."
+        )
+    if not path.parent.is_dir():
+        raise UsageError(
+            f"the folder '{path.parent}' of the report does not exist; create it or write the report elsewhere."
+        )
+    if path.is_dir():
+        raise UsageError(f"the report '{path}' is a folder; give a file name ending in .html.")
+    return path
+
+
+def _fmt(v: Any, digits: int = 3) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, float | np.floating):
+        if not np.isfinite(v):
+            return "-"
+        return f"{v:.{digits}g}"
+    return html.escape(str(v))
+
+
+def _table(headers: list[str], rows: list[list[Any]], text_columns: int = 1) -> str:
+    head = "".join(f"<th>{html.escape(h)}</th>" for h in headers)
+    body = "".join(
+        "<tr>"
+        + "".join(
+            f'<td class="text">{_fmt(c)}</td>' if k < text_columns else f"<td>{_fmt(c)}</td>"
+            for k, c in enumerate(row)
+        )
+        + "</tr>"
+        for row in rows
+    )
+    return f"<table><tr>{head}</tr>{body}</table>"
+
+
+def diagnosis_figures(result) -> list[tuple[str, str, bytes]]:
+    """The report's figures: ``(title, caption, png)`` each, one joint per panel.
+
+    Parameters
+    ----------
+    result : Diagnosis
+        What :func:`dynid.validation.diagnosis.diagnose` returned.
+    """
+    from matplotlib.figure import Figure
+
+    from dynid.validation.plots import figure_png, joint_grid, thin, tidy_grid
+
+    out = []
+    names = result.joint_names
+    n = len(names)
+    gmap = result.gap_map
+    # 1. Gap map: excess per bin with its interval.
+    fig, axes = joint_grid(n, height=3.6, sharex=False)
+    for j, ax in enumerate(axes):
+        labels, est, lo, hi, colors = [], [], [], [], []
+        palette = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
+        for k, (kind, rows) in enumerate(gmap["joints"][j].items()):
+            for r in rows:
+                if r.get("excess") is None:
+                    continue
+                labels.append(f"{kind}: {r['label']}"[:38])
+                est.append(r["excess"])
+                lo.append(r["low"] if r.get("low") is not None else r["excess"])
+                hi.append(r["high"] if r.get("high") is not None else r["excess"])
+                colors.append(palette[k % len(palette)])
+        y = np.arange(len(labels))
+        est_a = np.maximum(np.array(est), 1e-3)
+        err = np.vstack([est_a - np.minimum(lo, est_a), np.maximum(hi, est_a) - est_a])
+        ax.barh(y, est_a, xerr=err, color=colors, alpha=0.8, error_kw={"linewidth": 0.8})
+        ax.axvline(1.0, color="k", linewidth=1.0, linestyle="--")
+        ax.set_xscale("log")
+        ax.set_yticks(y, labels, fontsize=5.5)
+        ax.invert_yaxis()
+        ax.set_xlabel("excess: mean(r^2) / noise variance (-)")
+        ax.set_title(f"joint {j + 1} ({names[j]})", fontsize=9)
+    tidy_grid(axes)
+    out.append(
+        (
+            "Gap map",
+            "Held-out residual of the re-identified model: mean squared residual over the noise variance in each "
+            "bin (1, dashed: at the noise floor), 90 % moving-block bootstrap intervals; frequency bands against "
+            "the filtered noise spectrum.",
+            figure_png(fig),
+        )
+    )
+    # 2. Decomposition per joint.
+    dec = result.decomposition
+    fig, axes = joint_grid(n, height=2.4, sharex=False)
+    for j, ax in enumerate(axes):
+        vals = [dec["mse_model"][j], dec["mse_refit"][j], dec["mse_after"][j], dec["noise"][j]]
+        ax.bar(
+            ["model", "re-identified", "with effects", "noise floor"],
+            vals,
+            color=["#7f7f7f", "#1f77b4", "#2ca02c", "#000000"],
+        )
+        ax.set_ylabel("MSE (N^2 m^2)")
+        ax.set_title(f"joint {j + 1} ({names[j]})", fontsize=9)
+        ax.tick_params(axis="x", labelsize=7)
+    out.append(
+        (
+            "Held-out error per joint",
+            "Mean squared torque error on the held-out data (filtered like the model's data): the model as given, "
+            "its base parameters identified again, with the accepted effects added, and the measured noise floor.",
+            figure_png(fig),
+        )
+    )
+    # 3. Residual before / after over time.
+    t = result.residuals["t"]
+    before, after = result.residuals["before"], result.residuals["after"]
+    sd = result.residuals["noise_std"]
+    s = thin(len(t))
+    fig, axes = joint_grid(n, height=2.0)
+    for j, ax in enumerate(axes):
+        ax.plot(t[s], before[s, j], color="#d62728", linewidth=0.6, label="re-identified model")
+        if result.accepted:
+            ax.plot(t[s], after[s, j], color="#2ca02c", linewidth=0.6, label="with accepted effects")
+        ax.axhspan(-2 * sd[j], 2 * sd[j], color="k", alpha=0.08, label="+-2 noise std")
+        ax.set_ylabel(f"r_{j + 1} (N m)")
+        ax.set_xlabel("time (s)")
+        ax.set_title(f"joint {j + 1} ({names[j]})", fontsize=9)
+    axes[0].legend(fontsize=7, loc="upper right")
+    tidy_grid(axes)
+    out.append(
+        (
+            "Held-out residual",
+            "Torque residual over time before and after adding the accepted effects; the grey band is +-2 "
+            "standard deviations of the noise floor.",
+            figure_png(fig),
+        )
+    )
+    # 4. Delay and cogging flags as curves.
+    fig, axes = joint_grid(n, height=2.0, sharex=False)
+    for j, ax in enumerate(axes):
+        d = gmap["flags"]["delay"][j]
+        curve = d.get("curve")
+        if curve:
+            ax.plot(curve["lag_ms"], curve["rho"], color="#1f77b4")
+            if d.get("threshold"):
+                ax.axhline(d["threshold"], color="k", linestyle="--", linewidth=0.8)
+                ax.axhline(-d["threshold"], color="k", linestyle="--", linewidth=0.8)
+        ax.set_xlabel("lag (ms)")
+        ax.set_ylabel("correlation (-)")
+        ax.set_title(f"joint {j + 1}: residual vs predicted torque", fontsize=9)
+    tidy_grid(axes)
+    out.append(
+        (
+            "Residual-torque cross-correlation",
+            "Correlation of the residual with the predicted torque shifted by +-50 ms; a peak beyond the dashed "
+            "threshold at a non-zero lag points to a delay.",
+            figure_png(fig),
+        )
+    )
+    fig, axes = joint_grid(n, height=2.0, sharex=False)
+    for j, ax in enumerate(axes):
+        c = gmap["flags"]["cogging"][j]
+        spec = c.get("spectrum")
+        if spec:
+            ax.semilogy(spec["N"], np.maximum(spec["power"], 1e-30), color="#9467bd", linewidth=0.8)
+        ax.set_xlabel("angular frequency N (cycles per 2 pi rad)")
+        ax.set_ylabel("power (N^2 m^2)")
+        ax.set_title(f"joint {j + 1}: angle-domain spectrum", fontsize=9)
+    tidy_grid(axes)
+    out.append(
+        (
+            "Angle-domain spectrum of the residual",
+            "Power of the residual at harmonics of the joint angle; a sharp peak at N points to cogging or a "
+            "gear ripple with N periods per revolution.",
+            figure_png(fig),
+        )
+    )
+    del Figure
+    return out
+
+
+def render_diagnosis_html(
+    result, *, title: str = "dynid gap diagnosis", context: dict[str, Any] | None = None
+) -> str:
+    """The report as one HTML string.
+
+    Parameters
+    ----------
+    result : Diagnosis
+        The diagnosis.
+    title : str
+        Page title.
+    context : dict, optional
+        Extra facts shown in a table (model file, data files, robot).
+    """
+    from dynid.validation.plots import png_base64
+
+    doc = result.to_dict()
+    dec = doc["decomposition"]
+    n = len(result.joint_names)
+    parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"]
+    parts.append(f"<style>{_STYLE}</style></head><body><h1>{html.escape(title)}</h1>")
+    parts.append(f'<p class="verdict">Verdict: <strong>{html.escape(", ".join(result.verdict))}</strong></p>')
+    parts.append(
+        "<ul>" + "".join(f"<li>{html.escape(line)}</li>" for line in result.summary().splitlines()) + "</ul>"
+    )
+    if context:
+        parts.append(_table(["", ""], [[k, v] for k, v in context.items()], text_columns=2))
+    parts.append("<h2>Where the held-out error lies</h2>")
+    rows = []
+    for j in range(n):
+        rows.append(
+            [
+                f"{j + 1} ({result.joint_names[j]})",
+                dec["mse_model"][j],
+                dec["noise"][j],
+                dec["parametric"][j],
+                dec["attributed"][j],
+                dec["unexplained"][j],
+                doc["excess"]["ratio"][j],
+                dec["closure"][j],
+            ]
+        )
+    parts.append(
+        _table(
+            [
+                "joint",
+                "MSE model (N^2 m^2)",
+                "noise floor",
+                "parametric",
+                "attributed",
+                "unexplained",
+                "excess (re-identified / noise)",
+                "closure",
+            ],
+            rows,
+        )
+    )
+    parts.append(
+        f"<p>Noise floor: {html.escape(result.noise.detail)}. Closure overall: {_fmt(dec['closure_overall'])}. "
+        "MSE on the filtered held-out torque, samples near zero speed left out (sticking).</p>"
+    )
+    for title_f, caption, png in diagnosis_figures(result):
+        parts.append(
+            f"<figure><h3>{html.escape(title_f)}</h3><img src='{png_base64(png)}' alt='{html.escape(title_f)}'>"
+            f"<figcaption>{html.escape(caption)}</figcaption></figure>"
+        )
+    parts.append("<h2>Which effect: candidate ranking</h2>")
+    rows = []
+    for r in doc["ranking"][:20]:
+        joint = r["joint"]
+        joint = "+".join(map(str, joint)) if isinstance(joint, list) else joint
+        rows.append(
+            [
+                r["effect"],
+                "-" if joint is None else joint,
+                "yes" if r["accepted"] else "no",
+                "yes" if r["significant"] else "no",
+                r["gain"],
+                r["closure"],
+                r["p_value"],
+                ", ".join(r["confounded_with"]) or "-",
+            ]
+        )
+    parts.append(
+        _table(
+            [
+                "effect",
+                "joint",
+                "accepted",
+                "significant",
+                "gain (noise var.)",
+                "closure",
+                "p (Holm)",
+                "not separable from",
+            ],
+            rows,
+            text_columns=4,
+        )
+    )
+    parts.append("<h2>Parameter change</h2>")
+    par = doc["parametric"]
+    parts.append(f"<p>{html.escape(par.get('text', ''))}</p>")
+    parts.append(
+        _table(
+            ["hypothesis", "free parameters", "chi^2", "dof", "BIC"],
+            [[h["name"], h["k"], h["chi2"], h["dof"], h["bic"]] for h in par.get("hypotheses", [])[:8]],
+        )
+    )
+    parts.append("<h2>Global flags</h2>")
+    flags = doc["gap_map"]["flags"]
+    rows = []
+    for j in range(n):
+        w, d, c = flags["whiteness"][j], flags["delay"][j], flags["cogging"][j]
+        rows.append(
+            [
+                f"{j + 1}",
+                w["p_value"],
+                "yes" if w["white"] else "no",
+                d["lag_ms"],
+                d["rho"],
+                "yes" if d["flag"] else "no",
+                c.get("peak_ratio"),
+                c.get("peak"),
+                "yes" if c.get("flag") else "no",
+            ]
+        )
+    parts.append(
+        _table(
+            [
+                "joint",
+                "Ljung-Box p",
+                "white",
+                "xcorr peak lag (ms)",
+                "xcorr",
+                "delay flag",
+                "angle peak N",
+                "peak / median",
+                "cogging flag",
+            ],
+            rows,
+        )
+    )
+    if result.notes:
+        parts.append(
+            "<h2>Notes</h2><ul>" + "".join(f"<li>{html.escape(x)}</li>" for x in result.notes) + "</ul>"
+        )
+    parts.append("</body></html>\n")
+    return "".join(parts)
+
+
+def write_diagnosis_report(
+    result,
+    path: str | os.PathLike[str],
+    *,
+    title: str = "dynid gap diagnosis",
+    context: dict[str, Any] | None = None,
+) -> Path:
+    """Write the HTML report atomically (a temporary file renamed into place).
+
+    Parameters
+    ----------
+    result : Diagnosis
+        The diagnosis.
+    path : str or path-like
+        The ``.html`` file; its folder must exist.
+    title : str
+        Page title.
+    context : dict, optional
+        Extra facts shown in a table.
+
+    Returns
+    -------
+    Path
+    """
+    import tempfile
+
+    path = check_report_path(path)
+    text = render_diagnosis_html(result, title=title, context=context)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        os.fchmod(fd, 0o644)
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
