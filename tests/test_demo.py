@@ -6,6 +6,8 @@ import contextlib
 import io
 import json
 import re
+import subprocess
+import sys
 
 import pytest
 
@@ -108,6 +110,21 @@ def test_demo_models_can_be_validated_again(demo, tmp_path):
     assert main(argv) == 0
     again = json.loads(out.read_text())
     assert again["rms"] == pytest.approx(figures["rms"], rel=1e-9)
+
+
+def test_demo_models_load_in_a_fresh_process(demo, tmp_path):
+    """What a user does next, in a new process: nothing cached from the demo's own run may be needed."""
+    _, _, figures, run = demo
+    out = tmp_path / "fresh.json"
+    argv = ["validate", "--model", str(run / "model.json"), "--data", str(run / "validation.csv")]
+    proc = subprocess.run(
+        [sys.executable, "-m", "dynid.cli", *argv, "--json", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(out.read_text())["rms"] == pytest.approx(figures["rms"], rel=1e-9)
 
 
 def test_demo_out_must_be_a_folder(tmp_path, capsys):

@@ -131,7 +131,7 @@ def test_urdf_baseline_predicts_a_robot_that_is_its_urdf(tmp_path):
     from dynid.optim.excitation import ExcitationProblem
     from dynid.symbolic import load_robot
 
-    robot = load_robot("ur5").with_limits(dq_max=2.0, ddq_max=6.0)
+    robot = load_robot("ur5")
     traj = ExcitationProblem(robot=robot, harmonics=4, base_freq=0.2).random_trajectory(
         np.random.default_rng(1)
     )

@@ -39,7 +39,7 @@ def simulated_case(base: Path) -> Case:
 
     folder = base / "validation-case"
     folder.mkdir(exist_ok=True)
-    robot = load_robot("ur5").with_limits(dq_max=2.0, ddq_max=6.0)
+    robot = load_robot("ur5")
     problem = ExcitationProblem(robot=robot, harmonics=4, base_freq=1.0 / PERIOD)
     rng = np.random.default_rng(11)
     train_traj, heldout_traj = problem.random_trajectory(rng), problem.random_trajectory(rng)
