@@ -23,7 +23,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--trajectories", type=int, default=1, metavar="K", help="design K complementary trajectories")
     parser.add_argument("--seed", type=int, default=0, help="seed of the random starts (default 0)")
-    parser.add_argument("--out", required=True, metavar="T.json", help="Fourier coefficients and metadata (JSON)")
+    parser.add_argument(
+        "--out",
+        required=True,
+        metavar="T.json",
+        help="Fourier coefficients and metadata (JSON); with --trajectories K also T-2.json .. T-K.json",
+    )
     parser.add_argument("--csv", metavar="T.csv", help="also write approach, excitation(s) and retreat sampled at --rate")
     parser.add_argument("--rate", type=float, default=500.0, metavar="HZ", help="controller rate of the CSV (default 500)")
     add_json_argument(parser)

@@ -32,7 +32,8 @@ position, the jerk that of the velocity, the snap that of the acceleration): a t
 passes meets its limits in continuous time.  One that fails is re-solved from its result (warm
 start) with every limit of the failing kind tightened by the overshoot the optimisation grid can
 hide under the same formula, and the failing ones by their excess on top; on UR5 and Panda one
-re-solve is the rule, three the most seen.  Tightening only the failing joints needed up to seven.
+re-solve is the rule, three the most seen without Cartesian limits.  Tightening only the failing
+joints needed up to seven.
 
 *The regressor* is the base regressor Function (Pinocchio on CasADi SX) mapped over the grid inside
 an MX graph, ``A = H*^T H*`` formed with one dense product.  Measured on a UR5 (60 samples, 36 base
@@ -1107,7 +1108,7 @@ class ExcitationResult:
             "base_freq": problem.base_freq,
             "grid": problem.grid,
             "check_grid": problem.grid * problem.check_factor,
-            "noise_std": problem.noise_std,
+            "noise_std": problem.noise_std.tolist(),
             "sharpness": problem.sharpness,
             "cartesian": None if problem.cartesian is None else problem.cartesian.to_dict(),
             "n_base": int(_functions(problem).n_base),
@@ -1116,10 +1117,10 @@ class ExcitationResult:
             "seconds": self.seconds,
             "seed": self.seed,
             "limits": {
-                "q_min": robot.q_min,
-                "q_max": robot.q_max,
-                "dq_max": robot.dq_max,
-                "ddq_max": robot.ddq_max,
+                "q_min": robot.q_min.tolist(),
+                "q_max": robot.q_max.tolist(),
+                "dq_max": robot.dq_max.tolist(),
+                "ddq_max": robot.ddq_max.tolist(),
             },
         }
 
