@@ -89,6 +89,9 @@ def test_demo_writes_its_files(demo):
         "report.html",
     } <= names
     assert not [n for n in names if n.startswith(".")], "temporary files left behind"
+    if figures.get("diagnosis_report"):  # the diagnosis' own report, linked from the demo's
+        assert "diagnosis.html" in names
+        assert '<a href="diagnosis.html">' in (run / "report.html").read_text(encoding="utf-8")
     html = (run / "report.html").read_text(encoding="utf-8")
     assert html.count('<img src="data:image/png;base64,') == 4
     assert "Sim-to-real gap diagnosis" in html and "Against the simulated truth" in html

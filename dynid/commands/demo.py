@@ -380,8 +380,18 @@ def run(args: argparse.Namespace) -> int:
         )
         state["diagnosis"] = result
         figures["diagnosis"] = result.to_dict()
+        written = ""
+        if _exists("dynid.validation.diagnosis_report"):
+            from dynid.validation.diagnosis_report import write_diagnosis_report
+
+            path = write_diagnosis_report(
+                result, out / "diagnosis.html", title="dynid demo: gap diagnosis of the full method"
+            )
+            state["diagnosis_report"] = path
+            figures["diagnosis_report"] = str(path)
+            written = f"; wrote {path}"
         text = result.summary().splitlines()
-        return f"verdict {', '.join(result.verdict)}: {text[0] if text else ''}"
+        return f"verdict {', '.join(result.verdict)}{written}: {text[0] if text else ''}"
 
     # ------------------------------------------------------------------ 7. report
     def report() -> str:
@@ -426,7 +436,14 @@ def run(args: argparse.Namespace) -> int:
             ),
         ]
         if "diagnosis" in state:
-            sections.insert(0, ("Sim-to-real gap diagnosis", _diagnosis_html(state["diagnosis"], full.label)))
+            fragment = _diagnosis_html(state["diagnosis"], full.label)
+            if "diagnosis_report" in state:
+                name = html.escape(Path(state["diagnosis_report"]).name)
+                fragment += (
+                    f'<p class="note">The diagnosis in full (gap map, decomposition, every candidate): '
+                    f'<a href="{name}">{name}</a>, beside this file.</p>'
+                )
+            sections.insert(0, ("Sim-to-real gap diagnosis", fragment))
         else:
             row = next((r for r in stages.rows if r["stage"].startswith("sim-to-real")), None)
             why = row["summary"] if row else "not run"
