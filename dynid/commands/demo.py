@@ -23,7 +23,7 @@ from typing import Any
 from dynid.commands.common import add_json_argument
 from dynid.exceptions import UsageError
 
-HELP = "run the whole path on the built-in default robot (UR5): excite, simulate, identify, validate, report"
+HELP = "run the whole path on the built-in default robot (UR5): excite, simulate, identify, validate, diagnose, report"
 
 DEFAULT_ROBOT = "ur5"
 

@@ -42,7 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=float,
         metavar="S",
         help="period (s) of the motion if it repeats, for the noise floor (default: from a simulated "
-        "dataset's sidecar, else the spectrum)",
+        "dataset's sidecar, else detected from the angles; without one, the spectrum)",
     )
     parser.add_argument(
         "--robot",
