@@ -98,3 +98,16 @@ def test_wrong_sizes_are_refused():
         base.to_base(np.zeros(50))
     with pytest.raises(ShapeError, match=r"beta has shape \(35,\); the robot 'ur5' has 36 base parameters"):
         base.to_standard(np.zeros(35))
+
+
+def test_the_split_does_not_depend_on_joint_limits():
+    """A model identified on a slowed robot must match the same robot loaded again."""
+    from dynid.symbolic.base import _MEMO
+
+    _MEMO.clear()
+    slow = load_robot("ur5").with_limits(q_min=-0.5, q_max=0.5, dq_max=0.3, ddq_max=1.0)
+    first = base_parameters(robot_functions(slow))
+    _MEMO.clear()
+    again = base_parameters(robot_functions(load_robot("ur5")))
+    np.testing.assert_array_equal(first.independent, again.independent)
+    np.testing.assert_allclose(first.K, again.K, atol=1e-12)

@@ -164,6 +164,24 @@ def random_states(robot, m: int, rng: np.random.Generator) -> tuple[np.ndarray, 
     return q, dq, ddq
 
 
+def _split_states(robot, m: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """States for the rank-revealing QR, drawn from a distribution that depends on the joint types only.
+
+    Not on the joint limits: the choice of independent columns (hence the names and the values of
+    the base parameters) must be the same for a robot whatever limits a user sets, or a model
+    identified on a slowed robot would not match the same robot loaded again.
+    """
+    revolute = np.array([j.revolute for j in robot.joints])
+    span = np.where(revolute, np.pi, 0.5)  # rad, or m for a prismatic joint
+    q = rng.uniform(-1.0, 1.0, size=(m, robot.n)) * span
+    dq = rng.uniform(-1.0, 1.0, size=(m, robot.n)) * 2.0
+    ddq = rng.uniform(-1.0, 1.0, size=(m, robot.n)) * 10.0
+    return q, dq, ddq
+
+
+_MEMO: dict[tuple, BaseParameters] = {}
+
+
 def base_parameters(funcs: RobotFunctions, *, samples: int | None = None, seed: int = 0) -> BaseParameters:
     """Compute the base parameters of a robot.
 
@@ -174,14 +192,18 @@ def base_parameters(funcs: RobotFunctions, *, samples: int | None = None, seed: 
     samples : int, optional
         Number of random states stacked (default ``max(200, 40 n)``).
     seed : int
-        Seed of the random states; the split is the same for any seed on a generic robot, the fixed
-        default makes the choice of independent columns repeatable.
+        Seed of the random states; the rank is the same for any seed, the fixed default makes the
+        choice of independent columns repeatable.  The states do not depend on the joint limits, and
+        the result is kept per process for each tree (:attr:`RobotModel.key`).
     """
     robot = funcs.robot
     n = robot.n
     m = samples or max(200, 40 * n)
+    memo_key = (robot.key, m, seed)
+    if memo_key in _MEMO:  # the split depends on the tree only (see _split_states)
+        return _MEMO[memo_key]
     rng = np.random.default_rng(seed)
-    q, dq, ddq = random_states(robot, m, rng)
+    q, dq, ddq = _split_states(robot, m, rng)
     W = funcs.regressor_numeric(q, dq, ddq).reshape(m * n, 10 * n)
     _, R, perm = scipy.linalg.qr(W, mode="economic", pivoting=True)
     diag = np.abs(np.diag(R))
@@ -201,7 +223,7 @@ def base_parameters(funcs: RobotFunctions, *, samples: int | None = None, seed: 
     qs, dqs, ddqs = (ca.SX.sym(name, n) for name in ("q", "dq", "ddq"))
     Yb = funcs.regressor(qs, dqs, ddqs)[:, independent.tolist()]
     base = ca.Function("base_regressor", [qs, dqs, ddqs], [ca.densify(Yb)], ["q", "dq", "ddq"], ["Yb"])
-    return BaseParameters(
+    result = BaseParameters(
         robot_name=robot.name,
         standard_names=robot.param_names,
         independent=independent,
@@ -210,3 +232,5 @@ def base_parameters(funcs: RobotFunctions, *, samples: int | None = None, seed: 
         gravity_related=gravity_related,
         base_regressor=base,
     )
+    _MEMO[memo_key] = result
+    return result
