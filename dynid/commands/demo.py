@@ -178,9 +178,7 @@ def run(args: argparse.Namespace) -> int:
     cfg = _SETTINGS[mode]
     started = time.perf_counter()
     stages = Stages(total=7)
-    # The UR5's own limits (URDF; 10 rad/s^2 where the URDF has none).  Not slowed down with with_limits:
-    # the base-parameter split is chosen on random states drawn within the limits, so a model identified
-    # with other limits would not load again as plain 'ur5' in another process.
+    # The UR5 at its own limits (URDF; 10 rad/s^2 where the URDF has none), as a user's first run has it.
     robot = load_robot(DEFAULT_ROBOT)
     state: dict[str, Any] = {}
     figures: dict[str, Any] = {"robot": DEFAULT_ROBOT, "mode": mode, "seed": args.seed}
