@@ -11,12 +11,21 @@ import pytest
 from dynid.cli import main
 from dynid.exceptions import ModelFileError
 from dynid.identify._synthetic import random_fourier, synthetic_dataset, true_parameters
-from dynid.identify.consistent import ConsistentLS, log_cholesky, pseudo_inertia, standard_from_pseudo_inertia
+from dynid.identify.consistent import (
+    EPS,
+    ConsistentLS,
+    consistent_solution,
+    is_consistent,
+    log_cholesky,
+    pseudo_inertia,
+    standard_from_pseudo_inertia,
+)
 from dynid.identify.dataset import save_dataset
 from dynid.identify.estimators import IRLS
 from dynid.identify.friction import SeedFriction
 from dynid.identify.linear_system import build_system, column_set
 from dynid.identify.model import identify, load_model, save_model
+from dynid.identify.simulate import perturb_params
 
 
 def test_log_cholesky_round_trip(ur5) -> None:
@@ -43,7 +52,8 @@ def test_consistent_fit_returns_a_consistent_estimate_unchanged(ur5) -> None:
     np.testing.assert_allclose(cols.P @ np.concatenate([fit.standard_, fit.extras_]), fit.params_, atol=1e-9)
 
 
-def test_consistent_fit_makes_an_impossible_estimate_physical(ur5) -> None:
+@pytest.mark.parametrize("reference_weight", [0.0, 0.01])
+def test_consistent_fit_makes_an_impossible_estimate_physical(ur5, reference_weight) -> None:
     rng = np.random.default_rng(22)
     cols = column_set(ur5)
     params = ur5.params.copy()
@@ -53,15 +63,33 @@ def test_consistent_fit_makes_an_impossible_estimate_physical(ur5) -> None:
     ds = synthetic_dataset(cols, x_bad, random_fourier(ur5, rng), rate=10, rng=rng, noise=0.3)  # few, noisy
     k = cols.names.index("Iyy6")
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        fit = ConsistentLS(robot=ur5, reference_weight=0.01).fit(ds)
+        warnings.simplefilter("error")  # no "stopped before its tolerance"
+        fit = ConsistentLS(robot=ur5, reference_weight=reference_weight).fit(ds)
+    assert fit.solver_["status"] == "converged" and 0 < fit.solver_["iterations"] < 300
     assert fit.unconstrained_.params_[k] < 0  # the unconstrained estimate is inconsistent
-    assert np.all(fit.min_eigenvalues_ > 0)
+    assert np.all(fit.min_eigenvalues_ >= EPS * (1 - 1e-6))  # consistent with the margin
     assert np.all(np.linalg.eigvalsh(pseudo_inertia(fit.standard_.reshape(6, 10))) > 0)
     assert fit.params_[k] >= 0
     kinds = np.array(cols.kinds)
     assert np.all(fit.params_[np.isin(kinds, ["armature", "coulomb", "viscous"])] >= 0)
     assert fit.distance_["mahalanobis"] > 1 and np.mean(fit.distance_["rms_change"]) >= -1e-12
+    np.testing.assert_allclose(cols.P @ np.concatenate([fit.standard_, fit.extras_]), fit.params_, atol=1e-9)
+
+
+def test_consistent_fit_leaves_a_consistent_estimate_alone_even_when_it_must_search(ur5) -> None:
+    # standard parameters far from the URDF (50 % perturbation, still physical): the vector nearest
+    # the URDF with the same base parameters is not consistent, so the fit searches; it must come
+    # back to the estimate itself, to solver tolerance
+    rng = np.random.default_rng(10)
+    cols = column_set(ur5)
+    params = perturb_params(ur5.params, 0.5, rng)
+    extras = np.concatenate([np.full(6, 0.02), rng.uniform(0.5, 3, 6), rng.uniform(0.2, 2, 6), np.zeros(6)])
+    x = cols.P @ np.concatenate([params, extras])
+    R = np.linalg.qr(rng.normal(size=(cols.p, cols.p)))[1] * 100  # some whitened factor
+    phi, solver = consistent_solution(ur5, cols, x, R, 1.0)
+    assert solver["status"] == "converged" and solver["iterations"] > 0
+    assert np.linalg.norm(R @ (cols.P @ phi - x)) < 1e-3  # in standard deviations
+    assert is_consistent(phi[:60], tol=EPS * (1 - 1e-6)).all()
 
 
 @pytest.fixture(scope="module")
