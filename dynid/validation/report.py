@@ -378,7 +378,7 @@ def _metrics_table(figures: Mapping[str, Any], n: int) -> str:
         table_id="metrics",
     )
     mean = (
-        f'<tr class="mean"><td class="text">mean</td>{_cell(figures["rms_mean"], key="rms_mean")}'
+        f'<tr class="mean"><td class="text">mean (the paper&#39;s average RMS)</td>{_cell(figures["rms_mean"], key="rms_mean")}'
         f"<td></td><td></td><td></td>{_cell(figures['noise_floor_mean'], key='noise_floor_mean')}<td></td></tr>"
     )
     return body.replace("</tbody>", mean + "</tbody>")
