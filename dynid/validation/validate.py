@@ -567,14 +567,13 @@ class MethodSpec(NamedTuple):
 
 
 COMPARISON: tuple[MethodSpec, ...] = (
-    MethodSpec("full", "consistent", "seed", "auto", reference_weight=0.1),
+    MethodSpec("full", "consistent", "seed", "auto"),
     MethodSpec("OLS", "ols", "linear", "off"),
     MethodSpec("IRLS", "irls", "linear", "off"),
 )
-"""The paper's comparison: the full method first (physically consistent links with IRLS weighting and
-a weak pull toward the URDF bodies, so that what the data cannot tell apart stays physical and IPOPT
-converges; the paper's friction model; the GMM layer), then OLS and IRLS with linear friction
-identified with the links."""
+"""The paper's comparison: the full method first (physically consistent links with IRLS weighting,
+the paper's friction model, the GMM layer), then OLS and IRLS with linear friction identified with
+the links."""
 
 
 @dataclass(frozen=True, eq=False)
