@@ -16,8 +16,10 @@ stribeck                  s(dq_j) exp(-(|dq_j| / vs)^2)                        v
 load_friction             s(dq_j) |tau_j|,  s(dq_j) |tau_j| s(dq_j tau_j)      -
 temperature               h(t) s(dq_j),  h(t) dq_j;  h = 1 - exp(-t / T)       T
 cogging                   sin(k N q_j), cos(k N q_j), k = 1, 2                 N (gear ratio)
-elasticity                d^2 tau_j / dt^2 (first order of q = theta - tau/K)  -
-backlash                  b_j, d^2 b_j / dt^2;  b_j = tanh(tau_j / eps)        eps
+elasticity                M(q)[:, j] d^2 tau_j / dt^2 (all joints; first      -
+                          order of q_j = theta_j - tau_j / K)
+backlash                  M(q)[:, j] d^2 b_j / dt^2, M(q)[:, j] d^2 tau_j /    eps
+                          dt^2 (all joints), b_j; b_j = tanh(tau_j / eps)
 delay                     d tau_j / dt (first order of tau(t - d))             -
 drive_gain                tau_j                                                -
 base_tilt                 d g(q) / d alpha about two horizontal axes (all j)   -
@@ -136,6 +138,18 @@ class FeatureSource:
         """``sign(v)`` with |v| < 1e-3 counted as zero."""
         return np.where(np.abs(v) < _SIGN_EPS, 0.0, np.sign(v))
 
+    def mass_column(self, j: int) -> NDArray[np.float64]:
+        """Column j of the mass matrix M(q) at every sample, (M, n) (kg m^2)."""
+        key = "mass"
+        if key not in self.cache:
+            import pinocchio as pin
+
+            model = self.robot.pin_model
+            data = model.createData()
+            self.cache[key] = np.array([pin.crba(model, data, qi) for qi in self.q])
+        M = self.cache[key]
+        return 0.5 * (M[:, :, j] + M[:, j, :])
+
     def gravity_tilt(self) -> NDArray[np.float64]:
         """``d g(q) / d alpha`` for gravity tilted about two horizontal axes: (M, n, 2) (N m/rad)."""
         if "tilt" in self.cache:
@@ -184,6 +198,13 @@ class Candidate:
     joints: tuple[int, ...]
     hyper: dict[str, float] = field(default_factory=dict)
     label: str = ""
+
+    @property
+    def scored(self) -> tuple[int, ...]:
+        """Joints (0-based) on which it is scored: a flexible transmission shakes the whole arm."""
+        if self.effect in ("elasticity", "backlash") and self.joint is not None:
+            return ()  # all joints
+        return self.joints
 
     @property
     def key(self) -> str:
@@ -255,16 +276,35 @@ def _shifted(src: FeatureSource, j: int, delta: NDArray[np.float64]) -> NDArray[
     return (src.torque_at(q, dq, ddq) - src.tau_pred)[:, :, None]
 
 
+def _spring_deflection(src: FeatureSource, j: int, tau, w: float, z: float) -> NDArray[np.float64]:
+    """Deflection (M,) of a spring of natural frequency w (rad/s), damping ratio z, loaded by tau (N m)."""
+    from scipy.signal import cont2discrete, lfilter
+
+    m = float(np.median(src.mass_column(j)[:, j]))
+    K = m * w * w
+    b, a, _ = cont2discrete(([w * w], [1.0, 2 * z * w, w * w]), 1.0 / src.fs, method="bilinear")
+    out = np.empty_like(tau)
+    for run in src.runs:
+        seg = tau[run] / K
+        out[run] = lfilter(b[0], a, seg - seg[0]) + seg[0]
+    return out
+
+
 def _elasticity(src, c):
     j = c.joint
     tau = src.tau_pred[:, j]
     # The motor inertia of a flexible joint acts on the encoder side like an armature: its column
     # goes with the spring's when the model has no armature of its own.
     motor = [src.ddq[:, j]] if c.hyper.get("motor") else []
-    if "exact" in c.hyper:  # refit: the link angle is q = theta - c tau (spring compliance c = 1/K)
-        out = _shifted(src, j, c.hyper["c"] * tau)
+    if "exact" in c.hyper:
+        # Refit: the link is a mass on a spring driven from the encoder side, q_j = theta_j - delta with
+        # m delta'' + d delta' + K delta = tau_j (natural frequency w, damping ratio z, m = M_jj).
+        delta = _spring_deflection(src, j, tau, c.hyper["w"], c.hyper["z"])
+        out = _shifted(src, j, delta)
         return np.concatenate([out, _on_joint(src, j, motor)], axis=2) if motor else out
-    return _on_joint(src, j, [src.derivative(tau, 2), *motor])
+    # First order of q_j = theta_j - c tau_j: the whole arm feels -M(q)[:, j] c d2tau_j/dt2.
+    out = src.mass_column(j)[:, :, None] * src.derivative(tau, 2)[:, None, None]
+    return np.concatenate([out, _on_joint(src, j, motor)], axis=2) if motor else out
 
 
 def _backlash(src, c):
@@ -275,7 +315,13 @@ def _backlash(src, c):
     if "exact" in c.hyper:  # refit: half the gap a on the side the torque pushes, plus a compliance c
         out = _shifted(src, j, c.hyper["a"] * b + c.hyper["c"] * 1e-3 * tau / max(np.std(tau), 1e-12))
         return np.concatenate([out, _on_joint(src, j, motor)], axis=2) if motor else out
-    return _on_joint(src, j, [b, src.derivative(b, 2), *motor])
+    # The link lags by a tanh(tau / eps) + c tau (dead zone and the teeth's stiffness): to first order the
+    # whole arm feels -M(q)[:, j] times their second derivatives; the offset b shifts gravity on joint j.
+    Mj = src.mass_column(j)[:, :, None]
+    out = np.concatenate(
+        [Mj * src.derivative(b, 2)[:, None, None], Mj * src.derivative(tau, 2)[:, None, None]], axis=2
+    )
+    return np.concatenate([out, _on_joint(src, j, [b, *motor])], axis=2)
 
 
 def _delay(src, c):

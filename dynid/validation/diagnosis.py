@@ -74,6 +74,7 @@ from dynid.validation.metrics import NoiseFloor, noise_floor
 __all__ = ["Diagnosis", "RankedCandidate", "detect_period", "diagnose", "measure_noise"]
 
 _MIN_SPECTRAL_SAMPLES = 4096
+_STATE_FACTOR = 2.0  # state filter cut-off over the parallel filter's in the refit
 _PERIOD_TOL = 1e-3  # relative mismatch of q over one period for the data to count as periodic
 
 
@@ -503,7 +504,7 @@ def _describe_refit(r: RankedCandidate) -> str:
     if e == "delay":
         return f"delay {1000 * eff['d']:.2g} ms"
     if e == "elasticity":
-        return f"stiffness {r.refit['stiffness']:.3g} N m/rad"
+        return f"stiffness {r.refit['stiffness']:.3g} N m/rad, resonance {r.refit['frequency_hz']:.3g} Hz"
     return f"half gap {1000 * eff['a']:.2g} mrad"
 
 
@@ -556,7 +557,7 @@ def diagnose(
     alpha: float = 0.05,
     max_effects: int = 3,
     min_gain: float = 0.15,
-    min_closure: float = 0.3,
+    min_closure: float = 0.5,
     excess_tol: float = 1.0,
     period: float | None = None,
     max_samples: int = 12000,
@@ -679,6 +680,14 @@ def _check_inputs(model, robot, train, heldout, effects) -> tuple[Any, ColumnSet
         cols = column_set(robot, friction=True, armature=False)
         settings = Preprocessing().resolve(train)
         shape = None
+    cutoff = settings.get("cutoff_hz")
+    if cutoff is not None and settings.get("parallel") and settings.get("state_cutoff_hz") == cutoff:
+        # The states are low-passed before differentiation and the regressor again in parallel with the
+        # torque: at one cut-off the inertial columns are filtered twice where the torque is filtered once,
+        # which leaves a residual at every sharp feature (reversals).  The refit differentiates states
+        # filtered at twice the cut-off, so that the parallel filter sets the band alone.
+        fs = 1.0 / train.dt
+        settings = {**settings, "state_cutoff_hz": float(min(_STATE_FACTOR * cutoff, 0.4 * fs))}
     return robot, cols, settings, shape
 
 
@@ -840,6 +849,8 @@ def _diagnose(
             scored.append((gi, rc, C_tr, C_ho))
         if not scored:
             break
+        if refit and rnd < max_effects:
+            scored = _refine_leaders(ctx, current_fit, acc_tr, acc_ho, scored, r_cur, mse_cur, rnd)
         p_adj = st.holm([s[1].p_value for s in scored])
         for (_, rc, _, _), pa in zip(scored, p_adj, strict=True):
             rc.p_holm = float(pa)
@@ -850,12 +861,24 @@ def _diagnose(
             _confounding(ctx, current_fit, scored, confound_deg)
         if rnd >= max_effects:
             break
-        ok = [s for s in scored if s[1].significant and s[1].closure >= min_closure]
+        # A candidate must close at least min_closure of the gap on its joints, and half of it where
+        # those joints show no significant excess (the background state estimation leaves there).
+        ok = [
+            s
+            for s in scored
+            if s[1].significant
+            and s[1].closure
+            >= (
+                min_closure
+                if sig_joint[list(s[1].candidate.scored or range(n))].any()
+                else max(min_closure, 0.5)
+            )
+        ]
         if not ok:
             break
         best = _parsimonious(ok, alpha, ctx.block)
         gi, rc, C_tr, C_ho = best
-        if refit:
+        if refit and not rc.refit:
             cand, C_tr2, C_ho2, info = _refine(ctx, current_fit, rc.candidate, C_tr)
             rc2 = _score(ctx, current_fit, acc_tr, acc_ho, C_tr2, C_ho2, cand, r_cur, mse_cur, rnd)
             if rc2.gain >= rc.gain:
@@ -1039,7 +1062,7 @@ def _score(ctx, fit: _Fit, acc_tr, acc_ho, C_tr, C_ho, cand, r_cur, mse_cur, rnd
     x, beta, _ = fit.solve(C_tr)
     X_ho = np.concatenate([ctx.ho.X0, acc_ho], axis=2) if acc_ho.shape[2] else ctx.ho.X0
     r = ctx.ho.y - _predict(X_ho, x, C_ho, beta)
-    js = list(cand.joints) if cand.joints else list(range(len(ctx.sigma)))
+    js = list(cand.scored) if cand.scored else list(range(len(ctx.sigma)))
     # The refit moves every joint's prediction a little (shared base parameters); scoring the joints the
     # candidate acts on keeps that variance out of the test.
     L = _losses(r[:, js], ctx.sigma[js], ctx.mask[:, js])
@@ -1100,6 +1123,31 @@ def _confound_note(r: RankedCandidate) -> str:
 
 
 # ---------------------------------------------------------------------------- nonlinear refit
+_NONLINEAR = ("elasticity", "backlash", "delay")
+_LEADERS = 4
+
+
+def _refine_leaders(ctx, fit, acc_tr, acc_ho, scored, r_cur, mse_cur, rnd):
+    """Refit the leading not-LIP candidates (elasticity, backlash, delay) before the choice.
+
+    Their first-order columns recover only part of what they cause, so they are compared with the
+    others on their nonlinear refit (on training data; held-out data only score it).
+    """
+    order = sorted(range(len(scored)), key=lambda i: -scored[i][1].gain)
+    leaders = [i for i in order if scored[i][1].candidate.effect in _NONLINEAR][:_LEADERS]
+    out = list(scored)
+    for i in leaders:
+        gi, rc, C_tr, _ = scored[i]
+        cand, C_tr2, C_ho2, info = _refine(ctx, fit, rc.candidate, C_tr)
+        rc2 = _score(ctx, fit, acc_tr, acc_ho, C_tr2, C_ho2, cand, r_cur, mse_cur, rnd)
+        if rc2.gain > rc.gain:
+            rc2.refit = info
+            out[i] = (gi, rc2, C_tr2, C_ho2)
+        else:
+            rc.refit = {**info, "kept": "screen columns (the refit did not lower the held-out loss)"}
+    return out
+
+
 def _refine(ctx: _Ctx, fit: _Fit, cand: Candidate, C_tr):
     """Refit an accepted candidate's nonlinear parameters by least squares on the training data."""
     e = cand.effect
@@ -1112,12 +1160,16 @@ def _refine(ctx: _Ctx, fit: _Fit, cand: Candidate, C_tr):
             np.array([0.05]),
         )
     elif e == "elasticity":
+        # Start from the first-order compliance c = 1 / (m w^2) when it is positive, else 15 Hz.
         c0 = _first_order_compliance(ctx, fit, cand, C_tr)
+        m = float(np.median(ctx.tr.src.mass_column(cand.joint)[:, cand.joint]))
+        w0 = math.sqrt(1.0 / (m * c0)) if c0 > 0 else 2 * math.pi * 15.0
+        w0 = float(np.clip(w0, 2 * math.pi * 3.0, 2 * math.pi * 100.0))
         specs[e] = (
-            ["c"],
-            np.array([c0]),
-            np.array([-abs(c0) * 20 - 1e-12]),
-            np.array([abs(c0) * 20 + 1e-12]),
+            ["w", "z"],
+            np.array([w0, 0.1]),
+            np.array([2 * math.pi * 2.0, 0.005]),
+            np.array([2 * math.pi * 150.0, 1.0]),
         )
     elif e == "backlash":
         s = max(float(np.std(ctx.tr.src.tau_pred[:, cand.joint])), 1e-9)
@@ -1139,6 +1191,15 @@ def _refine(ctx: _Ctx, fit: _Fit, cand: Candidate, C_tr):
     if e not in specs:
         return cand, C_tr, _columns(ctx.ho, cand), {"method": "linear least squares (no nonlinear parameter)"}
     names, x0, lo, hi = specs[e]
+    if e == "elasticity":
+        # The resonance makes the loss multimodal in w: start from the best of a coarse grid.
+        grid = [2 * math.pi * f for f in (4.0, 7.0, 12.0, 20.0, 35.0, 60.0)] + [float(x0[0])]
+
+        def rss(w: float) -> float:
+            C = _columns(ctx.tr, replace(cand, hyper={**cand.hyper, "w": w, "z": 0.1, "exact": 1.0}))
+            return float(np.sum(fit.varpro_residual(C) ** 2))
+
+        x0 = np.array([min(grid, key=rss), 0.1])
     x0 = np.clip(x0, lo + 1e-12 * np.abs(lo), hi - 1e-12 * np.abs(hi))
     scale = np.maximum(np.abs(x0), (hi - lo) * 1e-3)
 
@@ -1175,9 +1236,12 @@ def _refine(ctx: _Ctx, fit: _Fit, cand: Candidate, C_tr):
         info["coefficient"] = coef
         info["effective"] = {k: float(v) * coef for k, v in zip(names, theta, strict=True) if k != "eps"}
         if e == "elasticity":
-            c_eff = info["effective"]["c"]
-            info["stiffness"] = 1.0 / c_eff if c_eff != 0 else float("inf")
-            info["units"] = "c in rad/(N m), stiffness in N m/rad"
+            w = float(theta[0])
+            m = float(np.median(ctx.tr.src.mass_column(cand.joint)[:, cand.joint]))
+            info["effective"] = {"w": w, "z": float(theta[1])}
+            info["frequency_hz"] = w / (2 * math.pi)
+            info["stiffness"] = m * w * w
+            info["units"] = "w in rad/s, stiffness in N m/rad (with the median M_jj)"
         elif e == "delay":
             info["units"] = "d in s"
         else:
@@ -1193,15 +1257,8 @@ def _first_order_delay(ctx, fit, cand, C_tr) -> float:
 
 def _first_order_compliance(ctx, fit, cand, C_tr) -> float:
     _, beta, _ = fit.solve(C_tr)
-    j = cand.joint
-    # tau(q - c tau) ~ tau - M_jj c d2tau/dt2: the coefficient of d2tau/dt2 is -M_jj c.
-    import pinocchio as pin
-
-    model = ctx.tr.src.robot.pin_model
-    data = model.createData()
-    qm = np.median(ctx.tr.src.q, axis=0)
-    mjj = float(pin.crba(model, data, qm)[j, j])
-    return float(-beta[0] / max(mjj, 1e-9)) if beta.size else 0.0
+    # tau(q - c tau_j e_j) ~ tau - M[:, j] c d2tau_j/dt2: the coefficient of the screen column is -c.
+    return float(-beta[0]) if beta.size else 0.0
 
 
 # ---------------------------------------------------------------------------- parametric test
@@ -1261,12 +1318,15 @@ def _parametric(
     Bl = np.zeros((k_all, 10))
     Bl[:nb] = cols.base.matrix[:, 10 * last : 10 * last + 10]
     hyp["payload"] = Bl[idx]
-    if not cols.armature:
-        Aa = np.zeros((k_all, n))
+    Aa = np.zeros((k_all, n))
+    if cols.armature:
+        # Each joint's armature maps to its own parameter, or into the base parameter it duplicates.
+        Aa[: cols.p] = cols.P[:, 10 * n : 11 * n]
+    else:
         Aa[:nb] = _absorbed_armature(cols)
-        for j in range(n):
-            if np.linalg.norm(Aa[idx, j]) > 0:
-                hyp[f"armature@{j + 1}"] = Aa[idx, j : j + 1]
+    for j in range(n):
+        if np.linalg.norm(Aa[idx, j]) > 0:
+            hyp[f"armature@{j + 1}"] = Aa[idx, j : j + 1]
     del full
     fits = st.structured_change_test(delta, C, hyp, n_obs=fit.shape[0])
     best = fits[0]
