@@ -320,15 +320,28 @@ def reference_noise_floor(prep: Prepared, *, period: float | None = None) -> Noi
 
 
 # ---------------------------------------------------------------------------- validation
-def _parts(model: IdentifiedModel, prep: Prepared) -> tuple[NDArray[np.float64], ...]:
+def _parts(model: IdentifiedModel, prep: Prepared, data: Dataset) -> tuple[NDArray[np.float64], ...]:
+    """Rigid body, friction and GMM parts of the model's prediction of ``data`` (kept rows)."""
     cols, rows = model.columns, prep.rows
+    layer1_friction = model.friction is not None and model.friction_source == "layer1"
+    if hasattr(model, "predict_parts"):
+        # The model's own split, so the parts always add up to model.predict(data); its "link" part
+        # holds the friction identified with the links, taken out here for the friction figure.
+        parts = model.predict_parts(data)
+        link, fric, gmm = parts["link"], parts["friction"], parts["gmm"]
+        if layer1_friction:
+            lf = prep.filter(
+                linear_torque(cols, model.params, prep.q, prep.dq, prep.ddq, mask=cols.friction_mask)
+            )
+            link, fric = link - lf[rows], fric + lf[rows]
+        return link, fric, gmm
     link = prep.filter(linear_torque(cols, model.params, prep.q, prep.dq, prep.ddq, mask=cols.link_mask))[
         rows
     ]
     q_k, dq_k = prep.q[rows], prep.dq[rows]
     if model.friction is None:
         fric = np.zeros_like(link)
-    elif model.friction_source == "layer1":
+    elif layer1_friction:
         full = linear_torque(cols, model.params, prep.q, prep.dq, prep.ddq, mask=cols.friction_mask)
         fric = prep.filter(full)[rows]
     else:
@@ -384,7 +397,7 @@ def validate(
         raise DataError(
             f"the data keep {prep.m} sample(s) after the model's preprocessing; validate on a longer recording."
         )
-    link, fric, gmm = _parts(model, prep)
+    link, fric, gmm = _parts(model, prep, data)
     tau = prep.tau_reference
     pred = link + fric + gmm
     if period is None:
