@@ -74,4 +74,9 @@ def main(out: Path, root: Path | None = None) -> list[ValidationResult]:
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1] if len(sys.argv) > 1 else "."))
+    from dynid.exceptions import DynidError
+
+    try:
+        main(Path(sys.argv[1] if len(sys.argv) > 1 else "."))
+    except DynidError as err:  # e.g. no recordings here: one sentence, no traceback
+        sys.exit(f"{Path(__file__).name}: {err}")

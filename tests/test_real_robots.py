@@ -62,9 +62,9 @@ def test_tx40_identified_model_beats_its_urdf(tx40):
     results, out = tx40
     by_label = {r.label: r for r in results}
     full, urdf = by_label["full"], by_label["URDF"]
-    # The arm's first three joints are well explained; the coupled wrist (joints 5 and 6) is not
-    # modelled by any of these, so only the mean and the first joints are held to a bar.
+    # The first four joints are well explained; the coupled wrist (joints 5 and 6: motor 6's inertia and
+    # friction act on both) is modelled by none of these, so only the mean and joints 1-4 are held to a bar.
     assert full.metrics["rms_mean"] < 0.8 * urdf.metrics["rms_mean"]
-    assert np.all(full.metrics["rms"][:3] < urdf.metrics["rms"][:3])
-    assert np.all(np.asarray(full.metrics["r2"][:4]) > 0.9)
+    assert np.all(full.metrics["rms"][:4] < urdf.metrics["rms"][:4])
+    assert np.all(np.asarray(full.metrics["r2"][:4]) > 0.8)
     assert (out / "tx40_report.html").is_file() and (out / "tx40_model.json").is_file()
