@@ -127,7 +127,8 @@ def run(args: argparse.Namespace) -> int:
                 [figures[k][j] for k in ("rms", "nrms", "r2", "max_error", "noise_floor", "rms_over_noise")]
             )
         )
-    print(f"{'mean':>5} {figures['rms_mean']:>10.4g} {'':>43}{figures['noise_floor_mean']:>10.4g}")
+    # Mean row: rms under rms, noise under noise (three 11-character columns between them).
+    print(f"{'mean':>5} {figures['rms_mean']:>10.4g}" + " " * 33 + f" {figures['noise_floor_mean']:>10.4g}")
     if len(results) > 1:
         width = max(len(r["label"]) for r in rows)
         print(
