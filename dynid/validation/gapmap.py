@@ -43,6 +43,8 @@ def _reversal_time(t: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np
 
 
 def _terciles(x: NDArray[np.float64], label: str, unit: str) -> list[tuple[str, NDArray[np.bool_]]]:
+    if float(np.max(np.abs(x))) < 1e-9:  # e.g. no gravity load on a vertical first joint
+        return [(f"{label} = 0 {unit}", np.ones(x.shape, dtype=bool))]
     a, b = np.quantile(x, [1 / 3, 2 / 3])
     return [
         (f"{label} < {a:.3g} {unit}", x < a),
