@@ -85,3 +85,37 @@ def test_bad_friction_input_is_refused(rng) -> None:
         friction_model("coulomb")
     with pytest.raises(DataError, match=r"joint 2: .*needs the joint to move"):
         FrictionLayer(model="seed").fit(np.column_stack([dq, np.zeros(100)]), np.zeros((100, 2)))
+
+
+def test_seed_model_fitted_through_the_torque_filter_finds_the_threshold(rng) -> None:
+    # at 1 kHz with a 20 Hz filter the Coulomb step of every reversal is smeared over ~25 ms:
+    # fitted unfiltered against the filtered torque, the threshold came out 3-10 times too small
+    from dynid.identify.dataset import Dataset
+    from dynid.identify.linear_system import Preprocessing, prepare
+
+    t = np.arange(40_000) * 1e-3
+    q = 0.6 * np.sin(2 * np.pi * 0.2 * t) * np.sin(2 * np.pi * 0.05 * t)
+    ds = Dataset(t, q[:, None], np.zeros((len(t), 1)))
+    prep = prepare(ds, Preprocessing(cutoff=20.0))
+    truth = with_coef(SeedFriction(), [1.0, 0.8, 0.5, 0.2, 0.05, 1.6, 1.3, 0.08])
+    F = prep.filter(truth.predict(prep.dq) + 0.05 * rng.normal(size=prep.dq.shape))[prep.rows]
+    plain = FrictionLayer(model="seed").fit(prep.dq[prep.rows], F)
+    filtered = FrictionLayer(model="seed").fit(prep.dq, F, prepared=prep)
+    lam = filtered.models_[0].coef_[7]
+    assert lam == pytest.approx(0.08, rel=0.15)
+    assert plain.models_[0].coef_[7] < 0.5 * 0.08  # the unfiltered fit's bias this test guards against
+    pred = prep.filter(filtered.predict(prep.dq))[prep.rows]
+    expect = prep.filter(truth.predict(prep.dq))[prep.rows]
+    assert np.sqrt(np.mean((pred - expect) ** 2)) < 0.02
+
+
+def test_linear_part_round_trips_through_basis_and_set_linear(rng) -> None:
+    dq = velocities(rng, 3000)
+    for klass, coef in (
+        (SeedFriction, [1.0, 0.8, 0.5, 0.2, 0.05, 1.6, 1.3, 0.08]),
+        (LinearFriction, [0.7, 0.3, -0.2]),
+    ):
+        mdl = with_coef(klass(), coef)
+        np.testing.assert_allclose(mdl.basis(dq) @ mdl.linear_coef(), mdl.predict(dq), atol=1e-12)
+        mdl.set_linear(-np.ones(len(mdl.linear_coef())))  # below the bounds: kept at them
+        assert np.all(mdl.linear_coef() >= mdl.linear_bounds)
