@@ -7,7 +7,7 @@ import pytest
 from scipy.stats import multivariate_normal
 
 from dynid.exceptions import DataError, UsageError
-from dynid.identify.gmr import GMRCorrection, conditional_mean
+from dynid.identify.gmr import GMRCorrection, conditional_mean, period_of, validation_mask
 
 
 def motion(t: np.ndarray, phase: float) -> tuple[np.ndarray, np.ndarray]:
@@ -88,3 +88,31 @@ def test_bad_gmr_input_is_refused(rng) -> None:
         GMRCorrection(mode="joint").fit(u, rng.normal(size=(100, 2)))
     with pytest.raises(DataError, match="u has 100 rows but the residual has 99"):
         GMRCorrection().fit(u, rng.normal(size=(99, 2)))
+
+
+def test_experts_written_back_reproduce_the_design(rng) -> None:
+    t = np.arange(6000) * 0.01
+    q, dq = motion(t, 0.0)
+    u = np.hstack([q, dq])
+    for mode in ("position", "own"):
+        gmr = GMRCorrection(mode=mode).fit_mixtures(u, unmodelled(q, dq), [3, 4])
+        design = gmr.design(u)
+        coefs = [rng.normal(size=D.shape[1]) for D in design]
+        gmr.set_experts(coefs, noise=[0.01, 0.01])
+        expected = np.column_stack([D @ c for D, c in zip(design, coefs, strict=True)])
+        np.testing.assert_allclose(gmr.predict(u), expected, rtol=1e-9, atol=1e-12)
+        for mdl in gmr.models_:  # still a valid mixture
+            assert np.all(np.linalg.eigvalsh(mdl["covariances"]) > 0)
+
+
+def test_periodic_inputs_are_validated_on_unseen_phases(rng) -> None:
+    t = np.arange(9000) * 0.01  # three periods of 30 s
+    w = 2 * np.pi / 30.0
+    q = np.column_stack([np.sin(w * t), np.sin(2 * w * t + 1)])
+    u = np.hstack([q, np.gradient(q, t, axis=0)])
+    assert period_of(u + 1e-3 * rng.normal(size=u.shape)) == pytest.approx(3000, abs=3)
+    mask, how = validation_mask(u, 20, 0.25)
+    assert "phase windows" in how and mask.mean() == pytest.approx(0.25, abs=0.01)
+    np.testing.assert_array_equal(mask[:3000], mask[3000:6000])  # the same phases in every period
+    assert period_of(rng.normal(size=(5000, 3))) is None
+    assert "time blocks" in validation_mask(rng.normal(size=(5000, 3)), 20, 0.25)[1]

@@ -15,6 +15,30 @@ correlated and would leak), fits on the rest and keeps the correction of a joint
 joint's RMS on the blocks kept aside by at least ``min_improvement``; otherwise the joint's correction is
 zero and ``fallback_`` says why.  Inputs outside the range seen in training are clipped to it, so
 the correction never extrapolates its local linear models far from the data.
+
+Periodic data.  An excitation is usually one period repeated: time blocks then share their states
+with the other periods, and the validation cannot see a correction that only remembers the motion.
+When the inputs repeat (autocorrelation above 0.98 at some lag, at least two periods), the samples
+kept aside are phase windows instead, the same windows of every period, so their states are absent
+from the training samples.
+
+Number of components.  ``n_components="auto"`` fits each size of the grid on the training samples
+and keeps the one with the least RMS on the validation samples (held-out prediction error, what the
+correction is for; the in-sample BIC kept adding components that fitted the training motion).
+
+Inputs (``mode``).  ``position`` (the default of the three-layer pipeline): each joint's residual as
+a function of its own angle ``q_j``, the physical home of what the rigid body and friction leave
+(transmission and harmonic-drive errors, cogging, position-dependent friction): the velocity
+dependence is the friction layer's.  ``own`` adds ``dq_j``; over ``[q_j, dq_j]`` one excitation
+covers only a curve, and a mixture fitted along it predicted another motion poorly (simulated UR5,
+60 s at 1 kHz: held-out RMS 0.23 N m with ``own`` against 0.06 with ``position``).  ``per_joint``
+and ``vector`` (the paper's, ``[q, dq]`` of all joints) need data that cover the motions to predict.
+
+Joint fit.  The conditional mean is a mixture of local linear experts under gates ``h_k(u)`` that
+depend on the inputs only.  :meth:`GMRCorrection.design` gives the expert columns at fixed gates and
+:meth:`GMRCorrection.set_experts` writes fitted experts back into the mixture (means and
+covariances), so the three-layer pipeline can estimate the experts jointly with the link parameters
+(:mod:`dynid.identify.model`).
 """
 
 from __future__ import annotations
@@ -31,11 +55,12 @@ from scipy.special import logsumexp
 from dynid.exceptions import DataError, ModelFileError, UsageError
 from dynid.identify._threads import one_blas_thread
 
-__all__ = ["GMRCorrection", "conditional_mean"]
+__all__ = ["GMRCorrection", "conditional_mean", "period_of", "validation_mask"]
 
-_MODES = ("vector", "per_joint", "own")
-_BIC_GRID = (1, 2, 3, 4, 6, 8, 12, 16)  # mixture sizes tried by n_components="auto"
-_BIC_SAMPLES = 4000  # samples of the BIC search (evenly strided); the chosen size is refitted on all
+_MODES = ("vector", "per_joint", "own", "position")
+_GRID = (1, 2, 3, 4, 6, 8, 12, 16)  # mixture sizes tried by n_components="auto"
+_PERIODIC = 0.98  # autocorrelation of the inputs at a lag above which the data count as periodic
+_PHASE_WINDOWS = 8  # phase windows per period when the data are periodic
 
 
 def conditional_mean(
@@ -84,6 +109,24 @@ def conditional_mean(
     return np.einsum("km,kmo->mo", h, cond)
 
 
+def _gates(
+    u: NDArray[np.float64],
+    weights: NDArray[np.float64],
+    means: NDArray[np.float64],
+    covs: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Responsibilities ``h_k(u)`` (m, K) of a Gaussian mixture over the inputs."""
+    n_in = u.shape[1]
+    logp = np.empty((len(weights), len(u)))
+    for k in range(len(weights)):
+        L = np.linalg.cholesky(covs[k])
+        sol = scipy.linalg.solve_triangular(L, (u - means[k]).T, lower=True, check_finite=False)
+        logp[k] = math.log(max(weights[k], 1e-300)) - 0.5 * (
+            np.einsum("im,im->m", sol, sol) + 2.0 * np.log(np.diag(L)).sum() + n_in * math.log(2 * math.pi)
+        )
+    return np.exp(logp - logsumexp(logp, axis=0)).T
+
+
 def _blocks(m: int, n_blocks: int, fraction: float) -> NDArray[np.bool_]:
     """Mask of the validation samples: every ``round(1 / fraction)``-th block of consecutive samples."""
     every = max(2, round(1.0 / fraction))
@@ -95,28 +138,91 @@ def _blocks(m: int, n_blocks: int, fraction: float) -> NDArray[np.bool_]:
     return mask
 
 
+def period_of(u: NDArray[np.float64]) -> int | None:
+    """Period (in samples) of inputs that repeat, or None.
+
+    The autocorrelation of the standardised inputs (summed over columns) beyond its first drop below
+    0.5: the peak of its first stretch above 0.98 is the period, if the data hold 1.5 periods (two
+    periods trimmed at both ends for the filter still count).
+
+    Parameters
+    ----------
+    u : ndarray, shape (m, d)
+        Inputs in time order.
+    """
+    m = len(u)
+    if m < 40:
+        return None
+    x = u - u.mean(axis=0)
+    sd = x.std(axis=0)
+    x = x[:, sd > 0] / sd[sd > 0]
+    if x.shape[1] == 0:
+        return None
+    size = 1 << int(np.ceil(np.log2(2 * m)))
+    F = np.fft.rfft(x, n=size, axis=0)
+    # lags up to 2 m / 3: beyond, under a third of the samples overlap and the estimate is noise
+    acov = np.fft.irfft(np.abs(F) ** 2, n=size, axis=0)[: m * 2 // 3 + 1].sum(axis=1)
+    r = acov / (acov[0] * (m - np.arange(len(acov))) / m)  # unbiased at each lag
+    below = np.flatnonzero(r < 0.5)
+    if len(below) == 0:
+        return None
+    high = below[0] + np.flatnonzero(r[below[0] :] > _PERIODIC)
+    if len(high) == 0:
+        return None
+    # the first stretch of lags above the threshold holds the period (later ones its multiples)
+    stop = high[0] + int(np.argmax(np.diff(high) > 1)) + 1 if np.any(np.diff(high) > 1) else high[-1] + 1
+    lag = int(high[0] + np.argmax(r[high[0] : stop]))
+    return lag if m >= 1.5 * lag else None
+
+
+def validation_mask(u: NDArray[np.float64], n_blocks: int, fraction: float) -> tuple[NDArray[np.bool_], str]:
+    """Samples kept aside to validate a correction, and how they were chosen.
+
+    Phase windows of every period when the inputs repeat (see the module docstring), else every
+    ``round(1 / fraction)``-th of ``n_blocks`` time blocks.
+
+    Parameters
+    ----------
+    u : ndarray, shape (m, d)
+        Inputs in time order.
+    n_blocks : int
+        Time blocks (non-periodic data).
+    fraction : float
+        Share of the samples kept aside.
+    """
+    m = len(u)
+    T = period_of(u)
+    if T is None:
+        return _blocks(
+            m, n_blocks, fraction
+        ), f"{n_blocks} time blocks, every {max(2, round(1 / fraction))}th kept aside"
+    phase = (np.arange(m) % T) * _PHASE_WINDOWS // T
+    every = max(2, round(1.0 / fraction))
+    mask = (phase % every) == every // 2
+    return mask, f"the same phase windows of each of {m / T:.3g} periods of {T} samples"
+
+
 class GMRCorrection:
     """Gaussian mixture regression of the torque residual on ``u = [q, dq]``, guarded by validation.
 
     Parameters
     ----------
     n_components : int or "auto"
-        Mixture components, or ``"auto"``: the least BIC among 1, 2, 3, 4, 6, 8, 12, 16 up to
-        ``max_components`` (on a subsample of 4,000 samples; the search stops after two sizes without
-        a better BIC).
+        Mixture components, or ``"auto"``: the size among 1, 2, 3, 4, 6, 8, 12, 16 (up to
+        ``max_components``) with the least RMS on the validation samples; the search stops after two
+        sizes without a better one.
     max_components : int
         Largest mixture tried by ``"auto"``.
-    mode : {"vector", "per_joint", "own"}
-        ``own`` (default): one mixture per joint over ``[q_j, dq_j, tau_err_j]``; ``per_joint``: one
-        mixture per joint over ``[u, tau_err_j]``; ``vector``: one mixture over ``[u, tau_err]`` (the
-        paper's).  Over all of ``u`` (12 dimensions for 6 joints) a mixture fitted on one excitation
-        predicts poorly on another motion (a test: held-out RMS 0.5 -> 0.12 N m with ``own``, up to
-        0.5 -> 1.9 N m worse with ``vector``): the internal validation blocks share the excitation and
-        cannot see that.  Use ``vector`` / ``per_joint`` only for data that cover the motions to predict.
+    mode : {"own", "position", "per_joint", "vector"}
+        ``own`` (default): one mixture per joint over ``[q_j, dq_j, tau_err_j]``; ``position``: over
+        ``[q_j, tau_err_j]`` (the three-layer pipeline's default, see the module docstring);
+        ``per_joint``: one mixture per joint over ``[u, tau_err_j]``; ``vector``: one mixture over
+        ``[u, tau_err]`` (the paper's).
     validation_fraction : float
-        Share of the samples kept aside (in time blocks) to decide whether the correction helps.
+        Share of the samples kept aside (time blocks, or phase windows of periodic data) to choose the
+        size and decide whether the correction helps.
     n_blocks : int
-        Number of time blocks the samples are cut into.
+        Number of time blocks the samples are cut into (non-periodic data).
     min_improvement : float
         Relative drop of a joint's validation RMS needed to keep its correction (0.02 = 2 %).
     max_samples : int
@@ -132,8 +238,12 @@ class GMRCorrection:
         Joints whose correction is kept.
     n_components_ : list of int
         Components of each mixture.
+    scores_ : list of list of (int, float)
+        Per mixture, the sizes tried and their validation RMS (N m, summed in quadrature over outputs).
     validation_rms_ : ndarray, shape (2, n)
         Validation RMS (N m) per joint without (row 0) and with (row 1) the correction.
+    validation_ : str
+        How the validation samples were chosen.
     fallback_ : str or None
         Why some or all joints fell back to zero correction.
     """
@@ -172,7 +282,9 @@ class GMRCorrection:
         if self.mode == "per_joint":
             return [(np.arange(d), np.array([j])) for j in range(n)]
         if d != 2 * n:
-            raise DataError(f"mode 'own' needs u = [q, dq] with 2 n = {2 * n} columns; got {d}")
+            raise DataError(f"mode {self.mode!r} needs u = [q, dq] with 2 n = {2 * n} columns; got {d}")
+        if self.mode == "position":
+            return [(np.array([j]), np.array([j])) for j in range(n)]
         return [(np.array([j, n + j]), np.array([j])) for j in range(n)]
 
     def _check(
@@ -191,46 +303,47 @@ class GMRCorrection:
                 raise DataError(f"{label} holds non-finite values; drop or interpolate those samples")
         return u, y
 
-    def _fit_one(self, X: NDArray[np.float64]) -> tuple[Any, int, list[float]]:
-        """EM on X (standardised); with "auto", K by BIC on a subsample, then the chosen K on all of X."""
+    def _em(self, K: int, data: NDArray[np.float64]):
         from sklearn.exceptions import ConvergenceWarning
         from sklearn.mixture import GaussianMixture
+        from threadpoolctl import threadpool_limits
 
-        def fit(K: int, data: NDArray[np.float64]):
-            with warnings.catch_warnings():
-                # EM that stops at max_iter still gives a usable mixture; the validation decides.
-                warnings.simplefilter("ignore", ConvergenceWarning)
-                return GaussianMixture(
-                    n_components=K,
-                    covariance_type="full",
-                    reg_covar=self.reg_covar,
-                    random_state=self.random_state,
-                    max_iter=200,
-                ).fit(data)
+        # one OpenMP thread too: the k-means start of EM spent 0.3 s per small fit on a shared 2-core
+        # machine with OpenMP's default threads, 0.02 s with one
+        with warnings.catch_warnings(), threadpool_limits(limits=1, user_api="openmp"):
+            # EM that stops at max_iter still gives a usable mixture; the validation decides.
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            return GaussianMixture(
+                n_components=K,
+                covariance_type="full",
+                reg_covar=self.reg_covar,
+                random_state=self.random_state,
+                max_iter=200,
+            ).fit(data)
 
-        if self.n_components != "auto":
-            K = int(self.n_components)
-            gm = fit(K, X)
-            return gm, K, [float(gm.bic(X))]
-        sub = X[:: max(1, -(-len(X) // _BIC_SAMPLES))]
-        best_K, best_bic, bics, worse = 1, np.inf, [], 0
-        for K in _BIC_GRID:
-            if K > int(self.max_components) or K > len(sub) // (X.shape[1] + 2):
-                break
-            bic = float(fit(K, sub).bic(sub))
-            bics.append(bic)
-            if bic < best_bic:
-                best_K, best_bic, worse = K, bic, 0
-            else:
-                worse += 1
-                if worse >= 2:
-                    break
-        return fit(best_K, X), best_K, bics
+    def _model(self, X: NDArray[np.float64], n_in: int, K: int, inp, out) -> dict[str, Any]:
+        """A mixture fitted by EM on X = [u_in, y] (standardised inside), as a dict of arrays."""
+        mean = X.mean(axis=0)
+        scale = X.std(axis=0)
+        scale[scale <= 0] = 1.0
+        K = max(1, min(int(K), len(X) // (X.shape[1] + 2)))
+        gm = self._em(K, (X - mean) / scale)
+        return {
+            "lo": X[:, :n_in].min(axis=0),
+            "hi": X[:, :n_in].max(axis=0),
+            "inputs": inp,
+            "outputs": out,
+            "mean": mean,
+            "scale": scale,
+            "weights": gm.weights_,
+            "means": gm.means_,
+            "covariances": gm.covariances_,
+        }
 
     # ------------------------------------------------------------------ fit / predict
     @one_blas_thread
     def fit(self, u: ArrayLike, y: ArrayLike) -> GMRCorrection:
-        """Fit the mixtures on the training blocks and decide, per joint, whether to keep them.
+        """Choose the sizes and fit the mixtures; keep, per joint, only a correction that validates.
 
         Parameters
         ----------
@@ -253,37 +366,38 @@ class GMRCorrection:
                 f"the mixture regression needs at least {20 * self.n_blocks} samples to keep validation blocks "
                 f"aside; got {m}: use more data or fewer blocks"
             )
-        val = _blocks(m, int(self.n_blocks), float(self.validation_fraction))
-        train_idx = np.flatnonzero(~val)
-        train_idx = train_idx[:: max(1, -(-len(train_idx) // int(self.max_samples)))]
-        self.models_ = []
-        self.n_components_ = []
-        self.bic_ = []
-        for inp, out in self._specs(u.shape[1], n):
+        specs = self._specs(u.shape[1], n)
+        val, self.validation_ = validation_mask(u, int(self.n_blocks), float(self.validation_fraction))
+        stride = max(1, -(-m // int(self.max_samples)))
+        train_idx = np.flatnonzero(~val)[::stride]
+        val_idx = np.flatnonzero(val)[::stride]
+        sizes = (
+            [int(self.n_components)]
+            if self.n_components != "auto"
+            else [K for K in _GRID if K <= int(self.max_components)]
+        )
+        chosen, self.scores_ = [], []
+        pred_val = np.zeros((len(val_idx), n))
+        for inp, out in specs:
             X = np.hstack([u[:, inp], y[:, out]])
-            mean = X[train_idx].mean(axis=0)
-            scale = X[train_idx].std(axis=0)
-            scale[scale <= 0] = 1.0
-            gm, K, bics = self._fit_one((X[train_idx] - mean) / scale)
-            self.models_.append(
-                {
-                    "lo": X[train_idx, : len(inp)].min(axis=0),
-                    "hi": X[train_idx, : len(inp)].max(axis=0),
-                    "inputs": inp,
-                    "outputs": out,
-                    "mean": mean,
-                    "scale": scale,
-                    "weights": gm.weights_,
-                    "means": gm.means_,
-                    "covariances": gm.covariances_,
-                }
-            )
-            self.n_components_.append(int(K))
-            self.bic_.append(bics)
-        self.active_ = np.ones(n, dtype=bool)
-        pred = self._raw_predict(u[val], n)
-        before = np.sqrt(np.mean(y[val] ** 2, axis=0))
-        after = np.sqrt(np.mean((y[val] - pred) ** 2, axis=0))
+            best, scores, worse = None, [], 0
+            for K in sizes:
+                mdl = self._model(X[train_idx], len(inp), K, inp, out)
+                pred = self._predict_model(mdl, u[val_idx])
+                score = float(np.sqrt(np.mean((y[val_idx][:, out] - pred) ** 2) * len(out)))
+                scores.append((K, score))
+                if best is None or score < best[1]:
+                    best, worse = (K, score, pred), 0
+                else:
+                    worse += 1
+                    if worse >= 2:
+                        break
+            assert best is not None
+            chosen.append(best[0])
+            pred_val[:, out] = best[2]
+            self.scores_.append(scores)
+        before = np.sqrt(np.mean(y[val_idx] ** 2, axis=0))
+        after = np.sqrt(np.mean((y[val_idx] - pred_val) ** 2, axis=0))
         self.validation_rms_ = np.vstack([before, after])
         helps = after <= (1.0 - float(self.min_improvement)) * before
         self.active_ = helps
@@ -292,21 +406,74 @@ class GMRCorrection:
         else:
             off = [str(j + 1) for j in np.flatnonzero(~helps)]
             self.fallback_ = (
-                f"no correction for joint{'s' if len(off) > 1 else ''} {', '.join(off)}: on the validation blocks "
-                f"it did not lower the RMS by {100 * float(self.min_improvement):g} %"
+                f"no correction for joint{'s' if len(off) > 1 else ''} {', '.join(off)}: on the validation samples "
+                f"({self.validation_}) it did not lower the RMS by {100 * float(self.min_improvement):g} %"
             )
+        # the chosen sizes refitted on all the samples
+        every = np.arange(0, m, stride)
+        self.models_ = [
+            self._model(np.hstack([u[every][:, inp], y[every][:, out]]), len(inp), K, inp, out)
+            for (inp, out), K in zip(specs, chosen, strict=True)
+        ]
+        self.n_components_ = [len(mdl["weights"]) for mdl in self.models_]
         self.n_outputs_ = n
         return self
+
+    @one_blas_thread
+    def fit_mixtures(
+        self, u: ArrayLike, y: ArrayLike, sizes: list[int], active: ArrayLike | None = None
+    ) -> GMRCorrection:
+        """Fit one mixture per output group with given sizes on all the samples, without validation.
+
+        For callers that choose the sizes and validate the correction themselves (the joint fit of
+        :mod:`dynid.identify.refine`); :meth:`fit` does both.
+
+        Parameters
+        ----------
+        u : array_like, shape (m, d)
+            Inputs, usually ``[q, dq]`` (rad, rad/s).
+        y : array_like, shape (m, n)
+            Torque residual (N m).
+        sizes : list of int
+            Components of each mixture (one per joint, or one for ``vector``).
+        active : array_like of bool, shape (n,), optional
+            Outputs whose correction is on (default all).
+        """
+        if self.mode not in _MODES:
+            raise UsageError(f"mode is {self.mode!r}; choose one of {', '.join(_MODES)}")
+        u, y = self._check(u, y)
+        assert y is not None
+        m, n = y.shape
+        specs = self._specs(u.shape[1], n)
+        if len(sizes) != len(specs):
+            raise UsageError(f"sizes has {len(sizes)} entries; mode {self.mode!r} has {len(specs)} mixtures")
+        every = np.arange(0, m, max(1, -(-m // int(self.max_samples))))
+        self.models_ = [
+            self._model(np.hstack([u[every][:, inp], y[every][:, out]]), len(inp), K, inp, out)
+            for (inp, out), K in zip(specs, sizes, strict=True)
+        ]
+        self.n_components_ = [len(mdl["weights"]) for mdl in self.models_]
+        self.active_ = np.ones(n, dtype=bool) if active is None else np.asarray(active, dtype=bool).copy()
+        self.n_outputs_ = n
+        self.scores_ = []
+        self.validation_rms_ = np.full((2, n), np.nan)
+        self.validation_ = "none (sizes given)"
+        self.fallback_ = None
+        return self
+
+    @staticmethod
+    def _predict_model(mdl: dict[str, Any], u: NDArray[np.float64]) -> NDArray[np.float64]:
+        inp = mdl["inputs"]
+        n_in = len(inp)
+        # no extrapolation: inputs outside the training range are clipped to it
+        us = (np.clip(u[:, inp], mdl["lo"], mdl["hi"]) - mdl["mean"][:n_in]) / mdl["scale"][:n_in]
+        ys = conditional_mean(us, mdl["weights"], mdl["means"], mdl["covariances"], n_in)
+        return ys * mdl["scale"][n_in:] + mdl["mean"][n_in:]
 
     def _raw_predict(self, u: NDArray[np.float64], n: int) -> NDArray[np.float64]:
         out = np.zeros((u.shape[0], n))
         for mdl in self.models_:
-            inp, outp = mdl["inputs"], mdl["outputs"]
-            n_in = len(inp)
-            # no extrapolation: inputs outside the training range are clipped to it
-            us = (np.clip(u[:, inp], mdl["lo"], mdl["hi"]) - mdl["mean"][:n_in]) / mdl["scale"][:n_in]
-            ys = conditional_mean(us, mdl["weights"], mdl["means"], mdl["covariances"], n_in)
-            out[:, outp] = ys * mdl["scale"][n_in:] + mdl["mean"][n_in:]
+            out[:, mdl["outputs"]] = self._predict_model(mdl, u)
         return out * self.active_
 
     def predict(self, u: ArrayLike) -> NDArray[np.float64]:
@@ -327,6 +494,76 @@ class GMRCorrection:
         if not self.active_.any():
             return np.zeros((u.shape[0], self.n_outputs_))
         return self._raw_predict(u, self.n_outputs_)
+
+    # ------------------------------------------------------------------ experts (joint fit)
+    def design(self, u: ArrayLike) -> list[NDArray[np.float64]]:
+        """Columns of the local linear experts at the fitted gates, one array per output (joint).
+
+        The correction of output ``j`` is ``design(u)[j] @ c_j`` with, per component ``k``, the
+        coefficients ``[a_k, b_k]``: ``sum_k h_k(u) (a_k + b_k . (u_s - mu_k))``, ``h_k`` the gates of
+        the mixture's input marginal and ``u_s`` the standardised inputs (clipped to the training
+        range).  A joint whose correction is off gets an empty (m, 0) array.
+
+        Parameters
+        ----------
+        u : array_like, shape (m, d)
+            Inputs, as in :meth:`fit`.
+        """
+        if not hasattr(self, "active_"):
+            raise UsageError("this GMRCorrection is not fitted yet; call fit(u, tau_err) first")
+        u, _ = self._check(u)
+        cols: list[NDArray[np.float64]] = [np.zeros((len(u), 0)) for _ in range(self.n_outputs_)]
+        for mdl in self.models_:
+            inp = mdl["inputs"]
+            n_in = len(inp)
+            us = (np.clip(u[:, inp], mdl["lo"], mdl["hi"]) - mdl["mean"][:n_in]) / mdl["scale"][:n_in]
+            h = _gates(us, mdl["weights"], mdl["means"][:, :n_in], mdl["covariances"][:, :n_in, :n_in])
+            parts = [h] + [h * (us[:, [i]] - mdl["means"][:, i]) for i in range(n_in)]
+            block = np.hstack(parts)
+            for o in mdl["outputs"]:
+                if self.active_[o]:
+                    cols[o] = block
+        return cols
+
+    def set_experts(self, coefs: list[NDArray[np.float64]], noise: ArrayLike) -> None:
+        """Write fitted experts (see :meth:`design`) back into the mixtures.
+
+        Parameters
+        ----------
+        coefs : list of ndarray
+            Per output, its coefficients ``[a_1..a_K, b_1,1..b_K,1, ...]`` in the order of
+            :meth:`design` (N m); empty for an output whose correction is off.
+        noise : array_like, shape (n,)
+            Residual variance per output (N^2 m^2), the spread of each component around its expert.
+        """
+        noise = np.asarray(noise, dtype=np.float64)
+        for mdl in self.models_:
+            n_in = len(mdl["inputs"])
+            K = len(mdl["weights"])
+            means = mdl["means"].copy()
+            cov = mdl["covariances"].copy()
+            Suu = cov[:, :n_in, :n_in]
+            for i, o in enumerate(mdl["outputs"]):
+                c = np.asarray(coefs[o], dtype=np.float64)
+                if c.size == 0:
+                    continue
+                sy, my = mdl["scale"][n_in + i], mdl["mean"][n_in + i]
+                a = c[:K]
+                beta = c[K:].reshape(n_in, K).T / sy  # (K, n_in), per standardised input
+                means[:, n_in + i] = (a - my) / sy
+                Suy = np.einsum("kab,kb->ka", Suu, beta)
+                cov[:, :n_in, n_in + i] = Suy
+                cov[:, n_in + i, :n_in] = Suy
+                for i2, o2 in enumerate(mdl["outputs"]):
+                    c2 = np.asarray(coefs[o2], dtype=np.float64)
+                    if c2.size == 0:
+                        continue
+                    beta2 = c2[K:].reshape(n_in, K).T / mdl["scale"][n_in + i2]
+                    cross = np.einsum("ka,ka->k", beta, np.einsum("kab,kb->ka", Suu, beta2))
+                    if i2 == i:
+                        cross = cross + max(float(noise[o]), 1e-12 * sy**2) / sy**2
+                    cov[:, n_in + i, n_in + i2] = cross
+            mdl["means"], mdl["covariances"] = means, cov
 
     # ------------------------------------------------------------------ files
     def to_arrays(self, prefix: str = "gmr") -> dict[str, NDArray[Any]]:
@@ -389,4 +626,5 @@ class GMRCorrection:
         out.n_outputs_ = len(out.active_)
         out.n_components_ = [len(mdl["weights"]) for mdl in out.models_]
         out.fallback_ = None
+        out.validation_ = None
         return out
