@@ -69,6 +69,7 @@ __all__ = [
     "IdentificationWarning",
     "LinkEstimator",
     "check_is_fitted",
+    "long_run_factor",
     "residual_correlation",
 ]
 
@@ -373,9 +374,30 @@ def residual_correlation(
     floor = system.prepared.noise_correlation
     if system.Z is None or m < 8:
         return np.full(n, floor), 0
-    E = (system.tau() - system.predict(x)) @ whitener.T
+    return long_run_factor((system.tau() - system.predict(x)) @ whitener.T, floor)
+
+
+def long_run_factor(E: NDArray[np.float64], floor: float = 1.0) -> tuple[NDArray[np.float64], int]:
+    """Long-run variance factor of each column of a residual time series (see :func:`residual_correlation`).
+
+    Parameters
+    ----------
+    E : ndarray, shape (m, n)
+        Residuals in time order (uniform sampling).
+    floor : float
+        The filter's white-noise factor (:attr:`Prepared.noise_correlation`): lower bound and lag scale.
+
+    Returns
+    -------
+    kappa : ndarray, shape (n,)
+    lag : int
+    """
+    E = np.asarray(E, dtype=np.float64)
+    m = len(E)
     E = E - E.mean(axis=0)
     lag = int(min(max(np.ceil(8 * floor), np.floor(4 * (m / 100.0) ** (2 / 9))), m // 4))
+    if lag < 1:
+        return np.full(E.shape[1], max(floor, 1.0)), 0
     size = 1 << int(np.ceil(np.log2(2 * m)))
     F = np.fft.rfft(E, n=size, axis=0)
     acov = np.fft.irfft(np.abs(F) ** 2, n=size, axis=0)[: lag + 1]

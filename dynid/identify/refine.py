@@ -1,0 +1,503 @@
+"""The three layers fitted together: link parameters, friction and mixture experts in one least squares.
+
+Fitted one after the other (METHOD.md section 4), the layers pass their errors down: layer 1 fits the
+link parameters with a linear friction only, so whatever it cannot express (the nonlinear friction,
+a smooth position-dependent torque) leaks into the link parameters wherever it correlates with their
+columns along the training motion, and layers 2 and 3 then learn a residual that belongs to that
+motion.  On a simulated UR5 (60 s at 1 kHz, the paper's friction, a 0.3 N m position ripple per joint)
+the link part alone was off by 0.3 N m RMS on a held-out motion: the whole model did hardly better
+than OLS (0.885 of its held-out RMS; the paper reports 0.64).
+
+:func:`refine` therefore alternates, for a few rounds:
+
+1. the friction model of each joint (its shape parameter, e.g. the seed model's threshold, by the
+   search of :mod:`dynid.identify.friction`) on ``tau - link - correction``;
+2. the mixture of each joint (:class:`dynid.identify.gmr.GMRCorrection`) on ``tau - link -
+   friction``; it fixes the gates.  In the first round the size of each joint's mixture, and whether
+   it has one at all, is chosen by validation of the joint fit (:func:`_select_mixtures`); in the later
+   rounds a correction of the joint's own angle must also pass a direction check (fitted on the samples
+   moving one way, it must predict those moving the other way);
+3. one least squares over the link parameters, the friction coefficients that enter linearly (at
+   the shape of step 1) and the local linear experts of the mixtures (at the gates of step 2).
+   Per joint the friction and expert columns are eliminated (``I - N (N^T N + L)^-1 N^T``, with a
+   ridge ``L`` of 1e-3 on the unit-norm expert columns only: where a smooth function of ``q_j`` and a
+   link column coincide, as ``g cos q_2`` does, the link parameter takes it), then the link
+   parameters solve the stacked projected system, each joint weighted by the inverse of its layer-1
+   residual variance (OLS: all alike; the cross-joint correlation GLS and IRLS use is left out here);
+   then friction (within its bounds) and experts per joint with the link parameters fixed.
+
+Every column is treated like the torque: evaluated on the states at full rate, low-pass filtered,
+taken at the kept samples (parallel filtering, DIAGNOSIS.md section 3), so the model predicts the
+filtered torque as it is compared.  The physically consistent method projects the refined link
+parameters onto the consistent set at the end (Mahalanobis metric of the refined fit) and refits
+friction and experts for them.
+
+The covariance of the refined link parameters is the sandwich of :mod:`dynid.identify.estimators`
+on the projected system, with each joint's residual long-run variance factor.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import scipy.linalg
+from numpy.typing import NDArray
+
+from dynid.identify._threads import single_blas_thread
+from dynid.identify.estimators import long_run_factor
+from dynid.identify.friction import FrictionLayer, _bounded_lsq
+from dynid.identify.gmr import GMRCorrection, validation_mask
+from dynid.identify.linear_system import LinearSystem
+
+__all__ = ["RIDGE", "Refinement", "refine"]
+
+RIDGE = 1e-3
+"""Ridge on the unit-norm expert columns in the joint least squares."""
+_TINY = 1e-10  # ridge on the friction columns (numerical safety only)
+_MIN_IMPROVEMENT = 0.1  # relative drop of a joint's validation RMS needed to keep its correction
+
+
+@dataclass(eq=False)
+class Refinement:
+    """What :func:`refine` returns.
+
+    Attributes
+    ----------
+    params : ndarray, shape (p,)
+        Identified parameters (the refined ones where ``mask``; layer 1's elsewhere).
+    cov : ndarray, shape (p, p)
+        Their covariance.
+    mask : ndarray of bool, shape (p,)
+        Parameters refined (link parameters, armature, and linear friction when it is layer 1's).
+    friction : FrictionLayer or None
+        The refitted friction layer (None for ``none`` or ``linear``).
+    gmr : GMRCorrection or None
+        The mixture with jointly fitted experts.
+    residual : ndarray, shape (m, n)
+        Filtered torque minus the whole model at the kept samples (N m).
+    rms_layers : dict
+        RMS per joint after the link part, after friction, after the correction (N m).
+    info : dict
+        Rounds, RMS per round, weights, correlation factors, consistent-projection figures.
+    """
+
+    params: NDArray[np.float64]
+    cov: NDArray[np.float64]
+    mask: NDArray[np.bool_]
+    friction: FrictionLayer | None
+    gmr: GMRCorrection | None
+    residual: NDArray[np.float64]
+    rms_layers: dict[str, list[float]]
+    info: dict[str, Any] = field(default_factory=dict)
+
+
+def _rms(r: NDArray[np.float64]) -> list[float]:
+    return [float(v) for v in np.sqrt(np.mean(r**2, axis=0))]
+
+
+class _Columns:
+    """Per joint, the refined parameters' columns at the kept rows: (indices into the mask, (m, k))."""
+
+    def __init__(self, system: LinearSystem, mask: NDArray[np.bool_]) -> None:
+        Z = system._need_Z()
+        rows = system.prepared.rows
+        self.sel = np.flatnonzero(mask)
+        where = -np.ones(system.p, dtype=np.intp)
+        where[self.sel] = np.arange(len(self.sel))
+        self.idx, self.W, self.tau = [], [], []
+        for j in range(system.n):
+            cols = np.flatnonzero((system.z_joint == j) & (system.z_param >= 0))
+            cols = cols[mask[system.z_param[cols]]]
+            self.idx.append(where[system.z_param[cols]])
+            self.W.append(Z[np.ix_(rows, cols)])
+            t = np.flatnonzero((system.z_joint == j) & (system.z_param < 0))[0]
+            self.tau.append(Z[rows, t])
+
+    def torque(self, x_sel: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.column_stack([W @ x_sel[i] for W, i in zip(self.W, self.idx, strict=True)])
+
+
+def _eliminator(N: NDArray[np.float64], ridge: NDArray[np.float64]):
+    """Projection ``v - N (N^T N + L)^-1 N^T v`` (unit-norm columns, ridge L) as a function."""
+    if N.shape[1] == 0:
+        return lambda v: v
+    norms = np.linalg.norm(N, axis=0)
+    norms[norms == 0] = 1.0
+    A = np.vstack([N / norms, np.diag(np.sqrt(ridge))])
+    Q = scipy.linalg.qr(A, mode="economic", check_finite=False)[0][: len(N)]
+    return lambda v: v - Q @ (Q.T @ v)
+
+
+def _nuisance(
+    N: NDArray[np.float64],
+    target: NDArray[np.float64],
+    ridge: NDArray[np.float64],
+    lower: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Ridge least squares of ``target`` on the columns N, coefficients >= 0 where ``lower`` is finite."""
+    if N.shape[1] == 0:
+        return np.zeros(0)
+    norms = np.linalg.norm(N, axis=0)
+    norms[norms == 0] = 1.0
+    A = np.vstack([N / norms, np.diag(np.sqrt(ridge))])
+    b = np.concatenate([target, np.zeros(N.shape[1])])
+    # the bounds are 0 or -inf, unchanged by the column scaling
+    c, _ = _bounded_lsq(A, b, tuple(float(v) for v in np.where(np.isfinite(lower), 0.0, -np.inf)))
+    return c / norms
+
+
+def refine(
+    system: LinearSystem,
+    x0: NDArray[np.float64],
+    omega: NDArray[np.float64],
+    *,
+    friction: str,
+    gmm: str | int,
+    gmm_mode: str = "position",
+    rounds: int = 2,
+    weighting: str = "per-joint",
+    consistent: dict[str, Any] | None = None,
+    random_state: int = 0,
+) -> Refinement:
+    """Refit link parameters, friction and mixture experts together (see the module docstring).
+
+    Parameters
+    ----------
+    system : LinearSystem
+        The identification system, with its data matrix (``keep_samples=True``).
+    x0 : ndarray, shape (p,)
+        The layer-1 estimate to start from.
+    omega : ndarray, shape (n, n)
+        Layer-1 joint-noise covariance (its diagonal weighs the joints).
+    friction : {"none", "linear", "seed", "stribeck", "sigmoid"}
+        Friction model; ``linear`` is the layer-1 friction, refined with the link parameters.
+    gmm : "off" or "auto" or int
+        Layer 3: off, size by validation, or a fixed number of components.
+    gmm_mode : str
+        Inputs of the mixtures (:class:`GMRCorrection` ``mode``).
+    rounds : int
+        Rounds of the alternation (at least 1).
+    weighting : {"per-joint", "none"}
+        Weigh each joint by the inverse of its layer-1 residual variance, or not (OLS).
+    consistent : dict, optional
+        Project the link parameters onto physically consistent ones at the end: the keyword arguments
+        of :func:`dynid.identify.consistent.consistent_solution` (``reference_weight``, ``eps``, ...).
+    random_state : int
+        Seed of the mixtures' EM.
+
+    Returns
+    -------
+    Refinement
+    """
+    with single_blas_thread():
+        return _refine(
+            system, x0, omega, friction, gmm, gmm_mode, rounds, weighting, consistent, random_state
+        )
+
+
+def _refine(system, x0, omega, friction, gmm, gmm_mode, rounds, weighting, consistent, random_state):
+    cols = system.columns
+    prep = system.prepared
+    rows = prep.rows
+    n, m = system.n, system.m
+    layer2 = friction not in ("none", "linear")
+    mask = cols.link_mask | (cols.friction_mask if friction == "linear" else False)
+    C = _Columns(system, mask)
+    tau = np.column_stack(C.tau)
+    x_sel = np.asarray(x0, dtype=np.float64)[C.sel].copy()
+    weights = 1.0 / np.maximum(np.diag(omega), 1e-300) if weighting == "per-joint" else np.ones(n)
+    weights = weights / weights.mean()
+    u_full = np.hstack([prep.q, prep.dq])
+    u_kept = u_full[rows]
+    layer: FrictionLayer | None = None
+    gmr: GMRCorrection | None = None
+    corr = np.zeros_like(tau)
+    fric = np.zeros_like(tau)
+    history = []
+    Fb = [np.zeros((m, 0))] * n
+    Gb = [np.zeros((m, 0))] * n
+    for _ in range(max(1, int(rounds))):
+        link = C.torque(x_sel)
+        if layer2:
+            layer = FrictionLayer(model=friction).fit(prep.dq, tau - link - corr, prepared=prep, around=layer)
+            Fb = [prep.filter(B)[rows] for B in layer.basis(prep.dq)]
+            fric = np.column_stack([B @ mdl.linear_coef() for B, mdl in zip(Fb, layer.models_, strict=True)])
+        if gmm != "off":
+            r3 = tau - link - fric
+            if gmr is None:  # first round: sizes and the guard, by validation of the joint fit
+                gmr = _select_mixtures(
+                    C, tau, Fb, u_kept, u_full, r3, gmm, gmm_mode, random_state, prep, weights
+                )
+            else:  # later rounds: the gates again, on the new residual, same sizes and joints
+                gmr = _refit_mixtures(gmr, u_kept, u_full, r3, prep)
+            Gb = [prep.filter(G)[rows] if G.shape[1] else G[rows] for G in gmr.design(u_full)]
+        x_sel, projected = _link_step(C, tau, Fb, Gb, weights)
+        fric, corr = _nuisance_step(C, tau, x_sel, Fb, Gb, layer, gmr)
+        history.append(float(np.sqrt(np.mean((tau - C.torque(x_sel) - fric - corr) ** 2))))
+
+    info: dict[str, Any] = {"rounds": len(history), "rms_per_round": history, "weighting": weighting}
+    if consistent is not None:
+        resid = tau - C.torque(x_sel) - fric - corr
+        kappa, _ = long_run_factor(resid, prep.noise_correlation)
+        scale2 = float(np.sum(weights * kappa * np.mean(resid**2, axis=0)) / n)
+        x_sel, info["consistency"] = _consistent_step(system, C, x_sel, projected, scale2, consistent, x0)
+        fric, corr = _nuisance_step(C, tau, x_sel, Fb, Gb, layer, gmr)
+    link = C.torque(x_sel)
+    resid = tau - link - fric - corr
+    cov_sel, kappa = _covariance(C, projected, resid, weights, prep.noise_correlation, Fb, Gb)
+    info["correlation"] = [float(k) for k in kappa]
+    x = np.asarray(x0, dtype=np.float64).copy()
+    x[C.sel] = x_sel
+    cov = np.zeros((cols.p, cols.p))
+    cov[np.ix_(C.sel, C.sel)] = cov_sel
+    return Refinement(
+        params=x,
+        cov=cov,
+        mask=mask,
+        friction=layer,
+        gmr=gmr,
+        residual=resid,
+        rms_layers={"link": _rms(tau - link), "friction": _rms(tau - link - fric), "gmm": _rms(resid)},
+        info=info,
+    )
+
+
+_SELECT_SAMPLES = 20_000  # training rows of the per-joint regressions that choose the mixture sizes
+_SIZES = (1, 2, 3, 4, 6, 8)  # mixture sizes tried by gmm="auto"
+_EM_SAMPLES = 4000  # samples (evenly strided) of each EM fit of the gates
+
+
+def _joint_validation(C: _Columns, tau, Fb, Gb, weights, train, val) -> NDArray[np.float64]:
+    """Per joint, the validation RMS of the joint fit (link, friction, experts) made on the training rows."""
+    x_sel, _ = _link_step(C, tau, Fb, Gb, weights, rows=train)
+    out = np.empty(len(C.W))
+    for j in range(len(C.W)):
+        N = np.hstack([Fb[j], Gb[j]])
+        W = C.W[j][:, :]
+        target = tau[train, j] - W[train] @ x_sel[C.idx[j]]
+        c = _nuisance_free(N[train], target, _ridges(Fb[j], Gb[j]))
+        pred = W[val] @ x_sel[C.idx[j]] + N[val] @ c
+        out[j] = float(np.sqrt(np.mean((tau[val, j] - pred) ** 2)))
+    return out
+
+
+def _nuisance_free(N, target, ridge):
+    """Ridge least squares of ``target`` on the columns N (no bounds)."""
+    if N.shape[1] == 0:
+        return np.zeros(0)
+    norms = np.linalg.norm(N, axis=0)
+    norms[norms == 0] = 1.0
+    A = np.vstack([N / norms, np.diag(np.sqrt(ridge))])
+    b = np.concatenate([target, np.zeros(N.shape[1])])
+    return scipy.linalg.lstsq(A, b, cond=1e-12, check_finite=False)[0] / norms
+
+
+def _select_mixtures(C, tau, Fb, u_kept, u_full, r3, gmm, mode, random_state, prep, weights) -> GMRCorrection:
+    """Per joint, the mixture size (or none) whose experts, fitted jointly with the link parameters and
+    friction on the training samples, predict that joint's validation samples best.
+
+    The validation samples are phase windows of periodic data, else time blocks
+    (:func:`dynid.identify.gmr.validation_mask`).  A joint keeps a correction only if it lowers its
+    validation RMS by 10 % against the joint fit without any correction (with 2 %, a correction of
+    up to 24 experts that fitted coloured noise on 10 s of simulated data passed, and tripled the
+    held-out error of the UR5's shoulder joint).
+    """
+    rows = prep.rows
+    n = len(C.W)
+    val, how = validation_mask(u_kept, 20, 0.25)
+    stride = max(1, -(-int((~val).sum()) // _SELECT_SAMPLES))
+    train = np.flatnonzero(~val)[::stride]
+    vrows = np.flatnonzero(val)[::stride]
+    sizes = list(_SIZES) if gmm == "auto" else [int(gmm)]
+    empty = [np.zeros((len(tau), 0))] * n
+    none = _joint_validation(C, tau, Fb, empty, weights, train, vrows)
+    best = np.full(n, np.inf)
+    best_K = np.ones(n, dtype=int)
+    stale = 0
+    scores: list[list[tuple[int, float]]] = [[] for _ in range(n)]
+    for K in sizes:
+        trial = GMRCorrection(mode=mode, random_state=random_state, max_samples=_EM_SAMPLES).fit_mixtures(
+            u_kept[train], r3[train], [K] * _mixtures(mode, n)
+        )
+        G = [prep.filter(D)[rows] for D in trial.design(u_full)]
+        score = _joint_validation(C, tau, Fb, G, weights, train, vrows)
+        better = score < best
+        for j in range(n):
+            scores[j].append((K, float(score[j])))
+        best_K[better], best[better] = K, score[better]
+        stale = 0 if better.any() else stale + 1
+        if stale >= 2:
+            break
+    active = best <= (1.0 - _MIN_IMPROVEMENT) * none
+    sizes_final = [int(K) for K in best_K]
+    if mode == "vector":
+        sizes_final = [max(sizes_final)]
+    gmr = GMRCorrection(mode=mode, random_state=random_state, max_samples=_EM_SAMPLES).fit_mixtures(
+        u_kept, r3, sizes_final, active
+    )
+    gmr.scores_ = scores
+    gmr.validation_rms_ = np.vstack([none, np.where(active, best, none)])
+    gmr.validation_ = how
+    gmr.direction_ratio_ = np.full(n, np.nan)
+    if not active.all():
+        off = [str(j + 1) for j in np.flatnonzero(~active)]
+        gmr.fallback_ = (
+            f"no correction for joint{'s' if len(off) > 1 else ''} {', '.join(off)}: on the validation samples "
+            f"({how}) it did not lower the RMS of the joint fit by {100 * _MIN_IMPROVEMENT:g} %"
+        )
+    return gmr
+
+
+def _direction_check(G, r, dq) -> float:
+    """RMS ratio (with / without) of experts fitted on one direction of motion, tested on the other."""
+    moving = np.abs(dq) > 1e-3 * np.abs(dq).max(initial=0.0)
+    halves = [np.flatnonzero(moving & (dq > 0)), np.flatnonzero(moving & (dq < 0))]
+    if min(len(h) for h in halves) < 10 * max(G.shape[1], 1):
+        return 1.0
+    err, ref = 0.0, 0.0
+    for a, b in ((0, 1), (1, 0)):
+        c = _nuisance_free(G[halves[a]], r[halves[a]], np.full(G.shape[1], RIDGE))
+        err += float(np.sum((r[halves[b]] - G[halves[b]] @ c) ** 2))
+        ref += float(np.sum(r[halves[b]] ** 2))
+    return float(np.sqrt(err / ref)) if ref > 0 else 1.0
+
+
+def _refit_mixtures(old: GMRCorrection, u_kept, u_full, r3, prep) -> GMRCorrection:
+    """The same sizes and joints, gates fitted again on a new residual; the direction check.
+
+    A correction of ``position`` mode is a function of ``q_j`` alone, so it must hold whichever way the
+    joint moves: experts fitted on the samples moving one way must predict those moving the other way
+    (:func:`_direction_check`).  A joint whose residual fails that (an effect of velocity and position
+    together, which no position-only correction can carry to another motion) loses its correction.
+    The check needs the link parameters of a joint fit (the first round's): on the layer-1 residual,
+    whose link parameters absorbed part of the effect along the training motion, true position
+    effects failed it too.
+    """
+    new = GMRCorrection(mode=old.mode, random_state=old.random_state, max_samples=_EM_SAMPLES).fit_mixtures(
+        u_kept, r3, list(old.n_components_), old.active_
+    )
+    for name in ("scores_", "validation_rms_", "validation_", "fallback_", "direction_ratio_"):
+        setattr(new, name, getattr(old, name))
+    if old.mode == "position":
+        n = r3.shape[1]
+        design = new.design(u_full)
+        off = []
+        for j in np.flatnonzero(new.active_):
+            ratio = _direction_check(prep.filter(design[j])[prep.rows], r3[:, j], u_kept[:, n + j])
+            new.direction_ratio_[j] = ratio
+            if ratio > 1.0 - _MIN_IMPROVEMENT:
+                new.active_[j] = False
+                off.append(str(j + 1))
+        if off:
+            note = (
+                f"no correction for joint{'s' if len(off) > 1 else ''} {', '.join(off)}: fitted on one direction "
+                "of motion it did not predict the other (the residual depends on the velocity too)"
+            )
+            new.fallback_ = note if new.fallback_ is None else f"{new.fallback_}; {note}"
+    return new
+
+
+def _mixtures(mode: str, n: int) -> int:
+    return 1 if mode == "vector" else n
+
+
+def _ridges(Fb: NDArray[np.float64], Gb: NDArray[np.float64]) -> NDArray[np.float64]:
+    return np.concatenate([np.full(Fb.shape[1], _TINY), np.full(Gb.shape[1], RIDGE)])
+
+
+def _link_step(C: _Columns, tau, Fb, Gb, weights, rows=None):
+    """Link parameters of the stacked system with friction and experts eliminated per joint.
+
+    ``rows``: fit on these samples only (the validation of :func:`_select_mixtures`).
+    """
+    p_sel = len(C.sel)
+    blocks = []
+    projected = []
+    if rows is not None:
+        tau, Fb, Gb = tau[rows], [F[rows] for F in Fb], [G[rows] for G in Gb]
+    for j in range(len(C.W)):
+        N = np.hstack([Fb[j], Gb[j]])
+        proj = _eliminator(N, _ridges(Fb[j], Gb[j]))
+        A = proj(C.W[j] if rows is None else C.W[j][rows])
+        b = proj(tau[:, j])
+        Rj = scipy.linalg.qr(np.sqrt(weights[j]) * np.column_stack([A, b]), mode="r", check_finite=False)[0]
+        k = len(C.idx[j])
+        Rj = Rj[: k + 1]
+        full = np.zeros((len(Rj), p_sel + 1))
+        full[:, C.idx[j]] = Rj[:, :k]
+        full[:, p_sel] = Rj[:, k]
+        blocks.append(full)
+        projected.append((C.idx[j], Rj[:k, :k] if Rj.shape[0] >= k else Rj[:, :k]))
+    R = scipy.linalg.qr(np.vstack(blocks), mode="r", check_finite=False)[0][:p_sel]
+    x_sel = scipy.linalg.lstsq(R[:, :p_sel], R[:, p_sel], cond=1e-13, check_finite=False)[0]
+    return x_sel, (R[:, :p_sel], projected)
+
+
+def _nuisance_step(C: _Columns, tau, x_sel, Fb, Gb, layer, gmr):
+    """Friction (within bounds) and experts per joint for fixed link parameters; their torques."""
+    n = len(C.W)
+    fric = np.zeros_like(tau)
+    corr = np.zeros_like(tau)
+    f_coefs, g_coefs, noise = [], [], np.zeros(n)
+    link = C.torque(x_sel)
+    for j in range(n):
+        N = np.hstack([Fb[j], Gb[j]])
+        lower = np.concatenate(
+            [
+                layer.models_[j].linear_bounds if layer is not None else np.zeros(0),
+                np.full(Gb[j].shape[1], -np.inf),
+            ]
+        )
+        c = _nuisance(N, tau[:, j] - link[:, j], _ridges(Fb[j], Gb[j]), lower)
+        kf = Fb[j].shape[1]
+        f_coefs.append(c[:kf])
+        g_coefs.append(c[kf:])
+        fric[:, j] = Fb[j] @ c[:kf]
+        corr[:, j] = Gb[j] @ c[kf:]
+        noise[j] = float(np.mean((tau[:, j] - link[:, j] - fric[:, j] - corr[:, j]) ** 2))
+    if layer is not None:
+        layer.set_linear(f_coefs)
+    if gmr is not None:
+        gmr.set_experts(g_coefs, noise)
+    return fric, corr
+
+
+def _covariance(C: _Columns, projected, resid, weights, floor, Fb, Gb):
+    """Sandwich covariance of the refined link parameters (see the module docstring)."""
+    R, per_joint = projected
+    p_sel = R.shape[1]
+    kappa, _ = long_run_factor(resid, floor)
+    m = len(resid)
+    middle = np.zeros((p_sel, p_sel))
+    for j, (idx, Rj) in enumerate(per_joint):
+        dof = max(m - Fb[j].shape[1] - Gb[j].shape[1] - len(idx), 1)
+        s2 = float(resid[:, j] @ resid[:, j]) / dof
+        block = np.zeros((Rj.shape[0], p_sel))
+        block[:, idx] = Rj
+        middle += weights[j] * kappa[j] * s2 * (block.T @ block)
+    Rinv = scipy.linalg.pinv(R)
+    cov = Rinv @ (Rinv.T @ middle @ Rinv) @ Rinv.T
+    return 0.5 * (cov + cov.T), kappa
+
+
+def _consistent_step(system, C: _Columns, x_sel, projected, scale2, options, x0):
+    """Project the refined link parameters onto physically consistent ones (Mahalanobis metric)."""
+    from dynid.identify.consistent import consistent_solution
+
+    cols = system.columns
+    R = projected[0]
+    x_full = np.asarray(x0, dtype=np.float64).copy()
+    x_full[C.sel] = x_sel
+    mask = np.zeros(cols.p, dtype=bool)
+    mask[C.sel] = True
+    phi, solver = consistent_solution(cols.robot, cols, x_full, R, max(scale2, 1e-300), mask=mask, **options)
+    x_c = cols.P[mask] @ phi
+    info = {
+        "mahalanobis": float(np.linalg.norm(R @ (x_c - x_sel)) / np.sqrt(max(scale2, 1e-300))),
+        "relative_distance": float(np.linalg.norm(x_c - x_sel) / max(np.linalg.norm(x_sel), 1e-300)),
+        "standard_params": [float(v) for v in phi[: 10 * cols.n]],
+        "solver": solver,
+    }
+    return x_c, info
