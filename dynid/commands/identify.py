@@ -65,6 +65,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--decimate", default=1, type=int, metavar="N", help="keep one sample in N after filtering"
     )
     parser.add_argument(
+        "--rounds",
+        default=2,
+        type=int,
+        metavar="N",
+        help="rounds in which link parameters, friction and GMM are refitted together (default 2; 0: the "
+        "paper's sequence, one layer after the other)",
+    )
+    parser.add_argument(
+        "--gmm-mode",
+        default="position",
+        choices=("position", "own", "per_joint", "vector"),
+        help="inputs of the GMM: each joint's angle (default), its angle and velocity, all states per joint, "
+        "or one mixture over all (the paper's)",
+    )
+    parser.add_argument(
         "--reference-weight",
         default=0.0,
         type=float,
@@ -98,6 +113,8 @@ def run(args: argparse.Namespace) -> int:
         gmm=args.gmm,
         preprocessing=Preprocessing(cutoff=args.cutoff, decimate=args.decimate),
         reference_weight=args.reference_weight,
+        rounds=args.rounds,
+        gmm_mode=args.gmm_mode,
     )
     json_path, arrays_path = save_model(model, args.out)
     elapsed = time.perf_counter() - start
@@ -116,6 +133,12 @@ def run(args: argparse.Namespace) -> int:
     for label in ("link", "friction", "gmm"):
         print(f"rms after {label:<8} (N m): " + " ".join(f"{v:.4g}" for v in layers[label]))
     print(f"friction: {figures['friction']['model']} ({figures['friction']['source']})")
+    rounds = figures.get("refinement", {}).get("rounds", 0)
+    print(
+        f"layers fitted together in {rounds} round{'s' if rounds != 1 else ''}"
+        if rounds
+        else "layers fitted in sequence"
+    )
     if model.gmr is not None:
         state = "active on joints " + ", ".join(str(j + 1) for j in np.flatnonzero(model.gmr.active_))
         print(
