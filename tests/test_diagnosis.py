@@ -117,7 +117,17 @@ EFFECT_CASES = {
 # The closed-loop vibration of a flexible joint is only partly captured by the one-mass resonance refit
 # (about half of its gap on all joints); every other effect must close at least 70 % of its gap.
 MIN_CLOSURE = {"elasticity": 0.4, "backlash": 0.4}
-SLOW = {"temperature", "elasticity", "backlash", "base_tilt", "coupled_friction", "cogging", "load_friction"}
+SLOW = {
+    "temperature",
+    "elasticity",
+    "backlash",
+    "base_tilt",
+    "coupled_friction",
+    "cogging",
+    "load_friction",
+    "armature",
+    "nonlinear_viscous",
+}
 
 
 # Backlash in the simulator rattles (impacts in the dead zone shake the whole arm): neither its
