@@ -43,6 +43,7 @@ import io
 import json
 import os
 import tempfile
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -54,7 +55,7 @@ from dynid.exceptions import DynidError, ModelFileError, UsageError
 from dynid.identify._threads import single_blas_thread
 from dynid.identify.consistent import ConsistentLS, pseudo_inertia
 from dynid.identify.dataset import Dataset
-from dynid.identify.estimators import ESTIMATORS, LinkEstimator, check_is_fitted
+from dynid.identify.estimators import ESTIMATORS, IdentificationWarning, LinkEstimator, check_is_fitted
 from dynid.identify.friction import FRICTION_MODELS, FrictionLayer
 from dynid.identify.gmr import GMRCorrection
 from dynid.identify.linear_system import (
@@ -181,6 +182,35 @@ class IdentifiedModel:
     def _direct(self, q: NDArray[np.float64], dq: NDArray[np.float64]) -> NDArray[np.float64]:
         return self._friction_torque(dq) + self._correction(q, dq)
 
+    def _check_range(self, q: NDArray[np.float64], dq: NDArray[np.float64]) -> None:
+        """Warn when a motion takes a corrected joint well beyond the states its correction was fitted on."""
+        if self.gmr is None or not self.gmr.active_.any():
+            return
+        u = np.hstack([q, dq])
+        n = q.shape[1]
+        out = []
+        for mdl in self.gmr.models_:
+            if not self.gmr.active_[mdl["outputs"]].any():
+                continue
+            lo, hi = np.asarray(mdl["lo"]), np.asarray(mdl["hi"])
+            margin = 0.05 * (hi - lo)
+            for i, c in enumerate(np.asarray(mdl["inputs"])):
+                v = u[:, c]
+                if v.min() < lo[i] - margin[i] or v.max() > hi[i] + margin[i]:
+                    label = f"q_{c + 1}" if c < n else f"dq_{c - n + 1}"
+                    out.append(
+                        f"{label} spans {v.min():.3g}..{v.max():.3g} (fitted on {lo[i]:.3g}..{hi[i]:.3g})"
+                    )
+        if out:
+            warnings.warn(
+                "the motion leaves the states the GMM correction was fitted on: "
+                + "; ".join(dict.fromkeys(out))
+                + "; there the correction holds its edge value and the link parameters fitted with it may "
+                "be off: identify on data that cover this motion's workspace",
+                IdentificationWarning,
+                stacklevel=3,
+            )
+
     def predict_parts(self, ds: Dataset) -> dict[str, NDArray[np.float64]]:
         """The prediction of a dataset split by layer, each treated as :meth:`predict` treats it.
 
@@ -198,6 +228,7 @@ class IdentifiedModel:
         """
         prep = self.prepare(ds)
         rows = prep.rows
+        self._check_range(prep.q[rows], prep.dq[rows])
         link = linear_torque(self.columns, self.params, prep.q, prep.dq, prep.ddq, mask=self.filtered_mask)
         if self.layers_filtered:
             fric = prep.filter(self._friction_torque(prep.dq))[rows]
