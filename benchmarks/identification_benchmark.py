@@ -165,7 +165,9 @@ def main() -> None:
     print(f"held-out RMS per joint (N m), three layers fitted together: {np.round(r_full, 3)}")
     print(f"held-out RMS per joint (N m), the same, consistent links:   {np.round(r_cons, 3)}")
     print(f"noise floor (the 0.2 N m noise through the 20 Hz filter):   {np.round(floor, 3)}")
-    print(f"noise floor measured (raw spectrum above 125 Hz, through the filter): {np.round(floor_measured, 3)}")
+    print(
+        f"noise floor measured (raw spectrum above 125 Hz, through the filter): {np.round(floor_measured, 3)}"
+    )
     print(
         f"ratio to OLS (mean over joints): in sequence {r_seq.mean() / r_ols.mean():.3f}, fitted together "
         f"{r_full.mean() / r_ols.mean():.3f}, consistent {r_cons.mean() / r_ols.mean():.3f}  (paper: 0.64)"

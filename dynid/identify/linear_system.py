@@ -241,7 +241,13 @@ class Prepared:
         return max(1.0, float(1.0 + 2.0 * rho[D::D].sum()))
 
     def filter(self, signal: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Apply the parallel filter (the torque's) to a full-rate signal of shape (M, ...)."""
+        """Apply the parallel filter (the torque's) to a full-rate signal of shape (M, ...).
+
+        Parameters
+        ----------
+        signal : ndarray, shape (M, ...)
+            Samples at full rate (time along axis 0).
+        """
         if not self.parallel_filter:
             return np.asarray(signal, dtype=np.float64)
         return lowpass(
@@ -421,6 +427,11 @@ class ColumnSet:
 
         Armature ``ddq_j``, Coulomb ``sign(dq_j)``, viscous ``dq_j``, offset ``1``, as in
         ``friction_columns`` / ``armature_columns`` of :mod:`dynid.symbolic.functions`.
+
+        Parameters
+        ----------
+        dq, ddq : ndarray, shape (m, n)
+            Joint velocities (rad/s) and accelerations (rad/s^2).
         """
         n = self.n
         out = np.empty((len(dq), len(self.extras)))
