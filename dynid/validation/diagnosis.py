@@ -58,6 +58,7 @@ from dynid.identify.linear_system import (
     compiled_base_regressor,
     prepare,
 )
+from dynid.identify.model import _clean  # the model file's JSON cleaner: arrays to lists, NaN to None
 from dynid.validation import stats as st
 from dynid.validation.candidates import (
     EFFECT_NAMES,
@@ -479,20 +480,6 @@ class Diagnosis:
     def summary(self) -> str:
         """The verdict and the gap in plain words."""
         return verdict_text(self)
-
-
-def _clean(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {str(k): _clean(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_clean(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _clean(value.tolist())
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
 
 
 def _describe_refit(r: RankedCandidate) -> str:
