@@ -35,7 +35,7 @@ Every model also exposes its linear part at the fitted shape (:meth:`basis`, :me
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Self
 
 import numpy as np
 import scipy.linalg
@@ -150,9 +150,43 @@ class _Friction:
 
     name: ClassVar[str] = ""
     coef_names: ClassVar[tuple[str, ...]] = ()
+    _min_samples: ClassVar[int] = 1  # fewer samples than this: DataError
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}()"
+
+    @one_blas_thread
+    def fit(
+        self, dq: ArrayLike, F: ArrayLike, *, sampling: _Sampling | None = None, around: float | None = None
+    ) -> Self:
+        """Fit the model to one joint's estimated friction torque (see the class docstring for how).
+
+        Parameters
+        ----------
+        dq : array_like, shape (m,)
+            Joint velocity (rad/s); at full rate with ``sampling``.
+        F : array_like, shape (m,)
+            Estimated friction torque (N m).
+        sampling : optional
+            Filtering of the model (see :meth:`FrictionLayer.fit`).
+        around : float, optional
+            A previous value of the shape parameter: search within a factor 3 of it (a warm start).
+            Models without a searched shape parameter ignore it.
+        """
+        dq, F, dq_k = _inputs(dq, F, sampling, self._min_samples, self.name)
+        self._fit(dq, F, dq_k, sampling, around)
+        return self
+
+    def _fit(
+        self,
+        dq: NDArray[np.float64],
+        F: NDArray[np.float64],
+        dq_k: NDArray[np.float64],
+        sampling: _Sampling | None,
+        around: float | None,
+    ) -> None:
+        """Fit on checked inputs (see :func:`_inputs`) and store the result with :meth:`_set`."""
+        raise NotImplementedError
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "coef_"):
@@ -310,26 +344,8 @@ class NoFriction(_Friction):
     name = "none"
     coef_names = ()
 
-    @one_blas_thread
-    def fit(
-        self, dq: ArrayLike, F: ArrayLike, *, sampling: _Sampling | None = None, around: float | None = None
-    ) -> NoFriction:
-        """Record nothing but the residual RMS.
-
-        Parameters
-        ----------
-        dq : array_like, shape (m,)
-            Joint velocity (rad/s).
-        F : array_like, shape (m,)
-            Estimated friction torque (N m).
-        sampling : optional
-            Filtering of the model (see :meth:`FrictionLayer.fit`).
-        around : float, optional
-            A previous value of the shape parameter: search within a factor 3 of it (a warm start).
-        """
-        dq, F, _ = _inputs(dq, F, sampling, 1, self.name)
+    def _fit(self, dq, F, dq_k, sampling, around) -> None:
         self._set([], float(F @ F), len(F))
-        return self
 
     def _basis(self, dq):
         return np.zeros((len(dq), 0))
@@ -337,6 +353,8 @@ class NoFriction(_Friction):
 
 class LinearFriction(_Friction):
     """``F = fc sign(dq) + fv dq + fo`` with ``fc, fv >= 0`` (METHOD.md's linear baseline plus an offset).
+
+    Fitted by bounded linear least squares.
 
     Parameters
     ----------
@@ -347,6 +365,7 @@ class LinearFriction(_Friction):
     name = "linear"
     coef_names = ("fc", "fv", "fo")
     _bounds = (0.0, 0.0, -np.inf)
+    _min_samples = 3
 
     def __init__(self, *, offset: bool = True) -> None:
         self.offset = offset
@@ -355,28 +374,10 @@ class LinearFriction(_Friction):
     def _linear(self) -> tuple[int, ...]:  # type: ignore[override]
         return (0, 1, 2) if getattr(self, "offset", True) else (0, 1)
 
-    @one_blas_thread
-    def fit(
-        self, dq: ArrayLike, F: ArrayLike, *, sampling: _Sampling | None = None, around: float | None = None
-    ) -> LinearFriction:
-        """Bounded linear least squares.
-
-        Parameters
-        ----------
-        dq : array_like, shape (m,)
-            Joint velocity (rad/s).
-        F : array_like, shape (m,)
-            Estimated friction torque (N m).
-        sampling : optional
-            Filtering of the model (see :meth:`FrictionLayer.fit`).
-        around : float, optional
-            A previous value of the shape parameter: search within a factor 3 of it (a warm start).
-        """
-        dq, F, _ = _inputs(dq, F, sampling, 3, self.name)
+    def _fit(self, dq, F, dq_k, sampling, around) -> None:
         k = 3 if self.offset else 2
         coef, rss = self._fit_columns(lambda v: self._columns(v)[:, :k], dq, F, sampling, self._bounds[:k])
         self._set(np.append(coef, 0.0) if k == 2 else coef, rss, len(F))
-        return self
 
     @staticmethod
     def _columns(dq):
@@ -414,7 +415,69 @@ def _seed_columns(dq: NDArray[np.float64], lam: float) -> NDArray[np.float64]:
     return A
 
 
-class SeedFriction(_Friction):
+class _ShapedFriction(_Friction):
+    """Models linear in their coefficients at a fixed shape parameter, the last coefficient.
+
+    The shape parameter is searched among candidates between the quantiles ``quantiles`` of ``|dq|``
+    (or near a previous value), each scored by the bounded linear least squares of the other
+    coefficients; the coefficients are then fitted on all samples at the winner.  On filtered data the
+    search filters a window of the record per candidate (see :class:`_Sampling`).
+
+    Attributes
+    ----------
+    candidates_ : ndarray
+        The candidate shape parameters of the search.
+    candidate_sse_ : ndarray
+        The squared error of the fit at each candidate.
+    """
+
+    n_candidates: int
+    quantiles: tuple[float, float]
+    _min_samples = 20
+    _search_label: ClassVar[str] = ""  # the model's name in messages
+    _move_advice: ClassVar[str] = ""  # appended to the message when the joint hardly moves
+    _refine: ClassVar[bool] = True  # refine the best candidate by golden section
+
+    @staticmethod
+    def _columns(dq: NDArray[np.float64], shape: float) -> NDArray[np.float64]:
+        """Columns of the linear coefficients at shape parameter ``shape``: (len(dq), k)."""
+        raise NotImplementedError
+
+    def _fit(self, dq, F, dq_k, sampling, around) -> None:
+        a = np.abs(dq_k[dq_k != 0])
+        if a.size < 20:
+            raise DataError(
+                f"the {self._search_label} friction model needs the joint to move; only {a.size} samples "
+                f"have dq != 0{self._move_advice}"
+            )
+        lo, hi = np.quantile(a, self.quantiles)
+        lo = max(lo, hi * 1e-4)
+        cands = np.geomspace(lo, hi, int(self.n_candidates)) if around is None else _near(around, lo, hi)
+        bounds = self._bounds
+        columns = self._columns
+        if sampling is None:
+            s = _stride(len(dq))
+            d_s, F_s = dq[s], F[s]
+
+            def cost(shape):
+                return _bounded_lsq(columns(d_s, shape), F_s, bounds)[1]
+        else:
+            d_w, F_w = sampling.window_of(dq), F[sampling.search_rows]
+
+            def cost(shape):
+                return _bounded_lsq(sampling.search(columns(d_w, shape)), F_w, bounds)[1]
+
+        shape, sse = _shape_search(cost, cands, refine=self._refine)
+        coef, rss = self._fit_columns(lambda v: columns(v, shape), dq, F, sampling, bounds)
+        self.candidates_ = cands
+        self.candidate_sse_ = sse
+        self._set(np.append(coef, shape), rss, len(F))
+
+    def _basis(self, dq):
+        return self._columns(dq, self.coef_[-1])
+
+
+class SeedFriction(_ShapedFriction):
     """The paper's friction model (METHOD.md section 2): low/high-speed split at a threshold lambda.
 
     Above the threshold (``|dq| >= lambda``)::
@@ -449,62 +512,17 @@ class SeedFriction(_Friction):
     _linear = (0, 1, 2, 3, 4, 5, 6)
     _bounds = (0.0,) * 7
 
+    _search_label = "seed"
+    _move_advice = ": record a motion of that joint"
+
     def __init__(self, *, n_candidates: int = 30, quantiles: tuple[float, float] = (0.01, 0.5)) -> None:
         self.n_candidates = n_candidates
         self.quantiles = quantiles
 
-    @one_blas_thread
-    def fit(
-        self, dq: ArrayLike, F: ArrayLike, *, sampling: _Sampling | None = None, around: float | None = None
-    ) -> SeedFriction:
-        """Search the threshold and fit the coefficients.
-
-        Parameters
-        ----------
-        dq : array_like, shape (m,)
-            Joint velocity (rad/s); at full rate with ``sampling``.
-        F : array_like, shape (m,)
-            Estimated friction torque (N m).
-        sampling : optional
-            Filtering of the model (see :meth:`FrictionLayer.fit`).
-        around : float, optional
-            A previous value of the shape parameter: search within a factor 3 of it (a warm start).
-        """
-        dq, F, dq_k = _inputs(dq, F, sampling, 20, self.name)
-        a = np.abs(dq_k[dq_k != 0])
-        if a.size < 20:
-            raise DataError(
-                f"the seed friction model needs the joint to move; only {a.size} samples have dq != 0: "
-                "record a motion of that joint"
-            )
-        lo, hi = np.quantile(a, self.quantiles)
-        lo = max(lo, hi * 1e-4)
-        cands = np.geomspace(lo, hi, int(self.n_candidates)) if around is None else _near(around, lo, hi)
-        bounds = self._bounds
-        if sampling is None:
-            s = _stride(len(dq))
-            d_s, F_s = dq[s], F[s]
-
-            def cost(lam):
-                return _bounded_lsq(_seed_columns(d_s, lam), F_s, bounds)[1]
-        else:
-            d_w, F_w = sampling.window_of(dq), F[sampling.search_rows]
-
-            def cost(lam):
-                return _bounded_lsq(sampling.search(_seed_columns(d_w, lam)), F_w, bounds)[1]
-
-        lam, sse = _shape_search(cost, cands)
-        coef, rss = self._fit_columns(lambda v: _seed_columns(v, lam), dq, F, sampling, bounds)
-        self.candidates_ = cands
-        self.candidate_sse_ = sse
-        self._set(np.append(coef, lam), rss, len(F))
-        return self
-
-    def _basis(self, dq):
-        return _seed_columns(dq, self.coef_[-1])
+    _columns = staticmethod(_seed_columns)
 
 
-class StribeckFriction(_Friction):
+class StribeckFriction(_ShapedFriction):
     """``F = sign(dq) (fc + (fs - fc) exp(-(dq / vs)^2)) + fv dq + fo``, ``fc, fs, fv >= 0``, ``vs > 0``.
 
     ``vs`` (rad/s) by a search over quantiles of ``|dq|`` with the other coefficients by bounded linear
@@ -523,6 +541,9 @@ class StribeckFriction(_Friction):
     _linear = (0, 1, 2, 3)
     _bounds = (0.0, 0.0, 0.0, -np.inf)
 
+    _search_label = "Stribeck"
+    _refine = False
+
     def __init__(self, *, n_candidates: int = 30, quantiles: tuple[float, float] = (0.002, 0.5)) -> None:
         self.n_candidates = n_candidates
         self.quantiles = quantiles
@@ -532,53 +553,6 @@ class StribeckFriction(_Friction):
         e = np.exp(-((dq / vs) ** 2))
         sg = np.sign(dq)
         return np.column_stack([sg * (1.0 - e), sg * e, dq, np.ones_like(dq)])
-
-    @one_blas_thread
-    def fit(
-        self, dq: ArrayLike, F: ArrayLike, *, sampling: _Sampling | None = None, around: float | None = None
-    ) -> StribeckFriction:
-        """Search ``vs`` and fit the coefficients.
-
-        Parameters
-        ----------
-        dq : array_like, shape (m,)
-            Joint velocity (rad/s); at full rate with ``sampling``.
-        F : array_like, shape (m,)
-            Estimated friction torque (N m).
-        sampling : optional
-            Filtering of the model (see :meth:`FrictionLayer.fit`).
-        around : float, optional
-            A previous value of the shape parameter: search within a factor 3 of it (a warm start).
-        """
-        dq, F, dq_k = _inputs(dq, F, sampling, 20, self.name)
-        a = np.abs(dq_k[dq_k != 0])
-        if a.size < 20:
-            raise DataError(
-                f"the Stribeck friction model needs the joint to move; only {a.size} samples have dq != 0"
-            )
-        lo, hi = np.quantile(a, self.quantiles)
-        lo = max(lo, hi * 1e-4)
-        cands = np.geomspace(lo, hi, int(self.n_candidates)) if around is None else _near(around, lo, hi)
-        bounds = self._bounds
-        if sampling is None:
-            s = _stride(len(dq))
-            d_s, F_s = dq[s], F[s]
-
-            def cost(vs):
-                return _bounded_lsq(self._columns(d_s, vs), F_s, bounds)[1]
-        else:
-            d_w, F_w = sampling.window_of(dq), F[sampling.search_rows]
-
-            def cost(vs):
-                return _bounded_lsq(sampling.search(self._columns(d_w, vs)), F_w, bounds)[1]
-
-        vs, _ = _shape_search(cost, cands, refine=False)
-        coef, rss = self._fit_columns(lambda v: self._columns(v, vs), dq, F, sampling, bounds)
-        self._set(np.append(coef, vs), rss, len(F))
-        return self
-
-    def _basis(self, dq):
-        return self._columns(dq, self.coef_[-1])
 
 
 class SigmoidFriction(_Friction):
@@ -599,6 +573,7 @@ class SigmoidFriction(_Friction):
     coef_names = ("phi1", "phi2", "phi3")
     _linear = (0,)
     _bounds = (-np.inf,)
+    _min_samples = 10
 
     def __init__(self, *, max_samples: int = 20_000) -> None:
         self.max_samples = max_samples
@@ -607,24 +582,7 @@ class SigmoidFriction(_Friction):
     def _shape(dq, phi2, phi3):
         return expit(phi2 * (dq + phi3)) - expit(phi2 * phi3)
 
-    @one_blas_thread
-    def fit(
-        self, dq: ArrayLike, F: ArrayLike, *, sampling: _Sampling | None = None, around: float | None = None
-    ) -> SigmoidFriction:
-        """Fit ``phi1, phi2, phi3``.
-
-        Parameters
-        ----------
-        dq : array_like, shape (m,)
-            Joint velocity (rad/s); at full rate with ``sampling``.
-        F : array_like, shape (m,)
-            Estimated friction torque (N m).
-        sampling : optional
-            Filtering of the model (see :meth:`FrictionLayer.fit`).
-        around : float, optional
-            A previous value of the shape parameter: search within a factor 3 of it (a warm start).
-        """
-        dq, F, dq_k = _inputs(dq, F, sampling, 10, self.name)
+    def _fit(self, dq, F, dq_k, sampling, around) -> None:
         s = _stride(len(dq_k), int(self.max_samples))
         d, f = dq_k[s], F[s]
         scale = float(np.median(np.abs(d[d != 0]))) if np.any(d != 0) else 1.0
@@ -648,7 +606,6 @@ class SigmoidFriction(_Friction):
             lambda v: self._shape(v, phi2, phi3)[:, None], dq, F, sampling, self._bounds
         )
         self._set([float(coef[0]), phi2, phi3], rss, len(F))
-        return self
 
     def _basis(self, dq):
         return self._shape(dq, self.coef_[1], self.coef_[2])[:, None]
@@ -739,7 +696,7 @@ class FrictionLayer:
             try:
                 mdl = friction_model(self.model, **(self.options or {}))
                 hint = None
-                if around is not None and around.model == self.model and mdl.name in ("seed", "stribeck"):
+                if around is not None and around.model == self.model and isinstance(mdl, _ShapedFriction):
                     hint = float(around.models_[j].coef_[-1])
                 models.append(mdl.fit(dq[:, j], F[:, j], sampling=sampling, around=hint))
             except DataError as err:
