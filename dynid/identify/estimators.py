@@ -241,6 +241,19 @@ class LinkEstimator:
             )
         return system.residual_matrix(x) / (m - p)
 
+    def _reweighted_fit(
+        self, system: LinearSystem, x: NDArray[np.float64], *, diagonal: bool
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], Any]:
+        """Refit weighted by ``Omega`` of the residual of ``x`` (its diagonal only with ``diagonal``).
+
+        Returns (new x, Omega used, (R, rhs, rss)).
+        """
+        omega = self._omega(system, x)
+        if diagonal:
+            omega = np.diag(np.diag(omega))
+        x_new, fac = self._weighted_fit(system, whitener(omega))
+        return x_new, omega, fac
+
     def _iterate(self, system: LinearSystem) -> tuple[NDArray[np.float64], NDArray[np.float64], Any]:
         """Return (x, Omega used, (R, rhs, rss)); subclasses choose the weighting."""
         raise NotImplementedError
@@ -448,14 +461,8 @@ class OLS(LinkEstimator):
 
     Parameters
     ----------
-    robot : RobotModel
-        The robot that recorded the data.
-    friction : bool
-        Identify linear friction with the link parameters.
-    armature : bool
-        Identify the armature with the link parameters.
-    preprocessing : Preprocessing, optional
-        Filtering and differentiation of a dataset.
+    robot, friction, armature, preprocessing
+        As in :class:`LinkEstimator`.
     """
 
     method = "ols"
@@ -472,23 +479,15 @@ class WLS(LinkEstimator):
 
     Parameters
     ----------
-    robot : RobotModel
-        The robot that recorded the data.
-    friction : bool
-        Identify linear friction with the link parameters.
-    armature : bool
-        Identify the armature with the link parameters.
-    preprocessing : Preprocessing, optional
-        Filtering and differentiation of a dataset.
+    robot, friction, armature, preprocessing
+        As in :class:`LinkEstimator`.
     """
 
     method = "wls"
 
     def _iterate(self, system):
         x0, _ = self._weighted_fit(system, np.eye(system.n))
-        omega = np.diag(np.diag(self._omega(system, x0)))
-        x, fac = self._weighted_fit(system, whitener(omega))
-        return x, omega, fac
+        return self._reweighted_fit(system, x0, diagonal=True)
 
 
 class GLS(LinkEstimator):
@@ -499,23 +498,15 @@ class GLS(LinkEstimator):
 
     Parameters
     ----------
-    robot : RobotModel
-        The robot that recorded the data.
-    friction : bool
-        Identify linear friction with the link parameters.
-    armature : bool
-        Identify the armature with the link parameters.
-    preprocessing : Preprocessing, optional
-        Filtering and differentiation of a dataset.
+    robot, friction, armature, preprocessing
+        As in :class:`LinkEstimator`.
     """
 
     method = "gls"
 
     def _iterate(self, system):
         x0, _ = self._weighted_fit(system, np.eye(system.n))
-        omega = self._omega(system, x0)
-        x, fac = self._weighted_fit(system, whitener(omega))
-        return x, omega, fac
+        return self._reweighted_fit(system, x0, diagonal=False)
 
 
 class IRLS(LinkEstimator):
@@ -523,14 +514,8 @@ class IRLS(LinkEstimator):
 
     Parameters
     ----------
-    robot : RobotModel
-        The robot that recorded the data.
-    friction : bool
-        Identify linear friction with the link parameters.
-    armature : bool
-        Identify the armature with the link parameters.
-    preprocessing : Preprocessing, optional
-        Filtering and differentiation of a dataset.
+    robot, friction, armature, preprocessing
+        As in :class:`LinkEstimator`.
     weighting : {"full", "diagonal"}
         Full ``Omega`` (GLS steps) or its diagonal (WLS steps).
     tol : float
@@ -576,10 +561,7 @@ class IRLS(LinkEstimator):
         it = 0
         omega = np.eye(system.n)
         for it in range(1, int(self.max_iter) + 1):  # noqa: B007 (it is kept)
-            omega = self._omega(system, x)
-            if self.weighting == "diagonal":
-                omega = np.diag(np.diag(omega))
-            x_new, fac = self._weighted_fit(system, whitener(omega))
+            x_new, omega, fac = self._reweighted_fit(system, x, diagonal=self.weighting == "diagonal")
             R = fac[0]
             rss = fac[2]
             dof = max(system.m * system.n - system.p, 1)
