@@ -25,7 +25,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-import numpy as np
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # the scripts' shared helpers
 
 RECORDINGS = {
     # name: (split time (s), decimation after the 20 Hz filter)
@@ -36,17 +36,15 @@ RECORDINGS = {
 
 def diagnose_recording(name: str, split: float, decimate: int, out: Path, root: Path | None = None) -> dict:
     """Identify on ``t < split``, diagnose on the rest; write the model and the report into ``out``."""
-    from dynid.identify.adapters import load_recording, recording_model_path
+    from _realrobot import load_with_robot, split_in_time
+
     from dynid.identify.linear_system import Preprocessing
     from dynid.identify.model import identify, load_model, save_model
-    from dynid.symbolic import load_robot
     from dynid.validation.diagnosis import diagnose
     from dynid.validation.diagnosis_report import write_diagnosis_report
 
-    data = load_recording(name, root)
-    robot = load_robot(recording_model_path(name, root))
-    train = data.select_rows(np.flatnonzero(data.t < split))
-    heldout = data.select_rows(np.flatnonzero(data.t >= split))
+    data, robot = load_with_robot(name, root)
+    train, heldout = split_in_time(data, split)
 
     # Layer 1 only: the diagnosis explains what the rigid body and linear friction leave.
     model = identify(

@@ -15,13 +15,11 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-import numpy as np
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # the scripts' shared helpers
 
-from dynid.identify.adapters import load_recording, recording_model_path
+from _realrobot import load_with_robot, print_heldout_table, run, split_in_time, write_outputs
+
 from dynid.identify.linear_system import Preprocessing
-from dynid.identify.model import save_model
-from dynid.symbolic import load_robot
-from dynid.validation.report import render_report
 from dynid.validation.validate import ValidationResult, compare_methods
 
 RECORDING = "tx40"
@@ -32,34 +30,20 @@ def main(out: Path, root: Path | None = None) -> list[ValidationResult]:
     """Identify, validate, write ``tx40_report.html`` and ``tx40_model.json`` into ``out``."""
     # Joint-side angles and torques; no velocities: they are differentiated from the angles after the
     # 20 Hz zero-phase filter, which is applied to the torque and to every regressor column alike.
-    data = load_recording(RECORDING, root)
-    robot = load_robot(recording_model_path(RECORDING, root))
+    data, robot = load_with_robot(RECORDING, root)
 
     # Time-based split: the first 6 s to identify, the last 3 s to validate.
-    train = data.select_rows(np.flatnonzero(data.t < SPLIT_S))
-    heldout = data.select_rows(np.flatnonzero(data.t >= SPLIT_S))
+    train, heldout = split_in_time(data, SPLIT_S)
 
     # 5 kHz is far more than a 20 Hz band needs: keep one sample in 10 (500 Hz) after filtering.
     results = compare_methods(
         robot, train, heldout, preprocessing=Preprocessing(decimate=10), baseline=True, progress=print
     )
-
-    full = results[0]
-    print(f"\nheld-out RMS (N m) on the last {heldout.duration:.1f} s; torque {full.reference}")
-    print(f"{'model':<6}" + "".join(f"{'joint ' + str(j + 1):>9}" for j in range(robot.n)) + f"{'mean':>9}")
-    for r in results:
-        print(
-            f"{r.label:<6}"
-            + "".join(f"{v:>9.4f}" for v in r.metrics["rms"])
-            + f"{r.metrics['rms_mean']:>9.4f}"
-        )
-    print(f"{'noise':<6}" + "".join(f"{v:>9.4f}" for v in full.noise.std) + f"   ({full.noise.method})")
-    print(f"{'R^2':<6}" + "".join(f"{v:>9.3f}" for v in full.metrics["r2"]) + "   (full method)")
-
-    out.mkdir(parents=True, exist_ok=True)
-    save_model(full.model, out / "tx40_model.json")
-    report = render_report(
+    print_heldout_table(results, heldout, r2=True)
+    write_outputs(
         results,
+        out,
+        "tx40",
         title="Staubli TX40 (5 kHz, coupled wrist): identified on the first 6 s, validated on the last 3 s",
         context={
             "recording": f"{RECORDING}: {data.m} samples over {data.duration:.1f} s, motor-side data on the joint side",
@@ -68,15 +52,8 @@ def main(out: Path, root: Path | None = None) -> list[ValidationResult]:
             "not modelled": "the coupled wrist's motor-6 inertia and friction acting on joints 5 and 6",
         },
     )
-    path = report.write(out / "tx40_report.html")
-    print(f"wrote {path} and {out / 'tx40_model.json'}")
     return results
 
 
 if __name__ == "__main__":
-    from dynid.exceptions import DynidError
-
-    try:
-        main(Path(sys.argv[1] if len(sys.argv) > 1 else "."))
-    except DynidError as err:  # e.g. no recordings here: one sentence, no traceback
-        sys.exit(f"{Path(__file__).name}: {err}")
+    run(main, __file__)
