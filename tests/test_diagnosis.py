@@ -230,6 +230,21 @@ def test_heldout_data_without_a_noise_estimate_is_refused(small):
         diagnose(model, train, one)
 
 
+def test_a_floor_from_the_spectrum_makes_the_verdict_provisional(ur5, small):
+    model, train, held = small
+    # Less than one period of a slow excitation: no repeated period, the floor comes from the spectrum.
+    slow = simulate(
+        ur5, random_fourier(ur5, 23, base_freq=0.15), duration=5.0, friction="linear", seed=23, truth_seed=21
+    ).to_dataset()
+    d = diagnose(model, train, slow, max_samples=3000, max_effects=1)
+    assert d.noise.method == "spectrum"
+    assert d.provisional and d.to_dict()["provisional"] is True
+    assert "Provisional" in d.summary() and "three periods" in d.summary()
+    periodic = diagnose(model, train, held, max_samples=3000, max_effects=1)
+    assert periodic.noise.method == "periods"
+    assert not periodic.provisional and "Provisional" not in periodic.summary()
+
+
 def test_unknown_effect_names_are_refused(small):
     model, train, held = small
     with pytest.raises(UsageError, match="unknown effect 'friction_wobble'"):
