@@ -66,21 +66,10 @@ def write_json(path: str | os.PathLike | None, figures: dict) -> None:
     """Write the figures of a command to ``--json FILE`` (atomically), if asked."""
     if path is None:
         return
+    from dynid._json import jsonable
     from dynid.optim.trajectory import write_atomic
 
-    write_atomic(Path(path), json.dumps(figures, indent=2, default=_jsonable) + "\n")
-
-
-def _jsonable(value):
-    import numpy as np
-
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
+    write_atomic(Path(path), json.dumps(figures, indent=2, default=jsonable) + "\n")
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -51,6 +51,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from dynid._json import jsonable
 from dynid.exceptions import DynidError, ModelFileError, UsageError
 from dynid.identify._threads import single_blas_thread
 from dynid.identify.consistent import ConsistentLS, pseudo_inertia
@@ -654,16 +655,6 @@ def identify(
 
 
 # ---------------------------------------------------------------------------- files
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
-
-
 def _clean(value: Any) -> Any:
     """JSON-ready copy: arrays to lists, non-finite floats to None (JSON has no NaN)."""
     if isinstance(value, dict):
@@ -727,7 +718,7 @@ def save_model(model: IdentifiedModel, path: str | os.PathLike[str]) -> tuple[Pa
         "arrays": arrays_path.name,
         "arrays_sha256": hashlib.sha256(blob).hexdigest(),
     }
-    text = json.dumps(_clean(doc), indent=2, default=_jsonable, allow_nan=False) + "\n"
+    text = json.dumps(_clean(doc), indent=2, default=jsonable, allow_nan=False) + "\n"
     tmp_arrays = _write_temp(path.parent, arrays_path.name, blob)
     try:
         tmp_json = _write_temp(path.parent, path.name, text.encode())
