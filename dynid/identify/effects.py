@@ -858,11 +858,8 @@ class Cogging(Effect):
     def build(cls, ctx, value, joints, rng):
         n = ctx.robot.n
         amp = np.outer(ctx.scales.torque, [0.01, 0.005]) * value
-        mask = np.zeros(n, dtype=bool)
-        mask[list(joints)] = True
-        amp[~mask] = 0.0
         phase = rng.uniform(0.0, 2 * math.pi, size=(n, 2))
-        return cls(value, joints, ratio=100.0, amplitude=amp, phase=phase)
+        return cls(value, joints, ratio=100.0, amplitude=_per_joint(amp, joints), phase=phase)
 
     def drive(self, t, x, dx, tau_m):
         k = np.arange(1, self.amplitude.shape[1] + 1)
