@@ -128,13 +128,24 @@ class _Columns:
         return np.column_stack([W @ x_sel[i] for W, i in zip(self.W, self.idx, strict=True)])
 
 
+def _ridge_rows(
+    N: NDArray[np.float64], ridge: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``[N / norms; diag(sqrt(ridge))]`` and the column norms (zero columns kept at norm 1).
+
+    Ridge least squares on the unit-norm columns of N is plain least squares on these rows, with the
+    target padded by one zero per column; the coefficients of N are the solution divided by ``norms``.
+    """
+    norms = np.linalg.norm(N, axis=0)
+    norms[norms == 0] = 1.0
+    return np.vstack([N / norms, np.diag(np.sqrt(ridge))]), norms
+
+
 def _eliminator(N: NDArray[np.float64], ridge: NDArray[np.float64]):
     """Projection ``v - N (N^T N + L)^-1 N^T v`` (unit-norm columns, ridge L) as a function."""
     if N.shape[1] == 0:
         return lambda v: v
-    norms = np.linalg.norm(N, axis=0)
-    norms[norms == 0] = 1.0
-    A = np.vstack([N / norms, np.diag(np.sqrt(ridge))])
+    A, _ = _ridge_rows(N, ridge)
     Q = scipy.linalg.qr(A, mode="economic", check_finite=False)[0][: len(N)]
     return lambda v: v - Q @ (Q.T @ v)
 
@@ -148,9 +159,7 @@ def _nuisance(
     """Ridge least squares of ``target`` on the columns N, coefficients >= 0 where ``lower`` is finite."""
     if N.shape[1] == 0:
         return np.zeros(0)
-    norms = np.linalg.norm(N, axis=0)
-    norms[norms == 0] = 1.0
-    A = np.vstack([N / norms, np.diag(np.sqrt(ridge))])
+    A, norms = _ridge_rows(N, ridge)
     b = np.concatenate([target, np.zeros(N.shape[1])])
     # the bounds are 0 or -inf, unchanged by the column scaling
     c, _ = _bounded_lsq(A, b, tuple(float(v) for v in np.where(np.isfinite(lower), 0.0, -np.inf)))
@@ -296,9 +305,7 @@ def _nuisance_free(N, target, ridge):
     """Ridge least squares of ``target`` on the columns N (no bounds)."""
     if N.shape[1] == 0:
         return np.zeros(0)
-    norms = np.linalg.norm(N, axis=0)
-    norms[norms == 0] = 1.0
-    A = np.vstack([N / norms, np.diag(np.sqrt(ridge))])
+    A, norms = _ridge_rows(N, ridge)
     b = np.concatenate([target, np.zeros(N.shape[1])])
     return scipy.linalg.lstsq(A, b, cond=1e-12, check_finite=False)[0] / norms
 
