@@ -72,29 +72,23 @@ def main() -> None:
 
     noise = 0.2  # N m
     rate = 1000.0
-    train = synthetic_dataset(
-        cols,
-        x,
-        random_fourier(robot, rng, periods=6),
-        rate=rate,
-        rng=rng,
-        noise=noise,
-        extra=extra,
-        state_noise=1e-5,
-        with_derivatives=False,
-    )
-    train = train.select_rows(np.arange(60_000))
-    test = synthetic_dataset(
-        cols,
-        x,
-        random_fourier(robot, rng, periods=2),
-        rate=rate,
-        rng=rng,
-        noise=noise,
-        extra=extra,
-        state_noise=1e-5,
-        with_derivatives=False,
-    )
+
+    def recording(periods: int):
+        """A run of a new random trajectory, with the torque and noise above (angles only)."""
+        return synthetic_dataset(
+            cols,
+            x,
+            random_fourier(robot, rng, periods=periods),
+            rate=rate,
+            rng=rng,
+            noise=noise,
+            extra=extra,
+            state_noise=1e-5,
+            with_derivatives=False,
+        )
+
+    train = recording(6).select_rows(np.arange(60_000))
+    test = recording(2)
     pre = Preprocessing(cutoff=20.0)
     print(f"data: {train.m} samples x {train.n} joints = {train.m * train.n} stacked rows at {rate:g} Hz")
     rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
