@@ -661,6 +661,10 @@ class FrictionLayer:
     def __repr__(self) -> str:
         return f"FrictionLayer(model={self.model!r})"
 
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "models_"):
+            raise UsageError("this FrictionLayer is not fitted yet; call fit(dq, F) first")
+
     @one_blas_thread
     def fit(
         self, dq: ArrayLike, F: ArrayLike, *, prepared: Any = None, around: FrictionLayer | None = None
@@ -714,8 +718,7 @@ class FrictionLayer:
         dq : array_like, shape (m, n)
             Joint velocities (rad/s).
         """
-        if not hasattr(self, "models_"):
-            raise UsageError("this FrictionLayer is not fitted yet; call fit(dq, F) first")
+        self._check_fitted()
         dq = np.atleast_2d(np.asarray(dq, dtype=np.float64))
         return [mdl.basis(dq[:, j]) for j, mdl in enumerate(self.models_)]
 
@@ -738,8 +741,7 @@ class FrictionLayer:
         dq : array_like, shape (m, n)
             Joint velocities (rad/s).
         """
-        if not hasattr(self, "models_"):
-            raise UsageError("this FrictionLayer is not fitted yet; call fit(dq, F) first")
+        self._check_fitted()
         dq = np.atleast_2d(np.asarray(dq, dtype=np.float64))
         if dq.shape[1] != len(self.models_):
             raise DataError(
@@ -749,8 +751,7 @@ class FrictionLayer:
 
     def to_dict(self) -> dict[str, Any]:
         """``{"model": name, "joints": [coef dict per joint]}`` (JSON-ready)."""
-        if not hasattr(self, "models_"):
-            raise UsageError("this FrictionLayer is not fitted yet; call fit(dq, F) first")
+        self._check_fitted()
         return {"model": self.model, "joints": [mdl.to_dict()["coef"] for mdl in self.models_]}
 
     @classmethod
