@@ -742,6 +742,14 @@ class LinearSystem:
             R_aug = np.vstack([R_aug, np.zeros((p + 1 - R_aug.shape[0], p + 1))])
         return R_aug[:p, :p], R_aug[:p, p], float(R_aug[p, p] ** 2)
 
+    def _model_map(self, x: NDArray[np.float64], mask: NDArray[np.bool_] | None) -> NDArray[np.float64]:
+        """(c, n): the data matrix's columns to the model torque ``W x`` per joint (torque columns 0)."""
+        xm = x if mask is None else np.where(mask, x, 0.0)
+        reg = np.flatnonzero(self.z_param >= 0)
+        C = np.zeros((len(self.z_joint), self.n))
+        C[reg, self.z_joint[reg]] = xm[self.z_param[reg]]
+        return C
+
     def residual_matrix(
         self, x: NDArray[np.float64], mask: NDArray[np.bool_] | None = None
     ) -> NDArray[np.float64]:
@@ -754,12 +762,9 @@ class LinearSystem:
         mask : ndarray of bool, shape (p,), optional
             Use only these parameters in the model.
         """
-        xm = x if mask is None else np.where(mask, x, 0.0)
-        c, n = len(self.z_joint), self.n
-        C = np.zeros((c, n))
-        reg = self.z_param >= 0
-        C[np.flatnonzero(reg), self.z_joint[reg]] = -xm[self.z_param[reg]]
-        C[np.flatnonzero(~reg), self.z_joint[~reg]] = 1.0
+        C = -self._model_map(x, mask)  # the residual tau - W x: minus the model ...
+        tau = np.flatnonzero(self.z_param < 0)
+        C[tau, self.z_joint[tau]] = 1.0  # ... plus each joint's torque column
         G = self.R_Z @ C
         return G.T @ G
 
@@ -802,10 +807,7 @@ class LinearSystem:
             Use only these parameters.
         """
         Z = self._need_Z()
-        xm = x if mask is None else np.where(mask, x, 0.0)
-        reg = np.flatnonzero(self.z_param >= 0)
-        C = np.zeros((len(self.z_joint), self.n))
-        C[reg, self.z_joint[reg]] = xm[self.z_param[reg]]
+        C = self._model_map(x, mask)
         rows = self.prepared.rows
         out = np.empty((len(rows), self.n))
         for a in range(0, len(rows), _CHUNK):
