@@ -133,6 +133,31 @@ def _locked(path: Path) -> Iterator[None]:
             fcntl.flock(handle, fcntl.LOCK_UN)
 
 
+@contextlib.contextmanager
+def _staged_dir(dest: Path, prefix: str) -> Iterator[Path]:
+    """A new temporary sibling of ``dest`` to write a folder into, moved into place at the end.
+
+    On a normal exit it replaces ``dest`` (removing an older one); on an error it is removed, so a
+    failure leaves nothing half written.
+
+    Parameters
+    ----------
+    dest : Path
+        The folder to write; its parent must exist.
+    prefix : str
+        Start of the temporary folder's name.
+    """
+    work = Path(tempfile.mkdtemp(prefix=prefix, dir=dest.parent))
+    try:
+        yield work
+        if dest.exists():
+            shutil.rmtree(dest)
+        os.replace(work, dest)
+    finally:
+        if work.exists():
+            shutil.rmtree(work, ignore_errors=True)
+
+
 def _run_with_progress(cmd: list[str], what: str, expected: str, progress: Progress | None) -> None:
     """Run ``cmd``; report elapsed time every 15 s while it runs."""
     start = time.monotonic()
@@ -224,8 +249,7 @@ def robot_function_dir(spec: str, progress: Progress | None = _stderr) -> Path:
     with _locked(cache_dir() / "robots" / f"{key}.lock"):
         if all((folder / f"{name}.casadi").is_file() for name in FUNCTION_NAMES):
             return folder
-        work = Path(tempfile.mkdtemp(prefix=f"{key}.tmp", dir=folder.parent))
-        try:
+        with _staged_dir(folder, prefix=f"{key}.tmp") as work:
             (work / "robot.spec").write_text(spec)
             proc = subprocess.run(
                 [str(exe), str(work / "robot.spec"), str(work)], capture_output=True, text=True
@@ -235,10 +259,4 @@ def robot_function_dir(spec: str, progress: Progress | None = _stderr) -> Path:
                     f"the symbolic generator could not build this robot: {proc.stderr.strip()}; "
                     "check the robot description."
                 )
-            if folder.exists():
-                shutil.rmtree(folder)
-            os.replace(work, folder)
-        finally:
-            if work.exists():
-                shutil.rmtree(work, ignore_errors=True)
     return folder

@@ -22,7 +22,6 @@ import os
 import re
 import shutil
 import subprocess
-import tempfile
 from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
@@ -32,7 +31,7 @@ import casadi as ca
 from dynid.exceptions import GeneratorError, UsageError
 from dynid.symbolic._export.loader import CompiledLibrary
 from dynid.symbolic.base import BaseParameters, base_parameters
-from dynid.symbolic.build import Progress, _locked, _stderr, cache_dir, find_compiler
+from dynid.symbolic.build import Progress, _locked, _staged_dir, _stderr, cache_dir, find_compiler
 from dynid.symbolic.functions import RobotFunctions, robot_functions
 from dynid.symbolic.robot import RobotModel
 
@@ -259,8 +258,7 @@ def export_c(
         raise GeneratorError(f"the folder '{out.parent}' does not exist; create it or choose another --out.")
     funcs = robot_functions(robot, progress=progress)
     base = base_parameters(funcs)
-    work = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp", dir=out.parent))
-    try:
+    with _staged_dir(out, prefix=f".{out.name}.tmp") as work:
         stem, entries = _write_sources(work, robot, funcs, base, tuple(functions))
         _compile(work, stem, progress)
         if "base_regressor" in functions:
@@ -269,12 +267,6 @@ def export_c(
             (work / "Makefile").write_text(makefile)
         (work / "manifest.json").write_text(json.dumps(_manifest(robot, base, stem, entries), indent=2))
         shutil.copyfile(_HERE / "loader.py", work / "dynid_loader.py")
-        if out.exists():
-            shutil.rmtree(out)
-        os.replace(work, out)
-    finally:
-        if work.exists():
-            shutil.rmtree(work, ignore_errors=True)
     return ExportResult(
         folder=out,
         source=out / f"{stem}.c",
