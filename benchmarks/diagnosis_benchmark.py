@@ -15,15 +15,21 @@ GMM), diagnoses it (:func:`dynid.validation.diagnosis.diagnose`) and classifies 
 (:func:`dynid.validation.synthetic.classify`).  Printed: the confusion matrix (injected x diagnosed,
 with parametric / none / unexplained columns), accuracy per level, false-alarm rate, share of unknown
 effects called "unexplained", median closure.  The method's thresholds were set on other seeds
-(1000 and up) than the benchmark's (1 and up).
+(1000 and up) than the benchmark's (1 and up; effect-free cases 101 and up).
 
 Run::
 
     OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python benchmarks/diagnosis_benchmark.py [--seeds 3] [--quick]
         [--n-jobs 2] [--json results.json]
 
-``--quick`` uses 2 seeds and fewer effect-free cases (about 10 minutes on 2 cores).  Not a test:
-nothing is asserted.
+``--quick`` uses 2 seeds and 10 effect-free cases per seed (about 25 minutes on 2 free cores; the
+full run, 3 seeds and 17 effect-free cases per seed, about 40).  Not a test: nothing is asserted.
+
+"Right where the visible excess is >= 1x" selects the single-effect cases by the excess the effect
+leaves on its joints after re-identification (the baseline refit's held-out MSE over the measured
+noise floor, minus one), whatever calibrated size produced it: the calibration measures the raw
+torque contribution, of which the low-pass filter and the refit can hide most (a 10-20 Hz
+transmission vibration, a gain error the base parameters absorb).
 """
 
 from __future__ import annotations
@@ -44,6 +50,21 @@ LEVELS = (0.3, 1.0, 3.0)
 PAIRS = (("stribeck", "delay"), ("cogging", "load_friction"), ("nonlinear_viscous", "base_tilt"))
 WHOLE_ARM = ("payload", "base_tilt", "coupled_friction")
 UNKNOWN = "coupled_friction"
+SHAKE_ARM = ("elasticity", "backlash")  # a flexible transmission shows on every joint
+ABSORBED = ("payload", "drive_gain", "offset", "armature")  # re-identification can absorb them
+
+
+def _visible(r: dict) -> float:
+    """The effect's excess over the noise floor on its joints, in noise variances: the baseline refit's
+    held-out MSE ratio minus 1 (measured before any candidate is scored)."""
+    return max(r.get("excess_joint") or [1.0]) - 1.0
+
+
+def _upper95(k: int, n: int) -> float:
+    """One-sided 95 % upper confidence bound of a rate seen k times in n (Clopper-Pearson)."""
+    from scipy.stats import beta
+
+    return 1.0 if k >= n else float(beta.ppf(0.95, k + 1, n - k))
 
 
 def _joint(effect: str, seed: int, n: int, avoid: int | None = None) -> int | None:
@@ -76,7 +97,7 @@ def build_cases(seeds: list[int], none_per_seed: int, n: int = 6) -> list[dict]:
             )
         for k in range(none_per_seed):
             cases.append(
-                {"kind": "none", "effect": "none", "injected": [], "level": 0.0, "seed": seed + 1000 * k}
+                {"kind": "none", "effect": "none", "injected": [], "level": 0.0, "seed": 100 + 20 * k + seed}
             )
         for level in (1.0, 3.0):
             cases.append(
@@ -99,6 +120,8 @@ def run_one(case: dict) -> dict:
         return {**case, "error": f"{type(err).__name__}: {err}", "correct": False, "label": "error"}
     d = out.pop("diagnosis")
     joints = [int(s.split("@")[1]) - 1 for s in case["injected"] if "@" in s]
+    if not joints or any(s.split("@")[0] in SHAKE_ARM for s in case["injected"]):
+        joints = list(range(len(out["excess"])))  # whole-arm effects and flexible transmissions
     return {
         **case,
         "values": out["values"],
@@ -164,6 +187,26 @@ def report(results: list[dict]) -> str:
     big = [r for r in singles if r["level"] >= 1.0]
     ok = sum(r["correct"] for r in big)
     lines.append(f"  at >= 1x noise: {ok}/{len(big)} = {100 * ok / max(len(big), 1):.0f} %  (target >= 90 %)")
+    vis = [r for r in singles if _visible(r) >= 1.0]
+    ok = sum(r["correct"] for r in vis)
+    lines.append(
+        f"Right where the effect's visible excess on its joints is >= 1x the noise floor (the issue's criterion; "
+        f"all levels): {ok}/{len(vis)} = {100 * ok / max(len(vis), 1):.0f} %  (target >= 90 %)"
+    )
+    for r in vis:
+        if not r["correct"]:
+            lines.append(
+                f"    miss: {r['injected'][0]} level {r['level']:g} seed {r['seed']} (excess {_visible(r):.2f}x): "
+                f"{'/'.join(r['verdict'])} ({r['parametric']})"
+            )
+    hidden = [r for r in big if _visible(r) < 1.0]
+    hid_abs = [r for r in hidden if r["effect"] in ABSORBED]
+    lines.append(
+        f"Calibrated >= 1x but visible excess < 1x: {len(hidden)} cases; of these, effects re-identification "
+        f"absorbs ({', '.join(ABSORBED)}) named or found by the parameter-change test: "
+        f"{sum(r['correct'] for r in hid_abs)}/{len(hid_abs)}; others named: "
+        f"{sum(r['correct'] for r in hidden if r not in hid_abs)}/{len(hidden) - len(hid_abs)}"
+    )
     per_effect = defaultdict(list)
     for r in big:
         per_effect[r["effect"]].append(r)
@@ -186,7 +229,8 @@ def report(results: list[dict]) -> str:
     none = [r for r in results if r["kind"] == "none"]
     fa = sum(not r["correct"] for r in none)
     lines.append(
-        f"False alarms with nothing injected: {fa}/{len(none)} = {100 * fa / max(len(none), 1):.1f} %  (target <= 2 %)"
+        f"False alarms with nothing injected: {fa}/{len(none)} = {100 * fa / max(len(none), 1):.1f} % "
+        f"(one-sided 95 % upper bound {100 * _upper95(fa, len(none)):.1f} %; target <= 2 %)"
     )
     for r in none:
         if not r["correct"]:
@@ -220,14 +264,14 @@ def main() -> None:
     parser.add_argument(
         "--first-seed", type=int, default=1, help="first seed (the method was tuned on 1000+)"
     )
-    parser.add_argument("--none", type=int, default=4, help="effect-free cases per seed")
-    parser.add_argument("--quick", action="store_true", help="2 seeds, 3 effect-free cases per seed")
+    parser.add_argument("--none", type=int, default=17, help="effect-free cases per seed")
+    parser.add_argument("--quick", action="store_true", help="2 seeds, 10 effect-free cases per seed")
     parser.add_argument("--n-jobs", type=int, default=2)
     parser.add_argument("--only", default=None, help="comma-separated effects to run (default all)")
     parser.add_argument("--json", default=None, help="write every case's result to this file")
     args = parser.parse_args()
     seeds = list(range(args.first_seed, args.first_seed + (2 if args.quick else args.seeds)))
-    cases = build_cases(seeds, 3 if args.quick else args.none)
+    cases = build_cases(seeds, 10 if args.quick else args.none)
     if args.only:
         keep = set(args.only.split(","))
         cases = [c for c in cases if c["effect"] in keep or any(p in keep for p in c["effect"].split("+"))]
