@@ -512,7 +512,12 @@ def _describe_refit(r: RankedCandidate) -> str:
     if e == "delay":
         return f"delay {1000 * eff['d']:.2g} ms"
     if e == "elasticity":
-        return f"stiffness {r.refit['stiffness']:.3g} N m/rad, resonance {r.refit['frequency_hz']:.3g} Hz"
+        bound = (
+            ", at the top of the searched range: the data show a compliance, not its resonance"
+            if r.refit.get("at_bound")
+            else ""
+        )
+        return f"stiffness {r.refit['stiffness']:.3g} N m/rad, resonance {r.refit['frequency_hz']:.3g} Hz{bound}"
     return f"half gap {1000 * eff['a']:.2g} mrad"
 
 
@@ -1287,6 +1292,7 @@ def _refine(ctx: _Ctx, fit: _Fit, cand: Candidate, C_tr):
             m = float(np.median(ctx.tr.src.mass_column(cand.joint)[:, cand.joint]))
             info["effective"] = {"w": w, "z": float(theta[1])}
             info["frequency_hz"] = w / (2 * math.pi)
+            info["at_bound"] = bool(w >= 0.99 * hi[0])
             info["stiffness"] = m * w * w
             info["units"] = "w in rad/s, stiffness in N m/rad (with the median M_jj)"
         elif e == "delay":
