@@ -115,8 +115,8 @@ EFFECT_CASES = {
     "nonlinear_viscous": ("nonlinear_viscous@4:9", {}),
 }
 # The closed-loop vibration of a flexible joint is only partly captured by the one-mass resonance refit
-# (about half of its gap on all joints); every other effect must close at least 70 % of its gap.
-MIN_CLOSURE = {"elasticity": 0.4, "backlash": 0.4}
+# (0.58 of its gap on all joints here, in noise variances); every other effect must close at least 70 %.
+MIN_CLOSURE = {"elasticity": 0.5, "backlash": 0.4}
 SLOW = {
     "temperature",
     "elasticity",
