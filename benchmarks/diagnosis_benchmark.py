@@ -56,7 +56,8 @@ ABSORBED = ("payload", "drive_gain", "offset", "armature")  # re-identification 
 
 def _visible(r: dict) -> float:
     """The effect's excess over the noise floor on its joints, in noise variances: the baseline refit's
-    held-out MSE ratio minus 1 (measured before any candidate is scored)."""
+    held-out MSE ratio minus 1 (measured before any candidate is scored).  For whole-arm effects and
+    flexible transmissions the largest over all joints, background included."""
     return max(r.get("excess_joint") or [1.0]) - 1.0
 
 
@@ -96,13 +97,15 @@ def build_cases(seeds: list[int], none_per_seed: int, n: int = 6) -> list[dict]:
                 {"kind": "pair", "effect": f"{a}+{b}", "injected": specs, "level": 3.0, "seed": seed}
             )
         for k in range(none_per_seed):
-            cases.append(
-                {"kind": "none", "effect": "none", "injected": [], "level": 0.0, "seed": 100 + 20 * k + seed}
-            )
+            free = 100 + 20 * k + seed  # below the tuning seeds (1000+); checked distinct below
+            cases.append({"kind": "none", "effect": "none", "injected": [], "level": 0.0, "seed": free})
         for level in (1.0, 3.0):
             cases.append(
                 {"kind": "unknown", "effect": UNKNOWN, "injected": [UNKNOWN], "level": level, "seed": seed}
             )
+    free = [c["seed"] for c in cases if c["kind"] == "none"]
+    if len(set(free)) != len(free) or (free and max(free) >= 1000):
+        raise SystemExit(f"effect-free seeds {min(free)}..{max(free)} repeat or reach the tuning seeds (1000+)")
     return cases
 
 
@@ -187,7 +190,8 @@ def report(results: list[dict]) -> str:
     big = [r for r in singles if r["level"] >= 1.0]
     ok = sum(r["correct"] for r in big)
     lines.append(f"  at >= 1x noise: {ok}/{len(big)} = {100 * ok / max(len(big), 1):.0f} %  (target >= 90 %)")
-    vis = [r for r in singles if _visible(r) >= 1.0]
+    # A case that raised counts as a miss (its excess is unknown).
+    vis = [r for r in singles if r.get("error") or _visible(r) >= 1.0]
     ok = sum(r["correct"] for r in vis)
     lines.append(
         f"Right where the effect's visible excess on its joints is >= 1x the noise floor (the issue's criterion; "
@@ -199,7 +203,7 @@ def report(results: list[dict]) -> str:
                 f"    miss: {r['injected'][0]} level {r['level']:g} seed {r['seed']} (excess {_visible(r):.2f}x): "
                 f"{'/'.join(r['verdict'])} ({r['parametric']})"
             )
-    hidden = [r for r in big if _visible(r) < 1.0]
+    hidden = [r for r in big if not r.get("error") and _visible(r) < 1.0]
     hid_abs = [r for r in hidden if r["effect"] in ABSORBED]
     lines.append(
         f"Calibrated >= 1x but visible excess < 1x: {len(hidden)} cases; of these, effects re-identification "
@@ -229,8 +233,9 @@ def report(results: list[dict]) -> str:
     none = [r for r in results if r["kind"] == "none"]
     fa = sum(not r["correct"] for r in none)
     lines.append(
-        f"False alarms with nothing injected: {fa}/{len(none)} = {100 * fa / max(len(none), 1):.1f} % "
-        f"(one-sided 95 % upper bound {100 * _upper95(fa, len(none)):.1f} %; target <= 2 %)"
+        f"False alarms with nothing injected: {fa}/{len(none)} = {100 * fa / max(len(none), 1):.1f} %  (target "
+        f"<= 2 %; one-sided 95 % upper bound {100 * _upper95(fa, len(none)):.1f} %: bounding it below 2 % "
+        "takes 149 clean cases)"
     )
     for r in none:
         if not r["correct"]:

@@ -1,7 +1,8 @@
-"""The real recordings under ../shared/data: identify, validate on the later part, write the reports.
+"""The real recordings under ../shared/data: identify, validate on the later part, diagnose, write the reports.
 
-Runs ``scripts/identify_panda.py`` and ``scripts/identify_tx40.py`` (their ``main``) and checks what
-they claim; skipped, with the reason, when the recordings are not there (a user's fresh clone).
+Runs ``scripts/identify_panda.py`` and ``scripts/identify_tx40.py`` (their ``main``) and the TX40 part
+of ``scripts/diagnose_real_robots.py``, and checks what they claim; skipped, with the reason, when the
+recordings are not there (a user's fresh clone).
 """
 
 from __future__ import annotations
@@ -74,10 +75,10 @@ def test_tx40_diagnosis_points_at_the_coupled_wrist_and_is_provisional(shared_da
     # The TX40's motor 6 turns with joint 5 (its README): the friction of that motor acts on
     # dq5 + dq6, which the model's per-joint friction cannot hold.  The held-out part is not periodic,
     # so the floor comes from the spectrum and the verdict must say it is provisional.
+    script = runpy.run_path(str(REPO / "scripts" / "diagnose_real_robots.py"), run_name="dynid_script")
+    split, decimate = script["RECORDINGS"]["tx40"]
     with contextlib.redirect_stdout(io.StringIO()):
-        doc = runpy.run_path(str(REPO / "scripts" / "diagnose_real_robots.py"), run_name="dynid_script")[
-            "diagnose_recording"
-        ]("tx40", 6.0, 10, tmp_path, shared_data)
+        doc = script["diagnose_recording"]("tx40", split, decimate, tmp_path, shared_data)
     top = doc["ranking"][0]
     assert (top["effect"], top["joint"]) == ("coupled_friction", [5, 6]), doc["ranking"][:3]
     assert top["closure"] > 0.9

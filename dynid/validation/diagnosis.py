@@ -15,16 +15,17 @@ Method, in the order it runs:
    periodic excitation, else the spectral level), never assumed.
 2. Baseline: the base parameters and the model's own extra columns (armature, linear friction, and
    the shape of its friction layer) are identified again on the training data by weighted least squares
-   (weights: the baseline residual level per joint).  The held-out error of the model as given minus
+   (weights: the baseline residual level per joint, reweighted until they settle).  The held-out error of the model as given minus
    that of the refit is the *parametric* part of the gap.
 3. Screen: every catalogue candidate on every joint (:mod:`dynid.validation.candidates`) is refitted
    together with the baseline on the training data (its hyper-parameters tuned there, never on the
    held-out data) and scored by the reduction of the held-out loss ``sum_j r_j^2 / sigma_j^2``; its
    significance is a one-sided Diebold-Mariano test on the per-sample loss difference with a
    Newey-West variance, Holm-corrected across the candidates.
-4. Forward selection: the best significant candidate that closes at least ``min_closure`` of the
-   gap on its own joint(s) is accepted (a simpler candidate on the same joints that it does not beat
-   significantly is preferred), refitted (nonlinear least squares for elasticity, backlash and delay,
+4. Forward selection: among the significant candidates that close at least ``min_closure`` of the
+   gap on their own joint(s) (in noise variances), the one that lowers the held-out loss of the whole
+   arm most is accepted (a simpler candidate on the same joints that it does not beat significantly
+   is preferred), refitted (nonlinear least squares for elasticity, backlash and delay,
    whose first-order columns recover only part of the gap; the continuous hyper-parameters of the
    others), and the screen repeats on top of it, up to ``max_effects``.
 5. Verdict: the accepted effects; else ``["unexplained"]`` when the excess of some joint over the
@@ -32,7 +33,9 @@ Method, in the order it runs:
    excess even on an effect-free robot), ``["none"]`` when not.  Candidates whose columns are nearly parallel once the baseline is projected
    out (small principal angle) are reported as not separable with this excitation.
 6. Parametric test: identified minus nominal base parameters, with a block (HAC) covariance, against
-   structured hypotheses (common drive gain, payload on the last link, torque offsets) by chi^2 / BIC.
+   structured hypotheses (common drive gain, a torque gain on one joint, payload on the last link, an
+   armature per joint) by chi^2 / BIC; then the model's own torque offsets and armatures against
+   their nominal values.
 """
 
 from __future__ import annotations
@@ -367,7 +370,8 @@ class RankedCandidate:
         The same reduction summed over every joint: an effect that the shared base parameters spread to
         other joints also mends them there.  The choice among acceptable candidates uses it.
     closure : float
-        ``(MSE_before - MSE_after) / (MSE_before - noise)`` on its joint(s), held-out.
+        ``sum_j (MSE_before_j - MSE_after_j) / noise_j`` over ``sum_j (MSE_before_j - noise_j) / noise_j``
+        on its joint(s), held-out (per joint, in noise variances).
     p_value, p_holm : float
         One-sided Diebold-Mariano p-value and its Holm-adjusted value.
     significant : bool
@@ -513,7 +517,7 @@ def _describe_refit(r: RankedCandidate) -> str:
         return f"delay {1000 * eff['d']:.2g} ms"
     if e == "elasticity":
         bound = (
-            ", at the top of the searched range: the data show a compliance, not its resonance"
+            ", at an end of the searched range: the data do not pin the resonance down"
             if r.refit.get("at_bound")
             else ""
         )
@@ -785,7 +789,8 @@ def _diagnose(
     # wrist) under-weighted, its residual inflated by the heavy joints' model errors (an effect-free
     # UR5 showed 3.4x the noise floor on joint 6 after one pass, 1.3x after three).
     w = np.zeros(n)
-    for _ in range(_WEIGHT_PASSES):
+    settled, passes = False, 0
+    for passes in range(1, _WEIGHT_PASSES + 1):  # noqa: B007 - the count is reported
         w_new = 1.0 / np.maximum(np.sqrt(_mse(tr.y - _predict(tr.X0, x, None, None), mt)), 1e-12)
         settled = bool(np.all(np.abs(w_new - w) <= 0.05 * w_new))
         w = w_new
@@ -855,6 +860,11 @@ def _diagnose(
     r_cur = r_base
     ranking0: list[RankedCandidate] = []
     notes: list[str] = []
+    if not settled:
+        notes.append(
+            f"The baseline refit's joint weights still moved by more than 5 % after {passes} reweighting "
+            "passes: the split of the gap between joints is uncertain."
+        )
     tuned: dict[int, tuple[Candidate, NDArray[np.float64]]] = {}
     for rnd in range(max_effects + 1):
         scored = []
@@ -1018,6 +1028,8 @@ def _diagnose(
             "block_seconds": block_seconds,
             "samples_train": int(tr.y.shape[0]),
             "samples_heldout": int(ho.y.shape[0]),
+            "weight_passes": passes,
+            "weights_settled": settled,
             "preprocessing": settings,
         },
         residuals={
@@ -1292,7 +1304,7 @@ def _refine(ctx: _Ctx, fit: _Fit, cand: Candidate, C_tr):
             m = float(np.median(ctx.tr.src.mass_column(cand.joint)[:, cand.joint]))
             info["effective"] = {"w": w, "z": float(theta[1])}
             info["frequency_hz"] = w / (2 * math.pi)
-            info["at_bound"] = bool(w >= 0.99 * hi[0])
+            info["at_bound"] = bool(w >= 0.99 * hi[0] or w <= 1.01 * lo[0])
             info["stiffness"] = m * w * w
             info["units"] = "w in rad/s, stiffness in N m/rad (with the median M_jj)"
         elif e == "delay":
@@ -1352,8 +1364,8 @@ def _parametric(
 
     ``gain_dirs`` maps a joint (0-based) to the parameter change (k, 1) that a torque gain error on that
     joint alone leaves in the refit (the regression of its predicted torque on the baseline columns); a
-    gain on one joint is only partly absorbed, so its residual part is scored as a candidate and the
-    absorbed part here.
+    gain on one joint is partly absorbed (for most joints nearly all of it): its residual part is scored
+    as a candidate, the absorbed part here.
 
     A structured hypothesis is the finding when it has the lowest BIC, the nominal parameters are
     rejected clearly (chi^2 per degree of freedom above ``2 chi2_per_dof``) and what it leaves is
@@ -1444,7 +1456,7 @@ def _parametric(
         finding = "unstructured"
         text = (
             "Parameter change: the re-identified base parameters differ from the nominal ones, and no structured "
-            "hypothesis (common gain, payload, armature) explains the change: the nominal inertial parameters "
+            "hypothesis (common or one-joint gain, payload, armature) explains the change: the nominal inertial parameters "
             "are off."
         )
     # Per-joint parameters the model holds: torque offsets (nominal 0) and armatures (nominal: the URDF's).

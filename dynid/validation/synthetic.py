@@ -290,7 +290,8 @@ def run_case(
     Returns
     -------
     dict
-        The case, the calibrated values, the verdict, the classification and the closure.
+        The case, the calibrated values, the realised effects (their truth-file entries: sizes, joints),
+        the verdict, the classification and the closure.
     """
     from dynid.identify.model import identify
     from dynid.validation.diagnosis import diagnose
@@ -343,6 +344,7 @@ def run_case(
         "achieved_level": achieved,
         "verdict": list(d.verdict),
         "excess": [float(v) for v in d.excess["ratio"]],
+        "realised": [e.to_dict() for e in tr.truth.effects],
         "diagnosis": d,
         **cls,
     }
