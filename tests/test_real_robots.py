@@ -77,11 +77,16 @@ def test_tx40_diagnosis_points_at_the_coupled_wrist_and_is_provisional(shared_da
     # so the floor comes from the spectrum and the verdict must say it is provisional.
     script = runpy.run_path(str(REPO / "scripts" / "diagnose_real_robots.py"), run_name="dynid_script")
     split, decimate = script["RECORDINGS"]["tx40"]
-    with contextlib.redirect_stdout(io.StringIO()):
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
         doc = script["diagnose_recording"]("tx40", split, decimate, tmp_path, shared_data)
     top = doc["ranking"][0]
     assert (top["effect"], top["joint"]) == ("coupled_friction", [5, 6]), doc["ranking"][:3]
     assert top["closure"] > 0.9
     assert doc["provisional"] is True
+    # Named, or the reason it is not: on 3 s of held-out data the 95 % closure is not significant after
+    # the correction for the ~60 candidates tested, and the summary must say that, not "closes too little".
+    if doc["verdict"] != ["coupled_friction"]:
+        assert "a longer held-out run would decide" in printed.getvalue()
     assert doc["noise_floor"]["method"] == "spectrum"
     assert (tmp_path / "tx40_diagnosis.html").is_file()

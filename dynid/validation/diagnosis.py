@@ -538,14 +538,19 @@ def verdict_text(d: Diagnosis) -> str:
     elif d.verdict == ["unexplained"]:
         lines.append(
             f"Unexplained gap: the held-out error is {ratio:.2f} times the noise floor (significant), and no "
-            "candidate effect of the catalogue closes enough of it."
+            "candidate effect of the catalogue both closes enough of it and passes the significance test."
         )
         if d.ranking:
             top = d.ranking[0]
-            lines.append(
-                f"The closest candidate, {top.candidate.label}, would close {100 * max(top.closure, 0):.0f} % "
-                "of its joint's gap; that is not taken as the cause."
-            )
+            closes = f"{top.candidate.label}, would close {100 * max(top.closure, 0):.0f} % of its joints' gap"
+            if top.closure >= d.settings.get("min_closure", 0.5) and not top.significant:
+                lines.append(
+                    f"The best candidate, {closes}, but that gain is not significant on these held-out data "
+                    f"once the {len(d.ranking)} candidates tested are accounted for (Holm-adjusted p = "
+                    f"{top.p_holm:.2g}): a longer held-out run would decide."
+                )
+            else:
+                lines.append(f"The closest candidate, {closes}; that is not taken as the cause.")
     else:
         for r in d.accepted:
             hyper = _describe_refit(r)
