@@ -79,6 +79,7 @@ from typing import Any
 
 import numpy as np
 
+from dynid._json import jsonable
 from dynid.exceptions import DataError, ShapeError, UsageError
 from dynid.identify.dataset import Dataset, save_dataset
 from dynid.identify.effects import (
@@ -1090,7 +1091,7 @@ def write_simulation(
     """
     path = check_output_path(path)
     sidecar = truth_path(path)
-    text = json.dumps(result.truth_dict(), indent=2, default=_jsonable) + "\n"
+    text = json.dumps(result.truth_dict(), indent=2, default=jsonable) + "\n"
     dataset = result.to_dataset(true_states=true_states)
     fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=path.suffix)
     os.close(fd)
@@ -1133,11 +1134,3 @@ def _write_text_atomic(path: Path, text: str) -> None:
         raise
 
 
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
