@@ -914,10 +914,12 @@ def _diagnose(
                 else max(min_closure, 0.5)
             )
         ]
-        unresolved = [x for x in ok if not _resolvable(ctx, current_fit, x)]
-        for x in unresolved:
-            d = (x[1].refit.get("effective") or {}).get("d")
-            d = _first_order_delay(ctx, current_fit, x[1].candidate, x[2]) if d is None else d
+        resolved = []
+        for x in ok:
+            d = _fitted_delay(ctx, current_fit, x) if x[1].candidate.effect == "delay" else None
+            if d is None or abs(d) >= ctx.min_delay:
+                resolved.append(x)
+                continue
             note = (
                 f"{x[1].candidate.label}: a timing mismatch of {1000 * d:.2g} ms, shorter than one sample "
                 f"({1000 * ctx.min_delay:.2g} ms), is not told apart from the state estimation's phase error "
@@ -925,7 +927,7 @@ def _diagnose(
             )
             if note not in notes:
                 notes.append(note)
-        ok = [x for x in ok if all(x is not u for u in unresolved)]
+        ok = resolved
         if not ok:
             break
         # Among the acceptable ones, the candidate that mends the whole arm most: a gain error on one joint
@@ -1006,11 +1008,8 @@ def _diagnose(
         "units": "N^2 m^2 (mean squared torque error on the filtered held-out data)",
     }
     # A torque gain on one joint scales that joint's measured torque: what the refit absorbs of it.
-    gain_dirs = (
-        {j: fit.regress(_columns(tr, Candidate(effect="drive_gain", joint=j, joints=(j,)))) for j in range(n)}
-        if "drive_gain" in effects
-        else {}
-    )
+    # Its columns were built for the screen (round 0 tunes every candidate).
+    gain_dirs = {c.joint: fit.regress(C) for c, C in tuned.values() if c.effect == "drive_gain"}
     par = _parametric(tr.src.ddq[tr.rows], cols, fit, x0, robot, block, alpha, sigma, gain_dirs)
     gmap = gap_map(
         t=ho.t,
@@ -1101,20 +1100,17 @@ class _Ctx:
     min_delay: float = 0.0
 
 
-def _resolvable(ctx: _Ctx, fit: _Fit, s) -> bool:
-    """Whether a candidate's fitted size can be told from the state estimation's own errors.
+def _fitted_delay(ctx: _Ctx, fit: _Fit, s) -> float:
+    """The delay (s) of a scored delay candidate: its refit's, else the first-order estimate.
 
-    A delay shorter than one sample of the recording cannot: central differences and the zero-order hold
-    of a sampled drive already shift torque against states by about half a sample (effect-free simulated
-    UR5s gave 'delays' of 0.3-0.7 ms at 1 kHz, closing 55-60 % of a gap below the significance level).
+    A delay shorter than one sample of the recording is not told apart from the state estimation's own
+    errors: central differences and the zero-order hold of a sampled drive already shift torque against
+    states by about half a sample (effect-free simulated UR5s gave 'delays' of 0.3-0.7 ms at 1 kHz,
+    closing 55-60 % of a gap below the significance level).
     """
     _, rc, C_tr, _ = s
-    if rc.candidate.effect != "delay":
-        return True
     d = (rc.refit.get("effective") or {}).get("d")
-    if d is None:
-        d = _first_order_delay(ctx, fit, rc.candidate, C_tr)
-    return abs(float(d)) >= ctx.min_delay
+    return _first_order_delay(ctx, fit, rc.candidate, C_tr) if d is None else float(d)
 
 
 def _columns(side: _Side, cand: Candidate) -> NDArray[np.float64]:
