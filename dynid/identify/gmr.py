@@ -96,17 +96,25 @@ def conditional_mean(
     cond = np.empty((K, m, n_out))
     for k in range(K):
         S = covariances[k]
-        L = np.linalg.cholesky(S[:n_in, :n_in])
-        diff = (u - means[k, :n_in]).T  # (n_in, m)
-        sol = scipy.linalg.solve_triangular(L, diff, lower=True, check_finite=False)
-        maha = np.einsum("im,im->m", sol, sol)
-        logdet = 2.0 * np.log(np.diag(L)).sum()
-        logp[k] = math.log(max(weights[k], 1e-300)) - 0.5 * (maha + logdet + n_in * math.log(2 * math.pi))
+        L, sol, logp[k] = _component(u, weights[k], means[k, :n_in], S[:n_in, :n_in])
         # S_yu S_uu^-1 (u - mu) = (L^-1 S_uy)^T L^-1 (u - mu)
         A = scipy.linalg.solve_triangular(L, S[:n_in, n_in:], lower=True, check_finite=False)  # (n_in, n_out)
         cond[k] = means[k, n_in:] + sol.T @ A
     h = np.exp(logp - logsumexp(logp, axis=0))
     return np.einsum("km,kmo->mo", h, cond)
+
+
+def _component(
+    u: NDArray[np.float64], weight: float, mean: NDArray[np.float64], cov: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """One component over the inputs: Cholesky factor L of ``cov``, ``L^-1 (u - mean)^T`` (d, m) and
+    ``log(weight N(u; mean, cov))`` (m,)."""
+    n_in = u.shape[1]
+    L = np.linalg.cholesky(cov)
+    sol = scipy.linalg.solve_triangular(L, (u - mean).T, lower=True, check_finite=False)
+    maha = np.einsum("im,im->m", sol, sol)
+    logdet = 2.0 * np.log(np.diag(L)).sum()
+    return L, sol, math.log(max(weight, 1e-300)) - 0.5 * (maha + logdet + n_in * math.log(2 * math.pi))
 
 
 def _gates(
@@ -116,14 +124,7 @@ def _gates(
     covs: NDArray[np.float64],
 ) -> NDArray[np.float64]:
     """Responsibilities ``h_k(u)`` (m, K) of a Gaussian mixture over the inputs."""
-    n_in = u.shape[1]
-    logp = np.empty((len(weights), len(u)))
-    for k in range(len(weights)):
-        L = np.linalg.cholesky(covs[k])
-        sol = scipy.linalg.solve_triangular(L, (u - means[k]).T, lower=True, check_finite=False)
-        logp[k] = math.log(max(weights[k], 1e-300)) - 0.5 * (
-            np.einsum("im,im->m", sol, sol) + 2.0 * np.log(np.diag(L)).sum() + n_in * math.log(2 * math.pi)
-        )
+    logp = np.array([_component(u, w, mu, S)[2] for w, mu, S in zip(weights, means, covs, strict=True)])
     return np.exp(logp - logsumexp(logp, axis=0)).T
 
 
