@@ -665,6 +665,16 @@ class FrictionLayer:
         if not hasattr(self, "models_"):
             raise UsageError("this FrictionLayer is not fitted yet; call fit(dq, F) first")
 
+    def _speeds(self, dq: ArrayLike) -> NDArray[np.float64]:
+        """Joint velocities (m, n) checked against the fitted joints."""
+        self._check_fitted()
+        dq = np.atleast_2d(np.asarray(dq, dtype=np.float64))
+        if dq.shape[1] != len(self.models_):
+            raise DataError(
+                f"dq has {dq.shape[1]} columns; the friction layer has {len(self.models_)} joints"
+            )
+        return dq
+
     @one_blas_thread
     def fit(
         self, dq: ArrayLike, F: ArrayLike, *, prepared: Any = None, around: FrictionLayer | None = None
@@ -718,8 +728,7 @@ class FrictionLayer:
         dq : array_like, shape (m, n)
             Joint velocities (rad/s).
         """
-        self._check_fitted()
-        dq = np.atleast_2d(np.asarray(dq, dtype=np.float64))
+        dq = self._speeds(dq)
         return [mdl.basis(dq[:, j]) for j, mdl in enumerate(self.models_)]
 
     def set_linear(self, coefs: list[ArrayLike]) -> None:
@@ -741,12 +750,7 @@ class FrictionLayer:
         dq : array_like, shape (m, n)
             Joint velocities (rad/s).
         """
-        self._check_fitted()
-        dq = np.atleast_2d(np.asarray(dq, dtype=np.float64))
-        if dq.shape[1] != len(self.models_):
-            raise DataError(
-                f"dq has {dq.shape[1]} columns; the friction layer has {len(self.models_)} joints"
-            )
+        dq = self._speeds(dq)
         return np.column_stack([mdl.predict(dq[:, j]) for j, mdl in enumerate(self.models_)])
 
     def to_dict(self) -> dict[str, Any]:
