@@ -47,6 +47,27 @@ def test_diebold_mariano_detects_a_lower_loss_and_not_an_equal_one(rng):
     assert st.diebold_mariano(ref, same, block=20).p_value > 0.01
 
 
+def test_a_fixed_extra_variance_weakens_the_diebold_mariano_test(rng):
+    ref = rng.normal(size=4000) ** 2
+    better = ref - 0.05 + 0.1 * rng.normal(size=4000)
+    plain = st.diebold_mariano(ref, better, block=20)
+    wider = st.diebold_mariano(ref, better, block=20, extra_variance=0.05**2)
+    assert plain.p_value < 1e-6
+    assert 0.05 < wider.p_value < 0.5  # the mean gain is about one extra standard deviation
+
+
+def test_the_excess_test_allows_for_the_estimation_term(rng):
+    loss = 1.0 + 0.01 * rng.normal(size=8000)  # the floor, sampled without serial correlation
+    # Without weights it is the Diebold-Mariano test against the level.
+    p_plain = st.excess_test(loss + 0.002, 1.0, block=10)
+    assert p_plain == pytest.approx(st.diebold_mariano(loss + 0.002, np.ones(8000), block=10).p_value)
+    # A mean 1 above the floor: certain without an estimation term, chance P(chi2_1 >= 1) with weight 1.
+    assert st.excess_test(loss + 1.0, 1.0, block=10) < 1e-12
+    assert st.excess_test(loss + 1.0, 1.0, [1.0], block=10) == pytest.approx(0.3173, abs=0.01)
+    # Two weights of 0.5: P(chi2_2 / 2 >= 1) = exp(-1).
+    assert st.excess_test(loss + 1.0, 1.0, [0.5, 0.5], block=10) == pytest.approx(np.exp(-1.0), abs=0.01)
+
+
 def test_diebold_mariano_refuses_too_few_blocks():
     with pytest.raises(DataError, match="at least 8 blocks"):
         st.diebold_mariano(np.ones(50), np.zeros(50), block=10)
@@ -198,6 +219,22 @@ def test_nothing_injected_gives_none(ur5):
     case = fast_case(ur5, [], seed=8)
     assert case["verdict"] == ["none"]
     assert case["parametric"] in ("none", "unstructured")
+
+
+@pytest.mark.slow
+def test_an_excess_left_by_uncertain_parameters_is_not_called_a_gap(ur5):
+    # This random training motion excites joint 1 poorly: the refit's parameter error alone is expected to
+    # add about 1.8 noise variances to joint 1's held-out error, which comes out 3.7 times the floor.
+    case = fast_case(ur5, [], seed=310)
+    d = case["diagnosis"]
+    assert d.excess["estimation"][0] > 1.0
+    r = d.residuals["before"][:, 0] / d.residuals["noise_std"][0]
+    block = round(d.settings["block_seconds"] / float(np.median(np.diff(d.residuals["t"]))))
+    level = 1 + d.excess["tolerance"]
+    assert st.excess_test(r**2, level, block=block) < 0.01  # significant without the estimation term
+    assert d.excess["p_joint"][0] > 0.05
+    assert case["verdict"] == ["none"]
+    assert "parameters uncertain" in d.summary()
 
 
 def test_an_effect_outside_the_catalogue_is_unexplained(ur5):

@@ -5,6 +5,8 @@ test here either works on a long-run (Newey-West) variance or resamples whole bl
 
 * :func:`newey_west_variance` and :func:`diebold_mariano`: is one model's held-out loss lower than
   another's, sample by sample, beyond what the serial correlation of the loss difference allows?
+* :func:`excess_test`: is a held-out loss above its floor, beyond the serial correlation and the
+  error that the training data's parameter uncertainty leaves on held-out data?
 * :func:`holm`: Holm's step-down correction of several p-values (family-wise error rate).
 * :func:`block_bootstrap_ci`: interval of a ratio of means by the moving-block bootstrap.
 * :func:`ljung_box`: whiteness of a residual.
@@ -29,6 +31,7 @@ __all__ = [
     "block_bootstrap_ci",
     "default_lag",
     "diebold_mariano",
+    "excess_test",
     "holm",
     "ljung_box",
     "newey_west_variance",
@@ -96,7 +99,12 @@ class DMResult:
 
 
 def diebold_mariano(
-    loss_ref: ArrayLike, loss_alt: ArrayLike, *, block: int = 1, lag: int | None = None
+    loss_ref: ArrayLike,
+    loss_alt: ArrayLike,
+    *,
+    block: int = 1,
+    lag: int | None = None,
+    extra_variance: float = 0.0,
 ) -> DMResult:
     """One-sided Diebold-Mariano test: is ``loss_alt`` lower than ``loss_ref`` on average?
 
@@ -112,6 +120,9 @@ def diebold_mariano(
         Samples per block mean (1: none).
     lag : int, optional
         Newey-West lag on the block means; default :func:`default_lag` of the block count.
+    extra_variance : float
+        A variance added to that of the mean difference, for a part of it that is fixed over the whole
+        run and so invisible to the serial correlation (a model's parameter error).
 
     Returns
     -------
@@ -129,10 +140,63 @@ def diebold_mariano(
     lag = default_lag(count) if lag is None else int(lag)
     var = newey_west_variance(means, lag)
     mean = float(means.mean())
-    stat = mean / math.sqrt(var / count)
+    stat = mean / math.sqrt(var / count + max(float(extra_variance), 0.0))
     # Student t with count - 1 degrees of freedom: conservative for few blocks (Harvey et al. 1997).
     p = float(stats.t.sf(stat, df=count - 1))
     return DMResult(mean=mean, stat=stat, p_value=p, lag=lag, blocks=count)
+
+
+def excess_test(
+    loss: ArrayLike,
+    level: float,
+    weights: ArrayLike = (),
+    *,
+    block: int = 1,
+    lag: int | None = None,
+    draws: int = 20000,
+) -> float:
+    """One-sided p-value of "the mean of ``loss`` is above ``level`` plus the estimation term".
+
+    Under the null hypothesis the mean loss is ``level + sum_i w_i z_i^2 + e``, where the ``z_i`` are
+    independent standard normal (a model's parameter error, fixed over the whole held-out run, seen through
+    the eigenvalues ``w_i`` of its effect on the loss) and ``e`` is the sampling error of the mean,
+    normal with the Newey-West variance of the block means (Student t, as in :func:`diebold_mariano`).
+    The estimation term is integrated by Monte Carlo with a fixed seed (reproducible); without weights
+    this is the Diebold-Mariano test of ``loss`` against the constant ``level``.
+
+    Parameters
+    ----------
+    loss : array_like, shape (m,)
+        Per-sample loss.
+    level : float
+        Its expected value when the model is right and its parameters exact.
+    weights : array_like, shape (p,)
+        Non-negative eigenvalues of the parameter error's contribution to the mean loss: their sum is
+        its expected value.
+    block, lag
+        As in :func:`diebold_mariano`.
+    draws : int
+        Monte Carlo draws of the estimation term.
+    """
+    x = np.asarray(loss, dtype=float) - float(level)
+    block = max(1, int(block))
+    count = x.size // block
+    if count < 8:
+        raise DataError(
+            f"the loss has {x.size} samples, {count} blocks of {block}; an excess test needs at least 8 "
+            "blocks: give longer held-out data."
+        )
+    means = x[: count * block].reshape(count, block).mean(axis=1)
+    lag = default_lag(count) if lag is None else int(lag)
+    se = math.sqrt(newey_west_variance(means, lag) / count)
+    mean = float(means.mean())
+    w = np.asarray(weights, dtype=float).ravel()
+    w = w[w > 1e-12 * max(float(w.max()), 1e-300)] if w.size else w
+    if not w.size:
+        return float(stats.t.sf(mean / se, df=count - 1))
+    z = np.random.default_rng(0).standard_normal((draws, w.size))
+    q = (z**2) @ w
+    return float(np.mean(stats.t.sf((mean - q) / se, df=count - 1)))
 
 
 def holm(p_values: ArrayLike) -> NDArray[np.float64]:
