@@ -28,9 +28,12 @@ nonlinear_viscous         dq_j |dq_j|,  dq_j^3                                 -
 payload                   (absorbed by the base parameters: parametric test)   -
 ========================  ===================================================  ===================
 
-``tau`` is the identified model's predicted torque (the "first fit").  Elasticity, backlash and delay
-are not linear in their parameters: the screen uses the first-order columns above, the refit
-(:mod:`dynid.validation.diagnosis`) fits their physical parameter by nonlinear least squares.
+``tau`` is the identified model's predicted torque (the "first fit"); for backlash its links' share,
+which the transmission carries (the motor's armature and friction act before the gear).
+Elasticity, backlash and delay are not linear in their parameters: the screen uses the first-order
+columns above, the refit (:mod:`dynid.validation.diagnosis`) fits their physical parameters (for
+backlash a dead zone whose sides change once the torque has reversed beyond a threshold, a crossing
+time later).
 """
 
 from __future__ import annotations
@@ -97,6 +100,12 @@ class FeatureSource:
         Sampling rate (Hz).
     runs : list of slice
         Runs (signals are differentiated within a run only).
+    torque_at : callable, optional
+        ``f(q, dq, ddq) -> (M, n)``: the model's torque at other states (what the exact transmission
+        columns shift); ``tau_pred`` at the recorded states.
+    tau_link, link_torque_at : optional
+        The same for the links' share of the torque, which the transmission carries (without the
+        model's armature and friction, which act on the motor side); the full torque when not given.
     """
 
     t: NDArray[np.float64]
@@ -111,6 +120,15 @@ class FeatureSource:
         Callable[[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]], NDArray[np.float64]] | None
     ) = None
     cache: dict[str, Any] = field(default_factory=dict)
+    tau_link: NDArray[np.float64] | None = None
+    link_torque_at: (
+        Callable[[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]], NDArray[np.float64]] | None
+    ) = None
+
+    def transmitted(self, j: int) -> NDArray[np.float64]:
+        """Torque (M,) that joint j's transmission carries to the link (N m): what deflects a spring or
+        closes a dead zone.  The motor's friction and inertia act before the gear, not through it."""
+        return (self.tau_pred if self.tau_link is None else self.tau_link)[:, j]
 
     @property
     def n(self) -> int:
@@ -265,15 +283,19 @@ def _cogging(src, c):
     return _on_joint(src, j, [f(k * N * x) for k in (1, 2) for f in (np.sin, np.cos)])
 
 
-def _shifted(src: FeatureSource, j: int, delta: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Change of the first-fit torque (M, n, 1) when the link angle of joint j lags the encoder by delta."""
-    if src.torque_at is None:
+def _shifted(src: FeatureSource, j: int, delta: NDArray[np.float64], *, links: bool = False) -> NDArray[np.float64]:
+    """Change of the first-fit torque (M, n, 1) when the link angle of joint j lags the encoder by delta;
+    with ``links`` of the links' share only (the motor's friction and inertia stay at the encoder's states)."""
+    at, base = src.torque_at, src.tau_pred
+    if links and src.link_torque_at is not None and src.tau_link is not None:
+        at, base = src.link_torque_at, src.tau_link
+    if at is None:
         raise ValueError("the exact transmission columns need FeatureSource.torque_at")
     q, dq, ddq = src.q.copy(), src.dq.copy(), src.ddq.copy()
     q[:, j] -= delta
     dq[:, j] -= src.derivative(delta, 1)
     ddq[:, j] -= src.derivative(delta, 2)
-    return (src.torque_at(q, dq, ddq) - src.tau_pred)[:, :, None]
+    return (at(q, dq, ddq) - base)[:, :, None]
 
 
 def _spring_deflection(src: FeatureSource, j: int, tau, w: float, z: float) -> NDArray[np.float64]:
@@ -292,6 +314,8 @@ def _spring_deflection(src: FeatureSource, j: int, tau, w: float, z: float) -> N
 
 def _elasticity(src, c):
     j = c.joint
+    # The model's whole torque loads the spring here: its links' share alone (physically the load)
+    # lost a flexible shoulder (UR5 joint 2, resonance 10 Hz: 0.64 of its gap closed, then none).
     tau = src.tau_pred[:, j]
     # The motor inertia of a flexible joint acts on the encoder side like an armature: its column
     # goes with the spring's when the model has no armature of its own.
@@ -307,14 +331,31 @@ def _elasticity(src, c):
     return np.concatenate([out, _on_joint(src, j, motor)], axis=2) if motor else out
 
 
+def _relay(x: NDArray[np.float64], h: float) -> NDArray[np.float64]:
+    """+-1 by the side x last crossed: above h, below -h (a relay with hysteresis 2 h)."""
+    s = np.where(x > h, 1.0, np.where(x < -h, -1.0, 0.0))
+    idx = np.where(s != 0, np.arange(s.size), 0)
+    idx = np.maximum.accumulate(idx)
+    out = s[idx]
+    first = np.flatnonzero(s)
+    out[: first[0] if first.size else s.size] = s[first[0]] if first.size else 0.0
+    return out
+
+
 def _backlash(src, c):
     j = c.joint
-    tau = src.tau_pred[:, j]
-    b = np.tanh(tau / c.hyper["eps"])
+    tau = src.transmitted(j)
     motor = [src.ddq[:, j]] if c.hyper.get("motor") else []
-    if "exact" in c.hyper:  # refit: half the gap a on the side the torque pushes, plus a compliance c
-        out = _shifted(src, j, c.hyper["a"] * b + c.hyper["c"] * 1e-3 * tau / max(np.std(tau), 1e-12))
+    if "exact" in c.hyper:
+        # Refit: the teeth change sides once the transmitted torque has reversed beyond h (the impacts
+        # and the link's own swing make it hover about zero), d seconds later (the time the motor takes
+        # to cross the gap); the link lags the encoder by a on the side last pushed.
+        b = _relay(tau, c.hyper["h"] * max(float(np.std(tau)), 1e-12))
+        if c.hyper.get("d", 0.0):
+            b = np.interp(src.t - c.hyper["d"], src.t, b)
+        out = _shifted(src, j, c.hyper["a"] * b, links=True)
         return np.concatenate([out, _on_joint(src, j, motor)], axis=2) if motor else out
+    b = np.tanh(tau / c.hyper["eps"])
     # The link lags by a tanh(tau / eps) + c tau (dead zone and the teeth's stiffness): to first order the
     # whole arm feels -M(q)[:, j] times their second derivatives; the offset b shifts gravity on joint j.
     Mj = src.mass_column(j)[:, :, None]
@@ -407,7 +448,7 @@ def _temperature_grid(src: FeatureSource, j: int) -> list[dict[str, float]]:
 
 
 def _backlash_grid(src: FeatureSource, j: int) -> list[dict[str, float]]:
-    s = max(float(np.std(src.tau_pred[:, j])), 1e-9)
+    s = max(float(np.std(src.transmitted(j))), 1e-9)
     return [{"eps": f * s} for f in (0.02, 0.05, 0.15)]
 
 
