@@ -423,7 +423,7 @@ class RankedCandidate:
     angle_deg: float | None = None
     mse_joint: NDArray[np.float64] | None = None
     refit: dict[str, Any] = field(default_factory=dict)
-    loss: NDArray[np.float64] | None = field(default=None, repr=False)
+    loss: NDArray[np.float64] | None = field(default=None, repr=False)  # per sample, all joints
     n_columns: int = 0
     gain_all: float = float("nan")
 
@@ -1000,7 +1000,7 @@ def _diagnose(
         # leaks through the shared base parameters onto its neighbours, where a same-shaped candidate on
         # the neighbour scores nearly as well on its own joint alone.
         ok.sort(key=lambda s: -s[1].gain_all)
-        best = _parsimonious(ok, alpha, ctx.block)
+        best = _parsimonious(ok, alpha, ctx.block, min_gain)
         gi, rc, C_tr, C_ho = best
         if refit and not rc.refit:
             cand, C_tr2, C_ho2, info = _refine(ctx, current_fit, rc.candidate, C_tr)
@@ -1237,7 +1237,8 @@ def _score(ctx, fit: _Fit, acc_tr, acc_ho, C_tr, C_ho, cand, r_cur, mse_cur, rnd
     # a light joint's large one (a coupled wrist: joint 5's 0.2x hid joint 6's 5.7x, closure 0.36).
     gap = float(np.sum((mse_cur[js] - noise_var[js]) / noise_var[js]))
     closure = float(np.sum((mse_cur[js] - mse[js]) / noise_var[js]) / gap) if gap > 0 else float("nan")
-    gain_all = float(np.mean(_losses(r_cur, ctx.sigma, ctx.mask) - _losses(r, ctx.sigma, ctx.mask)))
+    loss_all = _losses(r, ctx.sigma, ctx.mask)
+    gain_all = float(np.mean(_losses(r_cur, ctx.sigma, ctx.mask) - loss_all))
     rc = RankedCandidate(
         candidate=cand,
         gain=dm.mean,
@@ -1247,20 +1248,27 @@ def _score(ctx, fit: _Fit, acc_tr, acc_ho, C_tr, C_ho, cand, r_cur, mse_cur, rnd
         mse_joint=mse,
         gain_all=gain_all,
     )
-    rc.loss = L
+    rc.loss = loss_all
     rc.n_columns = int(C_tr.shape[2])
     return rc
 
 
-def _parsimonious(ok: list, alpha: float, block: int):
-    """The best acceptable candidate, or a simpler one on the same joints that it does not beat significantly."""
+def _parsimonious(ok: list, alpha: float, block: int, min_gain: float):
+    """The best acceptable candidate, or the simplest one on the same joints that it does not beat
+    significantly and by at least ``min_gain`` noise variances per sample (held-out loss over all joints:
+    candidates score different joint sets).
+
+    Simplest first: an armature is nested in the spring and dead-zone candidates (their motor-inertia
+    column), which can each edge it out by a hair without being better than it."""
     best = ok[0]
     rb = best[1]
-    simpler = [
-        s for s in ok[1:] if s[1].candidate.joints == rb.candidate.joints and s[1].n_columns < rb.n_columns
-    ]
+    simpler = sorted(
+        (s for s in ok[1:] if s[1].candidate.joints == rb.candidate.joints and s[1].n_columns < rb.n_columns),
+        key=lambda s: s[1].n_columns,
+    )
     for s in simpler:
-        if st.diebold_mariano(s[1].loss, rb.loss, block=block).p_value > alpha:
+        dm = st.diebold_mariano(s[1].loss, rb.loss, block=block)
+        if dm.p_value > alpha or dm.mean < min_gain:
             return s
     return best
 
