@@ -129,21 +129,26 @@ def diebold_mariano(
     DMResult
     """
     d = np.asarray(loss_ref, dtype=float) - np.asarray(loss_alt, dtype=float)
-    block = max(1, int(block))
-    count = d.size // block
-    if count < 8:
-        raise DataError(
-            f"the loss difference has {d.size} samples, {count} blocks of {block}; a Diebold-Mariano test "
-            "needs at least 8 blocks: give longer held-out data."
-        )
-    means = d[: count * block].reshape(count, block).mean(axis=1)
-    lag = default_lag(count) if lag is None else int(lag)
-    var = newey_west_variance(means, lag)
-    mean = float(means.mean())
-    stat = mean / math.sqrt(var / count + max(float(extra_variance), 0.0))
+    mean, var_mean, lag, count = _block_mean(d, block, lag, "the loss difference", "a Diebold-Mariano test")
+    stat = mean / math.sqrt(var_mean + max(float(extra_variance), 0.0))
     # Student t with count - 1 degrees of freedom: conservative for few blocks (Harvey et al. 1997).
     p = float(stats.t.sf(stat, df=count - 1))
     return DMResult(mean=mean, stat=stat, p_value=p, lag=lag, blocks=count)
+
+
+def _block_mean(x: NDArray[np.float64], block: int, lag: int | None, what: str, test: str):
+    """Mean of a series, the variance of that mean from its block means (Newey-West), the lag used and
+    the block count; a clear error when there are fewer than 8 blocks."""
+    block = max(1, int(block))
+    count = x.size // block
+    if count < 8:
+        raise DataError(
+            f"{what} has {x.size} samples, {count} blocks of {block}; {test} needs at least 8 blocks: give "
+            "longer held-out data."
+        )
+    means = x[: count * block].reshape(count, block).mean(axis=1)
+    lag = default_lag(count) if lag is None else int(lag)
+    return float(means.mean()), newey_west_variance(means, lag) / count, lag, count
 
 
 def excess_test(
@@ -179,17 +184,8 @@ def excess_test(
         Monte Carlo draws of the estimation term.
     """
     x = np.asarray(loss, dtype=float) - float(level)
-    block = max(1, int(block))
-    count = x.size // block
-    if count < 8:
-        raise DataError(
-            f"the loss has {x.size} samples, {count} blocks of {block}; an excess test needs at least 8 "
-            "blocks: give longer held-out data."
-        )
-    means = x[: count * block].reshape(count, block).mean(axis=1)
-    lag = default_lag(count) if lag is None else int(lag)
-    se = math.sqrt(newey_west_variance(means, lag) / count)
-    mean = float(means.mean())
+    mean, var_mean, _, count = _block_mean(x, block, lag, "the loss", "an excess test")
+    se = math.sqrt(var_mean)
     w = np.asarray(weights, dtype=float).ravel()
     w = w[w > 1e-12 * max(float(w.max()), 1e-300)] if w.size else w
     if not w.size:
