@@ -423,7 +423,7 @@ class RankedCandidate:
     angle_deg: float | None = None
     mse_joint: NDArray[np.float64] | None = None
     refit: dict[str, Any] = field(default_factory=dict)
-    loss: NDArray[np.float64] | None = field(default=None, repr=False)  # per sample, all joints
+    loss: NDArray[np.float64] | None = field(default=None, repr=False)  # (m, n): per sample and joint
     n_columns: int = 0
     gain_all: float = float("nan")
 
@@ -1237,8 +1237,8 @@ def _score(ctx, fit: _Fit, acc_tr, acc_ho, C_tr, C_ho, cand, r_cur, mse_cur, rnd
     # a light joint's large one (a coupled wrist: joint 5's 0.2x hid joint 6's 5.7x, closure 0.36).
     gap = float(np.sum((mse_cur[js] - noise_var[js]) / noise_var[js]))
     closure = float(np.sum((mse_cur[js] - mse[js]) / noise_var[js]) / gap) if gap > 0 else float("nan")
-    loss_all = _losses(r, ctx.sigma, ctx.mask)
-    gain_all = float(np.mean(_losses(r_cur, ctx.sigma, ctx.mask) - loss_all))
+    loss_joint = ctx.mask * (r / ctx.sigma[None, :]) ** 2
+    gain_all = float(np.mean(_losses(r_cur, ctx.sigma, ctx.mask) - np.sum(loss_joint, axis=1)))
     rc = RankedCandidate(
         candidate=cand,
         gain=dm.mean,
@@ -1248,29 +1248,39 @@ def _score(ctx, fit: _Fit, acc_tr, acc_ho, C_tr, C_ho, cand, r_cur, mse_cur, rnd
         mse_joint=mse,
         gain_all=gain_all,
     )
-    rc.loss = loss_all
+    rc.loss = loss_joint
     rc.n_columns = int(C_tr.shape[2])
     return rc
 
 
 def _parsimonious(ok: list, alpha: float, block: int, min_gain: float):
     """The best acceptable candidate, or the simplest one on the same joints that it does not beat
-    significantly and by at least ``min_gain`` noise variances per sample (held-out loss over all joints:
-    candidates score different joint sets).
+    significantly (held-out loss on the joints either scores).
 
-    Simplest first: an armature is nested in the spring and dead-zone candidates (their motor-inertia
-    column), which can each edge it out by a hair without being better than it."""
+    A richer candidate whose columns contain a simpler one's must also beat it by ``min_gain`` noise
+    variances per sample: an armature is nested in the spring and dead-zone candidates (their
+    motor-inertia column), which edged it out by 0.05 with a DM p of 0.002."""
     best = ok[0]
     rb = best[1]
     simpler = sorted(
         (s for s in ok[1:] if s[1].candidate.joints == rb.candidate.joints and s[1].n_columns < rb.n_columns),
         key=lambda s: s[1].n_columns,
     )
+    n = rb.loss.shape[1]
     for s in simpler:
-        dm = st.diebold_mariano(s[1].loss, rb.loss, block=block)
-        if dm.p_value > alpha or dm.mean < min_gain:
+        js = sorted(set(s[1].candidate.scored or range(n)) | set(rb.candidate.scored or range(n)))
+        dm = st.diebold_mariano(s[1].loss[:, js].sum(axis=1), rb.loss[:, js].sum(axis=1), block=block)
+        if dm.p_value > alpha or (dm.mean < min_gain and _nested(s[2], best[2])):
             return s
     return best
+
+
+def _nested(C_small: NDArray[np.float64], C_big: NDArray[np.float64], tol: float = 1e-6) -> bool:
+    """Whether the columns C_small (m, n, a) lie in the span of C_big (m, n, b)."""
+    A = C_big.reshape(-1, C_big.shape[2])
+    B = C_small.reshape(-1, C_small.shape[2])
+    coef, *_ = np.linalg.lstsq(A, B, rcond=None)
+    return bool(np.linalg.norm(B - A @ coef) <= tol * max(float(np.linalg.norm(B)), 1e-300))
 
 
 def _confounding(ctx: _Ctx, fit: _Fit, scored, confound_deg: float) -> None:
