@@ -67,14 +67,18 @@ def diagnose_recording(name: str, split: float, decimate: int, out: Path, root: 
     print(result.summary())
     dec = result.decomposition
     print(
-        f"{'joint':>5} {'excess':>8} {'MSE model':>11} {'re-ident.':>11} {'after':>11} {'noise':>11} {'closure':>8}"
+        f"{'joint':>5} {'excess':>8} {'param.unc.':>10} {'MSE model':>11} {'re-ident.':>11} {'after':>11} {'noise':>11} "
+        f"{'closure':>8}"
     )
     for j in range(robot.n):
         c = dec["closure"][j]
         print(
-            f"{j + 1:>5} {result.excess['ratio'][j]:>8.2f} {dec['mse_model'][j]:>11.4g} {dec['mse_refit'][j]:>11.4g} "
+            f"{j + 1:>5} {result.excess['ratio'][j]:>8.2f} {result.excess['estimation'][j]:>10.3g} "
+            f"{dec['mse_model'][j]:>11.4g} {dec['mse_refit'][j]:>11.4g} "
             f"{dec['mse_after'][j]:>11.4g} {dec['noise'][j]:>11.4g} {'-' if c != c else f'{c:.2f}':>8}"
         )
+    print("(excess: held-out MSE of the re-identified model over the noise floor; param.unc.: the part of it, in")
+    print(" noise variances, that the training data's parameter uncertainty alone is expected to add)")
     print("each accepted effect, in the order of selection (closure on its joints, held-out):")
     for a in result.accepted:
         print(

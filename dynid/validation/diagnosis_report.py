@@ -261,6 +261,7 @@ def render_diagnosis_html(
                 dec["attributed"][j],
                 dec["unexplained"][j],
                 doc["excess"]["ratio"][j],
+                doc["excess"]["estimation"][j],
                 dec["closure"][j],
             ]
         )
@@ -274,6 +275,7 @@ def render_diagnosis_html(
                 "attributed",
                 "unexplained",
                 "excess (re-identified / noise)",
+                "of it expected from parameter uncertainty",
                 "closure",
             ],
             rows,
