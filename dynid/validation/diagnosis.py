@@ -339,10 +339,7 @@ class _Fit:
         Cp = self.projected(C)
         beta, *_ = np.linalg.lstsq(Cp, self.r0, rcond=1e-10)
         e = (self.r0 - Cp @ beta).reshape(m, n)
-        g = np.einsum("mnc,mn->mc", Cp.reshape(m, n, -1), e)
-        count = max(1, m // block)
-        G = g[: count * block].reshape(count, block, -1).sum(axis=1)
-        meat = G.T @ G * (m / (count * block))
+        meat = _block_meat(np.einsum("mnc,mn->mc", Cp.reshape(m, n, -1), e), block)
         bread = np.linalg.pinv(Cp.T @ Cp, rcond=1e-10)
         return bread @ meat @ bread
 
@@ -358,16 +355,22 @@ class _Fit:
         m, n = self.shape
         e = self.r0.reshape(m, n)
         Qr = self.Q.reshape(m, n, -1)
-        g = np.einsum("mnk,mn->mk", Qr, e)  # per-sample score
-        count = max(1, m // block)
-        G = g[: count * block].reshape(count, block, -1).sum(axis=1)
-        meat = G.T @ G * (m / (count * block))
+        meat = _block_meat(np.einsum("mnk,mn->mk", Qr, e), block)
         Rinv = scipy.linalg.solve_triangular(self.R, np.eye(self.R.shape[0]))
         cz = Rinv @ meat @ Rinv.T
         cov = np.full((self.k, self.k), np.nan)
         s = 1.0 / self.scale
         cov[np.ix_(self.cols, self.cols)] = cz * np.outer(s, s)
         return cov
+
+
+def _block_meat(g: NDArray[np.float64], block: int) -> NDArray[np.float64]:
+    """Middle of a block (HAC) sandwich: the outer product of the per-sample scores g (m, p) summed over
+    blocks of ``block`` samples, scaled to all m samples."""
+    m = g.shape[0]
+    count = max(1, m // block)
+    G = g[: count * block].reshape(count, block, -1).sum(axis=1)
+    return G.T @ G * (m / (count * block))
 
 
 def _predict(
@@ -862,14 +865,14 @@ def _diagnose(
             break
     x0 = x
     # First-fit torque at full rate (unfiltered): what the candidates' load, delay, elasticity columns use.
-    # Link-side part: the base (link) columns only; armature and friction act on the motor side.
-    link_cols = np.zeros(len(x0), dtype=bool)
-    link_cols[: cols.n_base] = True
+    # Links' share: the base (link) columns, which come first; armature and friction act on the motor side.
+    nb = cols.n_base
+    x_link = np.concatenate([x0[:nb], np.zeros(len(x0) - nb)])
     for side in (tr, ho):
         side.src.tau_pred = np.einsum("mnk,k->mn", side.X0_full, x0)
-        side.src.tau_link = np.einsum("mnk,k->mn", side.X0_full[:, :, link_cols], x0[link_cols])
+        side.src.tau_link = np.einsum("mnk,k->mn", side.X0_full[:, :, :nb], x0[:nb])
         side.src.torque_at = _torque_function(cols, shape, x0)
-        side.src.link_torque_at = _torque_function(cols, shape, np.where(link_cols, x0, 0.0))
+        side.src.link_torque_at = _torque_function(cols, shape, x_link)
     tr_full, ho_full = tr.X0_full, ho.X0_full
     tr.src.cache["X0_full"], ho.src.cache["X0_full"] = tr_full, ho_full
     tr.X0_full = ho.X0_full = None
