@@ -1,7 +1,7 @@
 """Gap diagnosis on withheld effects: confusion matrix, false-alarm rate, closure (DIAGNOSIS.md section 4).
 
 A simulated UR5 (closed-loop tracking at 1 kHz, 2^18-count encoders, states filtered and
-differentiated, white + AR(1) coloured torque noise; :mod:`dynid.identify.simulate`) runs a random
+differentiated, white + AR(1) coloured torque noise; :mod:`dynid.sim.simulator`) runs a random
 periodic excitation for training and another for held-out data (20 s each, 5 s period).  Cases:
 
 * each of the 14 catalogue effects alone, its VALUE calibrated so that its RMS torque contribution
@@ -11,8 +11,8 @@ periodic excitation for training and another for held-out data (20 s each, 5 s p
 * an effect the diagnosis is not told about: coupled_friction injected, left out of its catalogue.
 
 Each case identifies a model without the effects (OLS, linear friction with offsets, armature; no
-GMM), diagnoses it (:func:`dynid.validation.diagnosis.diagnose`) and classifies the verdict
-(:func:`dynid.validation.synthetic.classify`).  Printed: the confusion matrix (injected x diagnosed,
+GMM), diagnoses it (:func:`dynid.diagnosis.core.diagnose`) and classifies the verdict
+(:func:`dynid.diagnosis.cases.classify`).  Printed: the confusion matrix (injected x diagnosed,
 with parametric / none / unexplained columns), accuracy per level, false-alarm rate, share of unknown
 effects called "unexplained", median closure.  The method's thresholds were set on other seeds
 (1000 and up) than the benchmark's (1 and up; effect-free cases 101 and up).
@@ -78,7 +78,7 @@ def _joint(effect: str, seed: int, n: int, avoid: int | None = None) -> int | No
 
 
 def build_cases(seeds: list[int], none_per_seed: int, n: int = 6) -> list[dict]:
-    from dynid.validation.candidates import EFFECT_NAMES
+    from dynid.diagnosis.candidates import EFFECT_NAMES
 
     cases = []
     for seed in seeds:
@@ -110,9 +110,9 @@ def build_cases(seeds: list[int], none_per_seed: int, n: int = 6) -> list[dict]:
 
 
 def run_one(case: dict) -> dict:
+    from dynid.diagnosis.candidates import EFFECT_NAMES
+    from dynid.diagnosis.cases import run_case
     from dynid.symbolic import load_robot
-    from dynid.validation.candidates import EFFECT_NAMES
-    from dynid.validation.synthetic import run_case
 
     robot = load_robot("ur5")
     catalogue = [e for e in EFFECT_NAMES if not (case["kind"] == "unknown" and e == UNKNOWN)]
@@ -143,7 +143,7 @@ def run_one(case: dict) -> dict:
 
 
 def report(results: list[dict]) -> str:
-    from dynid.validation.candidates import EFFECT_NAMES
+    from dynid.diagnosis.candidates import EFFECT_NAMES
 
     lines = []
     cols = [*EFFECT_NAMES, "parametric", "none", "unexplained", "error"]

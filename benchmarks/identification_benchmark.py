@@ -44,7 +44,6 @@ def measured(label: str, func, results: dict):
 
 
 def main() -> None:
-    from dynid.identify._synthetic import random_fourier, synthetic_dataset, true_parameters
     from dynid.identify.consistent import ConsistentLS
     from dynid.identify.estimators import IRLS, OLS
     from dynid.identify.friction import FrictionLayer, SeedFriction
@@ -52,6 +51,7 @@ def main() -> None:
     from dynid.identify.linear_system import Preprocessing, build_system, column_set
     from dynid.identify.model import identify
     from dynid.identify.preprocess import lowpass
+    from dynid.sim.synthetic import random_fourier, synthetic_dataset, true_parameters
     from dynid.symbolic import load_robot
     from dynid.validation.metrics import noise_floor
 

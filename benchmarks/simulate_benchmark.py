@@ -19,9 +19,9 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
 
 import numpy as np  # noqa: E402
 
-from dynid.identify.effects import EFFECTS  # noqa: E402
-from dynid.identify.simulate import simulate  # noqa: E402
 from dynid.optim.trajectory import FourierTrajectory  # noqa: E402
+from dynid.sim.effects import EFFECTS  # noqa: E402
+from dynid.sim.simulator import simulate  # noqa: E402
 from dynid.symbolic import load_robot  # noqa: E402
 
 SETUPS = {

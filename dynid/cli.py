@@ -66,7 +66,7 @@ def write_json(path: str | os.PathLike | None, figures: dict) -> None:
     """Write the figures of a command to ``--json FILE`` (atomically), if asked."""
     if path is None:
         return
-    from dynid._json import jsonable
+    from dynid._io import jsonable
     from dynid.optim.trajectory import write_atomic
 
     write_atomic(Path(path), json.dumps(figures, indent=2, default=jsonable) + "\n")

@@ -38,10 +38,10 @@ def diagnose_recording(name: str, split: float, decimate: int, out: Path, root: 
     """Identify on ``t < split``, diagnose on the rest; write the model and the report into ``out``."""
     from _realrobot import load_with_robot, split_in_time
 
+    from dynid.diagnosis.core import diagnose
+    from dynid.diagnosis.report import write_diagnosis_report
     from dynid.identify.linear_system import Preprocessing
     from dynid.identify.model import identify, load_model, save_model
-    from dynid.validation.diagnosis import diagnose
-    from dynid.validation.diagnosis_report import write_diagnosis_report
 
     data, robot = load_with_robot(name, root)
     train, heldout = split_in_time(data, split)

@@ -125,8 +125,8 @@ def main(quick: bool = False, seed: int = 7, progress=print) -> dict:
     """
     from dynid.identify.linear_system import Preprocessing
     from dynid.identify.model import identify
-    from dynid.identify.simulate import build_truth, simulate
     from dynid.optim.excitation import ExcitationProblem, design_excitation
+    from dynid.sim.simulator import build_truth, simulate
     from dynid.symbolic import load_robot
     from dynid.validation.metrics import noise_floor
 

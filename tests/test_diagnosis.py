@@ -1,4 +1,4 @@
-"""Tests of the gap diagnosis (dynid.validation.diagnosis and its helpers).
+"""Tests of the gap diagnosis (dynid.diagnosis.core and its helpers).
 
 The core is a small version of ``benchmarks/diagnosis_benchmark.py``: a simulated UR5 (closed loop,
 quantised encoders, coloured noise) with one effect injected at a clearly detectable size and withheld
@@ -17,13 +17,13 @@ import numpy as np
 import pytest
 
 from dynid.cli import main
+from dynid.diagnosis import stats as st
+from dynid.diagnosis.candidates import EFFECT_NAMES, _relay
+from dynid.diagnosis.cases import random_fourier, run_case
+from dynid.diagnosis.core import detect_period, diagnose, measure_noise
 from dynid.exceptions import DataError, IdentificationError, ShapeError, UsageError
 from dynid.identify.dataset import Dataset, save_dataset
-from dynid.identify.simulate import simulate
-from dynid.validation import stats as st
-from dynid.validation.candidates import EFFECT_NAMES, _relay
-from dynid.validation.diagnosis import detect_period, diagnose, measure_noise
-from dynid.validation.synthetic import random_fourier, run_case
+from dynid.sim.simulator import simulate
 
 FAST = {"train_seconds": 20.0, "heldout_seconds": 20.0, "base_freq": 0.2}
 DIAG = {"max_samples": 6000, "max_effects": 2}

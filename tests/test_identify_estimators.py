@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from dynid.exceptions import DataError, IdentificationError
-from dynid.identify._synthetic import random_fourier, synthetic_dataset, true_parameters
 from dynid.identify.dataset import Dataset
 from dynid.identify.estimators import GLS, IRLS, OLS, WLS
 from dynid.identify.linear_system import Preprocessing, build_system, column_set, prepare
+from dynid.sim.synthetic import random_fourier, synthetic_dataset, true_parameters
 
 
 @pytest.fixture(scope="module")

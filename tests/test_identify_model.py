@@ -10,7 +10,6 @@ import pytest
 
 from dynid.cli import main
 from dynid.exceptions import ModelFileError
-from dynid.identify._synthetic import random_fourier, synthetic_dataset, true_parameters
 from dynid.identify.consistent import (
     EPS,
     ConsistentLS,
@@ -25,7 +24,8 @@ from dynid.identify.estimators import IRLS, IdentificationWarning
 from dynid.identify.friction import SeedFriction
 from dynid.identify.linear_system import build_system, column_set
 from dynid.identify.model import identify, load_model, save_model
-from dynid.identify.simulate import perturb_params
+from dynid.sim.simulator import perturb_params
+from dynid.sim.synthetic import random_fourier, synthetic_dataset, true_parameters
 
 
 def test_log_cholesky_round_trip(ur5) -> None:

@@ -1,4 +1,4 @@
-"""Tests of the simulator (dynid.identify.simulate) and its effect catalogue (dynid.identify.effects).
+"""Tests of the simulator (dynid.sim.simulator) and its effect catalogue (dynid.sim.effects).
 
 Each effect is switched on alone on a short UR5 run with exact sensors, and the torque it leaves is
 checked against the effect's own model, computed here from the states the simulator reports.
@@ -17,8 +17,9 @@ import pytest
 
 from dynid.cli import main
 from dynid.exceptions import DataError, ShapeError, UsageError
-from dynid.identify.effects import EFFECTS, parse_effects
-from dynid.identify.simulate import (
+from dynid.optim.trajectory import FourierTrajectory, SampledTrajectory
+from dynid.sim.effects import EFFECTS, parse_effects
+from dynid.sim.simulator import (
     NoiseModel,
     SimulationResult,
     build_truth,
@@ -27,7 +28,6 @@ from dynid.identify.simulate import (
     truth_path,
     write_simulation,
 )
-from dynid.optim.trajectory import FourierTrajectory, SampledTrajectory
 
 DURATION = 2.0
 EXACT = 1e-9

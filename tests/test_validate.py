@@ -127,8 +127,8 @@ def test_a_floor_that_cannot_be_measured_is_reported_as_such(full, heldout):
 
 
 def test_urdf_baseline_predicts_a_robot_that_is_its_urdf(tmp_path):
-    from dynid.identify.simulate import simulate
     from dynid.optim.excitation import ExcitationProblem
+    from dynid.sim.simulator import simulate
     from dynid.symbolic import load_robot
 
     robot = load_robot("ur5")

@@ -33,8 +33,8 @@ def simulated_case(base: Path) -> Case:
 
     from dynid.identify.linear_system import Preprocessing
     from dynid.identify.model import identify, save_model
-    from dynid.identify.simulate import build_truth, simulate, write_simulation
     from dynid.optim.excitation import ExcitationProblem
+    from dynid.sim.simulator import build_truth, simulate, write_simulation
     from dynid.symbolic import load_robot
 
     folder = base / "validation-case"

@@ -259,7 +259,7 @@ def run(args: argparse.Namespace) -> int:
 
     def simulate_runs() -> str:
         from dynid.identify.dataset import load_dataset
-        from dynid.identify.simulate import build_truth, simulate, write_simulation
+        from dynid.sim.simulator import build_truth, simulate, write_simulation
 
         needs("trajectory", "excitation design")
         traj = state["trajectory"]
@@ -367,7 +367,7 @@ def run(args: argparse.Namespace) -> int:
     # ------------------------------------------------------------------ 6. diagnosis
     def diagnosis() -> str:
         needs("results", "validation")
-        from dynid.validation.diagnosis import diagnose
+        from dynid.diagnosis.core import diagnose
 
         full = state["results"][0]
         result = diagnose(
@@ -379,8 +379,8 @@ def run(args: argparse.Namespace) -> int:
         state["diagnosis"] = result
         figures["diagnosis"] = result.to_dict()
         written = ""
-        if _exists("dynid.validation.diagnosis_report"):
-            from dynid.validation.diagnosis_report import write_diagnosis_report
+        if _exists("dynid.diagnosis.report"):
+            from dynid.diagnosis.report import write_diagnosis_report
 
             path = write_diagnosis_report(
                 result, out / "diagnosis.html", title="dynid demo: gap diagnosis of the full method"
@@ -475,12 +475,12 @@ def run(args: argparse.Namespace) -> int:
         stages.run("symbolic dynamics, base parameters and compiled C (Pinocchio on CasADi)", symbolic)
         stages.run("excitation design (Fourier series, IPOPT)", excite, needs=("dynid.optim.excitation",))
         stages.run(
-            "simulated identification and validation runs", simulate_runs, needs=("dynid.identify.simulate",)
+            "simulated identification and validation runs", simulate_runs, needs=("dynid.sim.simulator",)
         )
         stages.run("identification: the full three-layer method, OLS and IRLS", identify_models)
         stages.run("validation on the held-out run", validation)
         stages.run(
-            "sim-to-real gap diagnosis", diagnosis, needs=("dynid.validation.diagnosis",), may_fail=True
+            "sim-to-real gap diagnosis", diagnosis, needs=("dynid.diagnosis.core",), may_fail=True
         )
         stages.run("HTML report", report)
 

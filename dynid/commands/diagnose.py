@@ -42,12 +42,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from dynid.cli import write_json
+    from dynid.diagnosis.candidates import EFFECT_NAMES
+    from dynid.diagnosis.core import diagnose
+    from dynid.diagnosis.report import check_report_path, write_diagnosis_report
     from dynid.exceptions import UsageError
     from dynid.identify.dataset import load_dataset
     from dynid.identify.model import load_model
-    from dynid.validation.candidates import EFFECT_NAMES
-    from dynid.validation.diagnosis import diagnose
-    from dynid.validation.diagnosis_report import check_report_path, write_diagnosis_report
 
     report = check_report_path(args.report) if args.report else None
     if args.json is not None and not Path(args.json).parent.is_dir():

@@ -78,9 +78,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from dynid.identify.effects import parse_effects
-    from dynid.identify.simulate import NoiseModel, check_output_path, simulate, write_simulation
     from dynid.optim.trajectory import load_trajectory
+    from dynid.sim.effects import parse_effects
+    from dynid.sim.simulator import NoiseModel, check_output_path, simulate, write_simulation
 
     effects = parse_effects(args.effects)
     noise = NoiseModel.parse(args.noise)

@@ -1,4 +1,4 @@
-"""dynid.identify: datasets and preprocessing (estimators, friction, GMM/GMR and the simulator follow).
+"""dynid.identify: datasets, preprocessing, the three layers (link parameters, friction, GMR), model files.
 
 The submodules are imported on demand: :mod:`dynid.identify.dataset` (the :class:`Dataset` type and its
 files), :mod:`dynid.identify.preprocess` (resampling, filtering, differentiation, parallel filtering) and

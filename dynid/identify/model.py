@@ -51,7 +51,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dynid._json import jsonable
+from dynid._io import jsonable
 from dynid.exceptions import DynidError, ModelFileError, UsageError
 from dynid.identify._threads import single_blas_thread
 from dynid.identify.consistent import ConsistentLS, pseudo_inertia

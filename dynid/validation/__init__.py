@@ -1,11 +1,10 @@
-"""dynid.validation: held-out validation, reports and the gap diagnosis.
+"""dynid.validation: held-out validation, error metrics, the noise floor, plots and the HTML report.
 
 The submodules are imported on first use (matplotlib and scikit-learn are slow to import):
 :mod:`dynid.validation.metrics` (error figures, the noise floor), :mod:`dynid.validation.validate`
 (a model's prediction of held-out data, methods side by side), :mod:`dynid.validation.report` and
-:mod:`dynid.validation.plots` (the HTML report and its figures), :mod:`dynid.validation.diagnosis`
-(the sim-to-real gap diagnosis, with :mod:`~dynid.validation.candidates`, :mod:`~dynid.validation.gapmap`,
-:mod:`~dynid.validation.stats` and its report :mod:`~dynid.validation.diagnosis_report`).
+:mod:`dynid.validation.plots` (the HTML report and its figures).  The gap diagnosis is
+:mod:`dynid.diagnosis`.
 """
 
 from __future__ import annotations
@@ -24,11 +23,6 @@ _EXPORTS = {
     "write_predictions": "validate",
     "Report": "report",
     "render_report": "report",
-    "Diagnosis": "diagnosis",
-    "diagnose": "diagnosis",
-    "EFFECT_NAMES": "candidates",
-    "gap_map": "gapmap",
-    "write_diagnosis_report": "diagnosis_report",
 }
 __all__ = sorted(_EXPORTS)
 

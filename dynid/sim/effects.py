@@ -1,6 +1,6 @@
 """The simulator's truth friction and its catalogue of unmodelled effects.
 
-The simulator (:mod:`dynid.identify.simulate`) drives a *truth* robot that differs from the nominal
+The simulator (:mod:`dynid.sim.simulator`) drives a *truth* robot that differs from the nominal
 model the way a real arm does.  This module holds the physics of those differences:
 
 * :class:`TruthFriction`, the joint friction of the truth (``--friction {none,linear,seed,stribeck}``);
@@ -36,7 +36,7 @@ stribeck    ``(Fc + (Fs - Fc) exp(-(dq / vs)^2)) sign(dq) + Fv dq``; Fs - Fc = 0
 
 ``sign`` is smoothed as ``tanh(dq / eps)`` with ``eps = 1e-3`` rad/s: the friction torque is then a
 continuous function whose steep slope near zero speed the integrator treats implicitly (see
-:mod:`dynid.identify.simulate`), so a velocity reversal neither chatters nor needs tiny steps.  Real
+:mod:`dynid.sim.simulator`), so a velocity reversal neither chatters nor needs tiny steps.  Real
 sticking (zero speed held over a finite time) is not reproduced.
 
 Effects (``VALUE`` multiplies the size; random choices use the truth generator, so the seed repeats them):

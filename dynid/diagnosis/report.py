@@ -89,7 +89,7 @@ def diagnosis_figures(result) -> list[tuple[str, str, bytes]]:
     Parameters
     ----------
     result : Diagnosis
-        What :func:`dynid.validation.diagnosis.diagnose` returned.
+        What :func:`dynid.diagnosis.core.diagnose` returned.
     """
     from matplotlib.figure import Figure
 

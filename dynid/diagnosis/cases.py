@@ -1,7 +1,7 @@
 """Withheld-effect cases for checking the gap diagnosis (DIAGNOSIS.md section 4).
 
 A case simulates one truth robot (closed-loop tracking, quantised encoders, coloured torque noise;
-:func:`dynid.identify.simulate.simulate`) on two different periodic excitations, one for training
+:func:`dynid.sim.simulator.simulate`) on two different periodic excitations, one for training
 and one held out, with effects injected at a size calibrated in multiples of the torque noise;
 identifies a model that lacks those effects; and diagnoses it.  The benchmark
 (``benchmarks/diagnosis_benchmark.py``) and the tests share these functions.
@@ -19,10 +19,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dynid.identify.effects import EFFECTS, parse_effects
-from dynid.identify.simulate import NoiseModel, SimulationResult, build_truth, simulate
+from dynid.diagnosis.candidates import EFFECT_NAMES
 from dynid.optim.trajectory import FourierTrajectory
-from dynid.validation.candidates import EFFECT_NAMES
+from dynid.sim.effects import EFFECTS, parse_effects
+from dynid.sim.simulator import NoiseModel, SimulationResult, build_truth, simulate
 
 __all__ = [
     "NOISE_STD",
@@ -285,7 +285,7 @@ def run_case(
     model_friction : str
         Friction the model identifies (``"linear"``: Coulomb, viscous and offset per joint; ``"none"``).
     diagnose_options : dict, optional
-        Extra keyword arguments of :func:`dynid.validation.diagnosis.diagnose`.
+        Extra keyword arguments of :func:`dynid.diagnosis.core.diagnose`.
 
     Returns
     -------
@@ -293,8 +293,8 @@ def run_case(
         The case, the calibrated values, the realised effects (their truth-file entries: sizes, joints),
         the verdict, the classification and the closure.
     """
+    from dynid.diagnosis.core import diagnose
     from dynid.identify.model import identify
-    from dynid.validation.diagnosis import diagnose
 
     train_traj = random_fourier(robot, 2 * seed, base_freq=base_freq)
     held_traj = random_fourier(robot, 2 * seed + 1, base_freq=base_freq)

@@ -17,7 +17,7 @@ Method, in the order it runs:
    the shape of its friction layer) are identified again on the training data by weighted least squares
    (weights: the baseline residual level per joint, reweighted until they settle).  The held-out error of the model as given minus
    that of the refit is the *parametric* part of the gap.
-3. Screen: every catalogue candidate on every joint (:mod:`dynid.validation.candidates`) is refitted
+3. Screen: every catalogue candidate on every joint (:mod:`dynid.diagnosis.candidates`) is refitted
    together with the baseline on the training data (its hyper-parameters tuned there, never on the
    held-out data) and scored by the reduction of the held-out loss ``sum_j r_j^2 / sigma_j^2``; its
    significance is a one-sided Diebold-Mariano test on the per-sample loss difference with a
@@ -33,7 +33,7 @@ Method, in the order it runs:
 5. Verdict: the accepted effects; else ``["unexplained"]`` when the excess of some joint over the
    noise floor is significant (above ``1 + excess_tol``: state estimation and sticking leave a small
    excess even on an effect-free robot; and above what the refit's parameter error, seen through the
-   held-out motion, adds: :func:`dynid.validation.stats.excess_test`), ``["none"]`` when not.  Candidates whose columns are nearly parallel once the baseline is projected
+   held-out motion, adds: :func:`dynid.diagnosis.stats.excess_test`), ``["none"]`` when not.  Candidates whose columns are nearly parallel once the baseline is projected
    out (small principal angle) are reported as not separable with this excitation.
 6. Parametric test: identified minus nominal base parameters, with a block (HAC) covariance, against
    structured hypotheses (common drive gain, a torque gain on one joint, payload on the last link, an
@@ -53,6 +53,17 @@ import scipy.linalg
 from numpy.typing import NDArray
 from scipy import optimize, stats
 
+from dynid.diagnosis import stats as st
+from dynid.diagnosis.candidates import (
+    EFFECT_NAMES,
+    Candidate,
+    FeatureSource,
+    candidate_columns,
+    describe_hyper,
+    enumerate_candidates,
+    excitation_hint,
+)
+from dynid.diagnosis.gapmap import gap_map
 from dynid.exceptions import DataError, IdentificationError, ShapeError, UsageError
 from dynid.identify._threads import single_blas_thread
 from dynid.identify.dataset import Dataset
@@ -65,17 +76,6 @@ from dynid.identify.linear_system import (
     prepare,
 )
 from dynid.identify.model import _clean  # the model file's JSON cleaner: arrays to lists, NaN to None
-from dynid.validation import stats as st
-from dynid.validation.candidates import (
-    EFFECT_NAMES,
-    Candidate,
-    FeatureSource,
-    candidate_columns,
-    describe_hyper,
-    enumerate_candidates,
-    excitation_hint,
-)
-from dynid.validation.gapmap import gap_map
 from dynid.validation.metrics import NoiseFloor, noise_floor
 
 __all__ = ["Diagnosis", "RankedCandidate", "detect_period", "diagnose", "measure_noise"]
@@ -477,7 +477,7 @@ class Diagnosis:
         ``unexplained``; ``closure`` per joint and ``closure_overall``.
     gap_map : dict
         Residual excess over the noise floor per joint and bin, global flags (see
-        :func:`dynid.validation.gapmap.gap_map`).
+        :func:`dynid.diagnosis.gapmap.gap_map`).
     parametric : dict
         The parameter-change test.
     noise : NoiseFloor

@@ -1,6 +1,6 @@
 """The catalogue of candidate effects of the gap diagnosis: their feature columns.
 
-Each effect of the catalogue (DESIGN.md; the simulator's :mod:`dynid.identify.effects` injects the
+Each effect of the catalogue (DESIGN.md; the simulator's :mod:`dynid.sim.effects` injects the
 same names) is a :class:`Candidate`: a rule that turns the states of a dataset into extra regressor
 columns, one or a few per joint, that are refitted *together with* the base parameters (so what
 re-identification absorbs is never credited to the effect).  Columns are computed at full rate, from
@@ -31,7 +31,7 @@ payload                   (absorbed by the base parameters: parametric test)   -
 ``tau`` is the identified model's predicted torque (the "first fit"); for backlash its links' share,
 which the transmission carries (the motor's armature and friction act before the gear).
 Elasticity, backlash and delay are not linear in their parameters: the screen uses the first-order
-columns above, the refit (:mod:`dynid.validation.diagnosis`) fits their physical parameters (for
+columns above, the refit (:mod:`dynid.diagnosis.core`) fits their physical parameters (for
 backlash a dead zone whose sides change once the torque has reversed beyond a threshold, a crossing
 time later).
 """

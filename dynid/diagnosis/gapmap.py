@@ -18,8 +18,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import welch
 
+from dynid.diagnosis.stats import block_bootstrap_ci, ljung_box
 from dynid.validation.metrics import NoiseFloor
-from dynid.validation.stats import block_bootstrap_ci, ljung_box
 
 __all__ = ["BIN_KINDS", "gap_map"]
 

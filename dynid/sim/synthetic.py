@@ -1,7 +1,7 @@
 """Synthetic identification data made from the regressor itself (tests and benchmarks).
 
 ``tau = W(q, dq, ddq) x_true (+ friction(dq) + unmodelled(q, dq)) + noise`` on random Fourier motions.
-This is not the simulator (:mod:`dynid.identify.simulate`, forward dynamics with effects); it is the
+This is not the simulator (:mod:`dynid.sim.simulator`, forward dynamics with effects); it is the
 shortest path to data whose truth is known exactly in the identified parameters.
 """
 

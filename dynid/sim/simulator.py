@@ -8,8 +8,8 @@ quantised current sensor.  The truth is the nominal model (URDF) with, optionall
   of mass, principal moments and axes of the inertia about the centre of mass are perturbed and the
   link rebuilt from them),
 * joint friction (``friction``: none, linear, seed = the paper's model, stribeck; sizes in
-  :mod:`dynid.identify.effects`),
-* unmodelled effects (``effects``: the catalogue of :mod:`dynid.identify.effects`, e.g.
+  :mod:`dynid.sim.effects`),
+* unmodelled effects (``effects``: the catalogue of :mod:`dynid.sim.effects`, e.g.
   ``"offset,elasticity@3:2,delay:1.5"``),
 
 and everything about it (parameters, friction coefficients, effects with their sizes, noise settings,
@@ -46,7 +46,7 @@ instantaneous acceleration of the continuous model there, so that with no fricti
 ``tau = rnea_truth(q_true, dq_true, ddq_true)`` holds to rounding, whatever the step.
 
 Noise settings (``noise=``, or ``--noise key=value,...``; torques are fractions of each joint's torque
-scale s_j, see :mod:`dynid.identify.effects`; ``--noise off`` turns all off):
+scale s_j, see :mod:`dynid.sim.effects`; ``--noise off`` turns all off):
 
 ============  =========  =================================================================
 key           default    meaning
@@ -79,10 +79,11 @@ from typing import Any
 
 import numpy as np
 
-from dynid._json import jsonable
+from dynid._io import jsonable
 from dynid.exceptions import DataError, ShapeError, UsageError
 from dynid.identify.dataset import Dataset, save_dataset
-from dynid.identify.effects import (
+from dynid.optim.trajectory import FourierTrajectory, Trajectory
+from dynid.sim.effects import (
     EFFECTS,
     FRICTION_KINDS,
     Effect,
@@ -93,7 +94,6 @@ from dynid.identify.effects import (
     parse_effects,
     robot_scales,
 )
-from dynid.optim.trajectory import FourierTrajectory, Trajectory
 from dynid.symbolic.robot import RobotModel, standard_from_com
 
 __all__ = [
@@ -452,7 +452,7 @@ def build_truth(
     robot : RobotModel
         The nominal robot.
     effects : str or sequence, optional
-        ``"NAME[@J|@J-K][:VALUE],..."`` or requests (see :func:`dynid.identify.effects.parse_effects`).
+        ``"NAME[@J|@J-K][:VALUE],..."`` or requests (see :func:`dynid.sim.effects.parse_effects`).
     friction : {"none", "linear", "seed", "stribeck"} or TruthFriction
         Truth friction: a kind with the default sizes, or explicit coefficients.
     perturb : float
@@ -460,7 +460,7 @@ def build_truth(
     truth_seed : int
         Seed of the truth's random choices.
     scales : RobotScales, optional
-        Precomputed :func:`dynid.identify.effects.robot_scales` of ``robot``.
+        Precomputed :func:`dynid.sim.effects.robot_scales` of ``robot``.
 
     Returns
     -------
@@ -726,7 +726,7 @@ def simulate(
     trajectory : FourierTrajectory or SampledTrajectory
         Commanded motion; times from 0.
     effects : str or sequence, optional
-        Unmodelled effects, ``"NAME[@J|@J-K][:VALUE],..."`` (see :mod:`dynid.identify.effects`).
+        Unmodelled effects, ``"NAME[@J|@J-K][:VALUE],..."`` (see :mod:`dynid.sim.effects`).
     friction : {"none", "linear", "seed", "stribeck"} or TruthFriction
         Truth friction.
     noise : str or mapping or NoiseModel, optional

@@ -1,0 +1,28 @@
+"""dynid.sim: the simulated arm, the ONE catalogue of unmodelled effects, and synthetic cases.
+
+:mod:`dynid.sim.simulator` runs a truth robot under closed-loop tracking with sensor noise and
+unmodelled effects; :mod:`dynid.sim.effects` is the effect catalogue that ``simulate --effects``,
+``identify --effects`` and ``diagnose`` all read; :mod:`dynid.sim.synthetic` makes data whose truth is
+known exactly (tests, benchmarks).  Submodules are imported on first use.
+"""
+
+from __future__ import annotations
+
+_EXPORTS = {
+    "EFFECTS": "effects",
+    "parse_effects": "effects",
+    "NoiseModel": "simulator",
+    "SimulationResult": "simulator",
+    "build_truth": "simulator",
+    "simulate": "simulator",
+    "write_simulation": "simulator",
+}
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        import importlib
+
+        return getattr(importlib.import_module(f"dynid.sim.{_EXPORTS[name]}"), name)
+    raise AttributeError(f"module 'dynid.sim' has no attribute {name!r}")
