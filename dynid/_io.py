@@ -1,17 +1,68 @@
-"""The ``default`` of :func:`json.dumps` for dynid's figures and files: arrays, numpy scalars, paths."""
+"""Files and JSON for every part of dynid: one atomic writer, one JSON cleaner.
+
+Every file dynid writes goes through :func:`atomic_path` (or its shorthands :func:`write_text`,
+:func:`write_bytes`, :func:`write_json`): the content goes to a temporary file in the target folder,
+is flushed to disk, gets the mode a plain ``open()`` would give it (an existing file's own mode, else
+``0666`` less the umask; not ``mkstemp``'s private ``0600``), and replaces the target in one
+:func:`os.replace`.  An interrupted or failed write leaves no partial file, no stray temporary file,
+and an older file intact.
+
+Every JSON document goes through :func:`to_jsonable`: arrays to lists, numpy scalars to Python
+numbers, paths to text, non-finite floats to ``null`` (JSON has no NaN).
+"""
 
 from __future__ import annotations
 
+import contextlib
+import json
+import math
+import os
+import tempfile
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["jsonable"]
+__all__ = [
+    "atomic_path",
+    "dumps_json",
+    "file_mode",
+    "jsonable",
+    "to_jsonable",
+    "write_bytes",
+    "write_json",
+    "write_text",
+]
+
+
+# ---------------------------------------------------------------------------- JSON
+def to_jsonable(value: Any) -> Any:
+    """A JSON-ready copy of ``value``: arrays to lists, numpy scalars to numbers, paths to text,
+    non-finite floats to None, mapping keys to text, tuples to lists.
+
+    Parameters
+    ----------
+    value : Any
+        Figures: mappings, sequences, numbers, arrays, paths.
+    """
+    if isinstance(value, Mapping):
+        return {str(k): to_jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [to_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return to_jsonable(value.tolist())
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
 
 
 def jsonable(value: Any) -> Any:
-    """A JSON value for what :mod:`json` cannot write itself: arrays to lists, numpy scalars, paths.
+    """The ``default`` of :func:`json.dumps` for what it cannot write: arrays, numpy scalars, paths.
 
     Parameters
     ----------
@@ -27,6 +78,72 @@ def jsonable(value: Any) -> Any:
         return value.tolist()
     if isinstance(value, np.generic):
         return value.item()
-    if isinstance(value, Path):
-        return str(value)
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
     raise TypeError(f"{type(value).__name__} is not JSON serialisable")
+
+
+def dumps_json(value: Any, *, indent: int | None = 2) -> str:
+    """``value`` as strict JSON text (cleaned by :func:`to_jsonable`), ending in a newline."""
+    return json.dumps(to_jsonable(value), indent=indent, default=jsonable, allow_nan=False) + "\n"
+
+
+# ---------------------------------------------------------------------------- atomic files
+def file_mode(path: str | os.PathLike[str]) -> int:
+    """Mode for a file written at ``path``: the existing file's own, else ``0666`` less the umask."""
+    path = Path(path)
+    if path.is_file():
+        return path.stat().st_mode & 0o777
+    umask = os.umask(0)
+    os.umask(umask)
+    return 0o666 & ~umask
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
+    """A temporary path beside ``path`` that replaces ``path`` when the block ends without error.
+
+    Write the content to the yielded path in any way (``np.savez``, ``open``, a compiler's ``-o``); on
+    leaving the block it is flushed to disk, given :func:`file_mode` and renamed onto ``path`` in one
+    step.  On an error (or an interrupt) it is removed and ``path`` is left as it was.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The file to write; its folder must exist.
+
+    Yields
+    ------
+    Path
+        The temporary file (created empty, in ``path``'s folder, named ``.NAME.XXXX.tmp``).
+    """
+    path = Path(path)
+    fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        yield tmp
+        with open(tmp, "rb+") as handle:
+            os.fsync(handle.fileno())
+        os.chmod(tmp, file_mode(path))
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically (see :func:`atomic_path`); returns the path."""
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
+    return Path(path)
+
+
+def write_text(path: str | os.PathLike[str], text: str) -> Path:
+    """Write ``text`` (UTF-8, ``\\n`` line ends) to ``path`` atomically; returns the path."""
+    return write_bytes(path, text.encode("utf-8"))
+
+
+def write_json(path: str | os.PathLike[str], value: Any) -> Path:
+    """Write ``value`` as strict, indented JSON (see :func:`dumps_json`) to ``path`` atomically."""
+    return write_text(path, dumps_json(value))
