@@ -46,6 +46,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from dynid.sim.effects import EFFECT_NAMES  # the catalogue: one list for simulate, identify, diagnose
+
 __all__ = [
     "CANDIDATES",
     "EFFECT_NAMES",
@@ -57,24 +59,6 @@ __all__ = [
     "enumerate_candidates",
     "excitation_hint",
 ]
-
-EFFECT_NAMES = (
-    "offset",
-    "armature",
-    "stribeck",
-    "load_friction",
-    "temperature",
-    "cogging",
-    "elasticity",
-    "backlash",
-    "delay",
-    "drive_gain",
-    "payload",
-    "base_tilt",
-    "coupled_friction",
-    "nonlinear_viscous",
-)
-"""The catalogue, in the order of DESIGN.md (the names ``dynid simulate --effects`` injects)."""
 
 PARAMETRIC_EFFECTS = ("drive_gain", "payload", "offset")
 """Effects that re-identification can absorb, tested on the change of the base parameters."""

@@ -99,6 +99,7 @@ from dynid.symbolic.robot import RobotModel, standard_from_com
 
 __all__ = [
     "EFFECTS",
+    "EFFECT_NAMES",
     "FRICTION_KINDS",
     "Effect",
     "EffectContext",
@@ -1010,3 +1011,7 @@ EFFECTS: dict[str, type[Effect]] = {
     )
 }
 """Effect name -> class, in the order of DESIGN.md."""
+
+EFFECT_NAMES: tuple[str, ...] = tuple(EFFECTS)
+"""The catalogue's effect names, in catalogue order (DESIGN.md): what ``simulate --effects`` injects,
+``identify --effects`` models and ``diagnose`` tests.  Every other list of effects is this one."""
