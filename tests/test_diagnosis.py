@@ -19,10 +19,11 @@ import pytest
 from dynid.cli import main
 from dynid.diagnosis import stats as st
 from dynid.diagnosis.candidates import EFFECT_NAMES, _relay
-from dynid.diagnosis.cases import random_fourier, run_case
+from dynid.diagnosis.cases import run_case
 from dynid.diagnosis.core import detect_period, diagnose, measure_noise
 from dynid.exceptions import DataError, IdentificationError, ShapeError, UsageError
 from dynid.identify.dataset import Dataset, save_dataset
+from dynid.sim.cases import case_excitation
 from dynid.sim.simulator import simulate
 
 FAST = {"train_seconds": 20.0, "heldout_seconds": 20.0, "base_freq": 0.2}
@@ -114,7 +115,7 @@ def test_structured_change_picks_the_hypothesis_that_made_the_change(rng):
 def test_period_detection_and_noise_floor_of_a_periodic_run(ur5):
     from dynid.identify.linear_system import Preprocessing, prepare
 
-    traj = random_fourier(ur5, 11, base_freq=0.5)
+    traj = case_excitation(ur5, 11, base_freq=0.5)
     res = simulate(ur5, traj, duration=8.0, friction="linear", seed=3)
     prep = prepare(res.to_dataset(), Preprocessing())
     assert detect_period(prep.t, prep.q) == pytest.approx(2.0, abs=1.5e-3)
@@ -259,9 +260,9 @@ def small(ur5):
     """A short model, training and held-out set (no effect), shared by the bad-input tests."""
     from dynid.identify.model import identify
 
-    tr = simulate(ur5, random_fourier(ur5, 21, base_freq=0.5), duration=6.0, friction="linear", seed=21)
+    tr = simulate(ur5, case_excitation(ur5, 21, base_freq=0.5), duration=6.0, friction="linear", seed=21)
     ho = simulate(
-        ur5, random_fourier(ur5, 22, base_freq=0.5), duration=6.0, friction="linear", seed=22, truth_seed=21
+        ur5, case_excitation(ur5, 22, base_freq=0.5), duration=6.0, friction="linear", seed=22, truth_seed=21
     )
     train, held = tr.to_dataset(), ho.to_dataset()
     model = identify(ur5, train, method="ols", friction="linear", gmm="off")
@@ -295,7 +296,7 @@ def test_a_floor_from_the_spectrum_makes_the_verdict_provisional(ur5, small):
     model, train, held = small
     # Less than one period of a slow excitation: no repeated period, the floor comes from the spectrum.
     slow = simulate(
-        ur5, random_fourier(ur5, 23, base_freq=0.15), duration=5.0, friction="linear", seed=23, truth_seed=21
+        ur5, case_excitation(ur5, 23, base_freq=0.15), duration=5.0, friction="linear", seed=23, truth_seed=21
     ).to_dataset()
     d = diagnose(model, train, slow, max_samples=3000, max_effects=1)
     assert d.noise.method == "spectrum"

@@ -3,20 +3,29 @@
 ``tau = W(q, dq, ddq) x_true (+ friction(dq) + unmodelled(q, dq)) + noise`` on random Fourier motions.
 This is not the simulator (:mod:`dynid.sim.simulator`, forward dynamics with effects); it is the
 shortest path to data whose truth is known exactly in the identified parameters.
+
+:func:`random_fourier` is the ONE random excitation of synthetic data: these regressor datasets, the
+simulated cases of the gap diagnosis (:func:`dynid.sim.cases.case_excitation`) and the benchmarks.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
 
+from dynid.exceptions import UsageError
 from dynid.identify.dataset import Dataset
 from dynid.identify.linear_system import ColumnSet, linear_torque
 from dynid.optim.trajectory import FourierTrajectory
 
 __all__ = ["random_fourier", "synthetic_dataset", "true_parameters"]
+
+
+_SAMPLES = {"joint": 2000, "arm": 4000}  # points per period on which the limits are checked
+_ARM_REACH = 1.2  # rad: "arm" scaling keeps each angle within this of the centre (and 80 % of its half-range)
 
 
 def random_fourier(
@@ -28,15 +37,30 @@ def random_fourier(
     periods: int = 1,
     fraction: float = 0.6,
     still: tuple[int, ...] = (),
+    centre=None,
+    scaling: str = "joint",
 ) -> FourierTrajectory:
-    """A random Fourier motion within ``fraction`` of each joint's limits (position, speed, acceleration).
+    """A random Fourier motion within ``fraction`` of the robot's limits: the ONE synthetic excitation.
+
+    The coefficients are standard normal draws from ``rng`` (``a`` then ``b``, each (harmonics, n)),
+    then scaled in one of two ways:
+
+    ``scaling="joint"``
+        each joint on its own, to ``fraction`` of the tightest of its position half-range
+        (``min(q_max - q_min, 2 pi) / 2``), speed and acceleration limit; the motion's mean sits on
+        ``centre`` (default the middle of each joint's range).
+    ``scaling="arm"``
+        one factor for all joints (the motion keeps its shape across joints): ``fraction`` of the
+        tightest speed and acceleration limit of any joint, and every angle within
+        ``min(0.8 half-range, 1.2 rad)`` of ``centre`` (default the middle of each joint's range
+        clipped to +-pi), the half-range also clipped to +-pi.  The offset ``c`` is the centre itself.
 
     Parameters
     ----------
     robot : RobotModel
         The robot (its limits scale the motion).
     rng : numpy.random.Generator
-        Random source.
+        Random source of the coefficients.
     harmonics : int
         Harmonics per joint.
     base_freq : float
@@ -46,17 +70,44 @@ def random_fourier(
     fraction : float
         Share of each limit the motion may use.
     still : tuple of int
-        Joints (1-based) that do not move.
+        Joints (1-based) that do not move (``scaling="joint"`` only).
+    centre : array_like, shape (n,), optional
+        Centre posture (rad), e.g. :func:`dynid.sim.cases.case_centre`; default the middle of the range.
+    scaling : {"joint", "arm"}
+        Scale each joint on its own, or the whole arm by one factor (see above).
+
+    Raises
+    ------
+    UsageError
+        An unknown scaling, ``still`` joints with ``scaling="arm"``, or a centre of the wrong length.
     """
+    if scaling not in _SAMPLES:
+        raise UsageError(
+            f"the scaling is '{scaling}'; give 'joint' (each joint on its own) or 'arm' (one factor)."
+        )
+    if still and scaling != "joint":
+        raise UsageError(
+            f"still joints {still} need scaling='joint' (one factor for the arm cannot hold a joint still); "
+            "give scaling='joint' or no still joints."
+        )
     n = robot.n
+    if centre is not None:
+        centre = np.asarray(centre, dtype=float)
+        if centre.shape != (n,):
+            raise UsageError(
+                f"the centre posture has shape {centre.shape}; the robot '{robot.name}' has {n} joints, "
+                f"give {n} angles (rad)."
+            )
     a = rng.normal(size=(harmonics, n))
     b = rng.normal(size=(harmonics, n))
+    if scaling == "arm":
+        return _scale_arm(robot, a, b, base_freq, periods, fraction, centre)
     traj = FourierTrajectory(a=a, b=b, c=np.zeros(n), base_freq=base_freq, periods=periods)
-    t = np.linspace(0.0, traj.period, 2000)
+    t = np.linspace(0.0, traj.period, _SAMPLES["joint"])
     q, dq, ddq = traj.evaluate(t)
     q = q - q.mean(axis=0)
     span = np.minimum(robot.q_max - robot.q_min, 2 * np.pi) / 2
-    center = 0.5 * (robot.q_max + robot.q_min)
+    middle = 0.5 * (robot.q_max + robot.q_min) if centre is None else centre
     scale = fraction * np.min(
         np.vstack(
             [
@@ -69,8 +120,23 @@ def random_fourier(
     )
     for j in still:
         scale[j - 1] = 0.0
-    c = center - scale * traj.evaluate(t)[0].mean(axis=0)
+    c = middle - scale * traj.evaluate(t)[0].mean(axis=0)
     return FourierTrajectory(a=a * scale, b=b * scale, c=c, base_freq=base_freq, periods=periods)
+
+
+def _scale_arm(robot, a, b, base_freq, periods, fraction, centre) -> FourierTrajectory:
+    """``scaling="arm"`` of :func:`random_fourier`: one factor for all joints, offset = centre."""
+    lo, hi = np.maximum(robot.q_min, -math.pi), np.minimum(robot.q_max, math.pi)
+    c = 0.5 * (lo + hi) if centre is None else centre
+    half = np.minimum(0.5 * (hi - lo) * 0.8, _ARM_REACH)
+    traj = FourierTrajectory(a=a, b=b, c=c, base_freq=base_freq)
+    q, dq, ddq = traj.evaluate(np.linspace(0.0, 1.0 / base_freq, _SAMPLES["arm"]))
+    s = min(
+        float(np.min(fraction * robot.dq_max / np.max(np.abs(dq), axis=0))),
+        float(np.min(fraction * robot.ddq_max / np.max(np.abs(ddq), axis=0))),
+        float(np.min(half / np.max(np.abs(q - c), axis=0))),
+    )
+    return FourierTrajectory(a=a * s, b=b * s, c=c, base_freq=base_freq, periods=periods)
 
 
 def true_parameters(columns: ColumnSet, rng: np.random.Generator | None = None) -> NDArray[np.float64]:
