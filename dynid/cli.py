@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import importlib.util
 import json
 import os
 import sys
@@ -37,14 +36,6 @@ COMMANDS = {
 }
 
 
-def _available() -> dict[str, str]:
-    return {
-        name: mod
-        for name, mod in COMMANDS.items()
-        if importlib.util.find_spec(f"dynid.commands.{mod}") is not None
-    }
-
-
 def build_parser() -> argparse.ArgumentParser:
     from dynid import __version__
 
@@ -54,7 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"dynid {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name, module in _available().items():
+    for name, module in COMMANDS.items():
         mod = importlib.import_module(f"dynid.commands.{module}")
         p = sub.add_parser(name, help=mod.HELP, description=mod.HELP)
         mod.add_arguments(p)

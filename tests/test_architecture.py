@@ -96,9 +96,7 @@ def _imports(module: str, tree: ast.AST) -> list[Import]:
         if isinstance(node, ast.Import):
             found += [Import(a.name, (), node.lineno) for a in node.names if a.name.split(".")[0] == "dynid"]
         elif isinstance(node, ast.ImportFrom):
-            target = (
-                _resolve_relative(module, node.level, node.module) if node.level else (node.module or "")
-            )
+            target = _resolve_relative(module, node.level, node.module) if node.level else (node.module or "")
             if target.split(".")[0] == "dynid":
                 found.append(Import(target, tuple(a.name for a in node.names), node.lineno))
         elif (
@@ -121,7 +119,9 @@ def _private_allowed(importer: str, private_module: str) -> bool:
 
 
 def _private_parts(dotted: str) -> list[int]:
-    return [i for i, part in enumerate(dotted.split(".")) if part.startswith("_") and not part.startswith("__")]
+    return [
+        i for i, part in enumerate(dotted.split(".")) if part.startswith("_") and not part.startswith("__")
+    ]
 
 
 def _check_private_module(importer: str, target: str) -> str | None:
@@ -179,9 +179,7 @@ def _violations(module: str, path: Path) -> dict[str, list[str]]:
                     else:
                         bound[a.name.split(".")[0]] = "dynid"
         elif isinstance(node, ast.ImportFrom):
-            target = (
-                _resolve_relative(module, node.level, node.module) if node.level else (node.module or "")
-            )
+            target = _resolve_relative(module, node.level, node.module) if node.level else (node.module or "")
             for a in node.names:
                 if f"{target}.{a.name}" in MODULES:
                     bound[a.asname or a.name] = f"{target}.{a.name}"
@@ -223,7 +221,9 @@ def test_the_walk_finds_every_layer():
     assert layer("dynid.symbolic.robot") < layer("dynid.optim.excitation") < layer("dynid.identify.model")
     assert layer("dynid.identify.model") < layer("dynid.sim.simulator") < layer("dynid.validation.validate")
     assert layer("dynid.validation.validate") < layer("dynid.diagnosis.core") < layer("dynid.commands.demo")
-    assert layer("dynid._io") < layer("dynid.symbolic.robot") and layer("dynid.commands.demo") < layer("dynid.cli")
+    assert layer("dynid._io") < layer("dynid.symbolic.robot") and layer("dynid.commands.demo") < layer(
+        "dynid.cli"
+    )
 
 
 def test_the_checks_catch_what_they_forbid(tmp_path):

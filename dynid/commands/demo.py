@@ -1,58 +1,25 @@
 """``dynid demo``: the whole path on the built-in default robot (UR5), one stage after another.
 
-Stages: symbolic model (and its compiled C) -> excitation design -> simulated runs (identification,
-and a separate validation run of several periods on another trajectory) -> identification (OLS,
-IRLS and the full three-layer method) -> validation -> gap diagnosis -> report.  The simulated robot
-is the UR5 with its inertial parameters perturbed by 10 %, the paper's friction model, a tracking
-controller and noisy, quantised sensors: identification has to find a truth it is not given.  A
-stage whose part of dynid is not built yet is listed as such, never faked; ``--quick`` shortens the
-trajectories and the search, never skips a stage.
+The stages live in :func:`dynid.demo.run_demo`; this command checks its options, shows the progress,
+prints the summary table and writes ``--json``.
 """
 
 from __future__ import annotations
 
 import argparse
-import html
-import importlib.util
-import sys
-import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from dynid.commands.common import add_json_argument
 from dynid.exceptions import UsageError
 
+__all__ = ["HELP", "add_arguments", "run"]
+
 HELP = "run the whole path on the built-in default robot (UR5): excite, simulate, identify, validate, diagnose, report"
-
-DEFAULT_ROBOT = "ur5"
-
-# Settings of the two modes: (full, quick).
-_SETTINGS = {
-    "full": {
-        "harmonics": 5,
-        "base_freq": 0.1,
-        "patience": 1,
-        "max_tries": 2,
-        "baseline": 20,
-        "id_periods": 2,
-        "val_periods": 3,
-    },
-    "quick": {
-        "harmonics": 3,
-        "base_freq": 0.2,
-        "patience": 1,
-        "max_tries": 1,
-        "baseline": 5,
-        "id_periods": 2,
-        "val_periods": 3,
-    },
-}
-_PERTURB = 0.1
-_DECIMATE = 4  # 1 kHz -> 250 Hz after the 20 Hz filter: the same information, a quarter of the work
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The demo's options: ``--out``, ``--quick``, ``--seed``, ``--json``."""
     parser.add_argument(
         "--out",
         default="dynid-demo",
@@ -66,93 +33,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_json_argument(parser)
 
 
-class NotBuilt(Exception):
-    """A stage cannot run: its part of dynid, or a stage it needs, does not exist yet."""
-
-
-class Stages:
-    """Runs named stages, shows progress, keeps the figures for the summary.
-
-    Parameters
-    ----------
-    total : int
-        Number of stages, for the ``[k/total]`` counter.
-    """
-
-    def __init__(self, total: int) -> None:
-        self.total = total
-        self.rows: list[dict[str, Any]] = []
-
-    def _head(self) -> str:
-        return f"[{len(self.rows) + 1}/{self.total}]"
-
-    def run(
-        self, label: str, fn: Callable[[], str], *, needs: tuple[str, ...] = (), may_fail: bool = False
-    ) -> None:
-        """Run one stage: ``fn`` does the work and returns a one-line summary.
-
-        ``needs``: modules the stage uses; a missing one, or a :class:`NotBuilt` raised by ``fn``,
-        lists the stage as not built yet instead of running it.  ``may_fail``: a
-        :class:`~dynid.exceptions.DynidError` of this stage is recorded as a failure and the next
-        stages still run (the demo then exits with code 1).
-        """
-        from dynid.exceptions import DynidError
-
-        missing = [m for m in needs if not _exists(m)]
-        if missing:
-            self._not_built(label, f"{missing[0]} does not exist")
-            return
-        print(f"{self._head()} {label}...", flush=True)
-        start = time.perf_counter()
-        try:
-            summary = fn()
-        except NotBuilt as why:
-            self.rows.append(
-                {"stage": label, "status": "not built", "summary": f"not built yet ({why})", "seconds": 0.0}
-            )
-            print(f"      not built yet ({why})", flush=True)
-            return
-        except DynidError as err:
-            if not may_fail:
-                raise
-            elapsed = time.perf_counter() - start
-            self.rows.append(
-                {"stage": label, "status": "failed", "summary": f"failed: {err}", "seconds": elapsed}
-            )
-            print(f"      failed: {err} ({elapsed:.1f} s)", flush=True)
-            return
-        elapsed = time.perf_counter() - start
-        self.rows.append({"stage": label, "status": "done", "summary": summary, "seconds": elapsed})
-        print(f"      {summary} ({elapsed:.1f} s)", flush=True)
-
-    def _not_built(self, label: str, why: str) -> None:
-        print(f"{self._head()} {label}: not built yet ({why})", flush=True)
-        self.rows.append(
-            {"stage": label, "status": "not built", "summary": f"not built yet ({why})", "seconds": 0.0}
-        )
-
-    @property
-    def missing(self) -> list[str]:
-        """Stages not built yet."""
-        return [r["stage"] for r in self.rows if r["status"] == "not built"]
-
-    @property
-    def failed(self) -> list[str]:
-        """Stages that failed."""
-        return [r["stage"] for r in self.rows if r["status"] == "failed"]
-
-
-def _exists(module: str) -> bool:
-    try:
-        return importlib.util.find_spec(module) is not None
-    except ModuleNotFoundError:
-        return False
-
-
-def _say(message: str) -> None:
-    print(f"      {message}", flush=True)
-
-
 def _check_out(path: str) -> Path:
     out = Path(path)
     if out.exists() and not out.is_dir():
@@ -162,401 +42,31 @@ def _check_out(path: str) -> Path:
     return out
 
 
-def run(args: argparse.Namespace) -> int:
-    import numpy as np
+def _show(line: str) -> None:
+    print(line, flush=True)
 
-    from dynid.cli import write_json
-    from dynid.symbolic.build import cache_dir, generator_is_built
-    from dynid.symbolic.robot import load_robot
+
+def run(args: argparse.Namespace) -> int:
+    """Run the demo; exit code 1 when a stage failed (the diagnosis may fail without stopping it)."""
+    from dynid._io import write_json
+    from dynid.demo import run_demo
 
     out = _check_out(args.out)
     json_path = None if args.json is None else Path(args.json)
     if json_path is not None and not json_path.parent.is_dir():
         raise UsageError(f"the folder of --json '{json_path}' does not exist; create it or write elsewhere.")
-    out.mkdir(exist_ok=True)
-    mode = "quick" if args.quick else "full"
-    cfg = _SETTINGS[mode]
-    started = time.perf_counter()
-    stages = Stages(total=7)
-    # The UR5 at its own limits (URDF; 10 rad/s^2 where the URDF has none), as a user's first run has it.
-    robot = load_robot(DEFAULT_ROBOT)
-    state: dict[str, Any] = {}
-    figures: dict[str, Any] = {"robot": DEFAULT_ROBOT, "mode": mode, "seed": args.seed}
-    first_build = not generator_is_built()
-    figures["first_run_build"] = first_build
-    print(
-        f"dynid demo ({mode}): {robot.name}, {robot.n} joints; the simulated robot is the UR5 with its inertial "
-        f"parameters perturbed by {100 * _PERTURB:g} %, the paper's friction and noisy sensors. Files go to {out}."
-    )
-
-    # ------------------------------------------------------------------ 1. symbolic model
-    def symbolic() -> str:
-        import pinocchio as pin
-
-        from dynid.symbolic.base import base_parameters
-        from dynid.symbolic.export import compiled_functions
-        from dynid.symbolic.functions import robot_functions
-
-        if first_build:
-            _say(
-                "first run in this environment: building the symbolic generator once (1-2 minutes on 2 cores, "
-                f"more on a slow machine), cached in {cache_dir()}; later runs skip this"
-            )
-        funcs = robot_functions(robot, progress=_say)
-        base = base_parameters(funcs)
-        lib = compiled_functions(robot, progress=_say)
-        rng = np.random.default_rng([args.seed, 0])
-        q, dq, ddq = rng.uniform(-1, 1, size=(3, 500, robot.n))
-        tau = lib.rnea(q, dq, ddq)
-        model, data = robot.pin_model, robot.pin_model.createData()
-        err = max(
-            float(np.abs(tau[k] - pin.rnea(model, data, q[k], dq[k], ddq[k])).max()) for k in range(len(q))
-        )
-        state["base"] = base
-        figures["n_base"] = base.n_base
-        figures["c_export_max_error"] = err
-        return (
-            f"{base.n_base} base parameters ({int(base.gravity_related.sum())} gravity-related); compiled C rnea "
-            f"matches numeric Pinocchio to {err:.1e} N m on 500 random states"
-        )
-
-    # ------------------------------------------------------------------ 2. excitation
-    def excite() -> str:
-        from dynid.optim.excitation import ExcitationProblem, design_excitation
-
-        problem = ExcitationProblem(
-            robot=robot, harmonics=cfg["harmonics"], base_freq=cfg["base_freq"], criterion="seed"
-        )
-        result = design_excitation(
-            problem,
-            seed=args.seed,
-            patience=cfg["patience"],
-            max_tries=cfg["max_tries"],
-            baseline=cfg["baseline"],
-            n_jobs=2,
-            progress=_say,
-        )
-        traj = result.trajectories[0]
-        traj.save(out / "excitation.json")
-        state["problem"], state["excitation"], state["trajectory"] = problem, result, traj
-        figures["excitation"] = {
-            "cond": result.cond,
-            "baseline_cond": result.baseline_cond,
-            "feasible": result.feasible,
-            "harmonics": cfg["harmonics"],
-            "period_s": traj.period,
-        }
-        return (
-            f"{cfg['harmonics']} harmonics, period {traj.period:g} s: cond {result.cond:.4g} against "
-            f"{result.baseline_cond:.4g} for the best of {cfg['baseline']} random feasible trajectories; "
-            f"wrote {out / 'excitation.json'}"
-        )
-
-    # ------------------------------------------------------------------ 3. simulation
-    def needs(key: str, stage: str) -> None:
-        if key not in state:
-            raise NotBuilt(f"it needs the {stage}, which did not run")
-
-    def simulate_runs() -> str:
-        from dynid.identify.dataset import load_dataset
-        from dynid.sim.simulator import build_truth, simulate, write_simulation
-
-        needs("trajectory", "excitation design")
-        traj = state["trajectory"]
-        truth = build_truth(robot, friction="seed", perturb=_PERTURB, truth_seed=args.seed)
-        # The held-out run follows another trajectory (random, within the limits), several periods long.
-        other = state["problem"].random_trajectory(np.random.default_rng([args.seed, 7]), amplitude=0.9)
-        runs = {}
-        for name, trajectory, periods, seed in (
-            ("identification", traj, cfg["id_periods"], args.seed + 1),
-            ("validation", other, cfg["val_periods"], args.seed + 2),
-        ):
-            result = simulate(
-                robot,
-                trajectory,
-                truth=truth,
-                seed=seed,
-                duration=periods * trajectory.period,
-                source=f"the demo's {name} trajectory",
-            )
-            path, _ = write_simulation(result, out / f"{name}.csv")
-            runs[name] = (result, path)
-        state["truth"] = truth
-        # Read back what was written: the rest of the demo sees the files a user would pass to dynid.
-        state["data"] = {k: load_dataset(p, robot.n) for k, (_, p) in runs.items()}
-        state["val_period"] = other.period
-        state["paths"] = {k: p for k, (_, p) in runs.items()}
-        ident, val = runs["identification"][0], runs["validation"][0]
-        figures["runs"] = {
-            "identification": {"duration_s": float(ident.t[-1]), "samples": int(ident.t.size)},
-            "validation": {
-                "duration_s": float(val.t[-1]),
-                "samples": int(val.t.size),
-                "periods": cfg["val_periods"],
-            },
-        }
-        return (
-            f"identification run {ident.t[-1]:.0f} s ({cfg['id_periods']} periods of the excitation), validation "
-            f"run {val.t[-1]:.0f} s ({cfg['val_periods']} periods of another trajectory), 1 kHz; wrote "
-            f"{runs['identification'][1].name} and {runs['validation'][1].name} with their .truth.json"
-        )
-
-    # ------------------------------------------------------------------ 4. identification
-    def identify_models() -> str:
-        needs("data", "simulated runs")
-        from dynid.identify.linear_system import Preprocessing
-        from dynid.identify.model import save_model
-        from dynid.validation.validate import COMPARISON, identify_methods
-
-        fitted = identify_methods(
-            robot,
-            state["data"]["identification"],
-            methods=COMPARISON,
-            preprocessing=Preprocessing(decimate=_DECIMATE),
-            random_state=args.seed,
-            progress=_say,
-        )
-        files = {}
-        for f in fitted:
-            name = "model.json" if f.label == "full" else f"model_{f.label.lower()}.json"
-            save_model(f.model, out / name)
-            files[f.label] = name
-        state["fitted"], state["files"] = fitted, files
-        figures["identification"] = {
-            f.label: {
-                "method": f.model.method,
-                "cond": f.model.cond,
-                "file": files[f.label],
-                "seconds": f.seconds,
-                "warnings": f.warnings,
-            }
-            for f in fitted
-        }
-        return (
-            "the full method (consistent links, the paper's friction, GMM), OLS and IRLS (linear friction) in "
-            + ", ".join(f"{f.seconds:.1f} s" for f in fitted)
-            + f"; wrote {', '.join(files.values())}"
-        )
-
-    # ------------------------------------------------------------------ 5. validation
-    def validation() -> str:
-        needs("fitted", "identification")
-        from dynid.validation.validate import compare, validate
-
-        data = state["data"]["validation"]
-        results = [
-            validate(
-                f.model,
-                data,
-                period=state["val_period"],
-                label=f.label,
-                info={"model_file": state["files"][f.label], "seconds": f.seconds},
-            )
-            for f in state["fitted"]
-        ]
-        state["results"] = results
-        state["rows"] = compare(results)
-        full = results[0]
-        state["truth_errors"] = _truth_errors(state["truth"], {r.label: r.model for r in results})
-        return (
-            f"held-out mean RMS: full {full.metrics['rms_mean']:.4g}, OLS {results[1].metrics['rms_mean']:.4g}, "
-            f"IRLS {results[2].metrics['rms_mean']:.4g} N m; noise floor {full.noise.rms_mean:.4g} N m "
-            f"({full.noise.detail})"
-        )
-
-    # ------------------------------------------------------------------ 6. diagnosis
-    def diagnosis() -> str:
-        needs("results", "validation")
-        from dynid.diagnosis.core import diagnose
-
-        full = state["results"][0]
-        result = diagnose(
-            full.model,
-            state["data"]["identification"],
-            state["data"]["validation"],
-            period=state["val_period"],
-        )
-        state["diagnosis"] = result
-        figures["diagnosis"] = result.to_dict()
-        written = ""
-        if _exists("dynid.diagnosis.report"):
-            from dynid.diagnosis.report import write_diagnosis_report
-
-            path = write_diagnosis_report(
-                result, out / "diagnosis.html", title="dynid demo: gap diagnosis of the full method"
-            )
-            state["diagnosis_report"] = path
-            figures["diagnosis_report"] = str(path)
-            written = f"; wrote {path}"
-        text = result.summary().splitlines()
-        return f"verdict {', '.join(result.verdict)}{written}: {text[0] if text else ''}"
-
-    # ------------------------------------------------------------------ 7. report
-    def report() -> str:
-        needs("results", "validation")
-        from dynid.validation.report import html_table, json_ready, render_report
-
-        results = state["results"]
-        full = results[0]
-        figures.update(
-            {
-                **full.figures(),
-                "models": state["rows"],
-                "truth_relative_error": state["truth_errors"],
-                "report": str(out / "report.html"),
-            }
-        )
-        stage_rows = [[r["stage"], r["status"], r["summary"], r["seconds"]] for r in stages.rows]
-        truth_rows = [
-            [
-                r.label,
-                state["truth_errors"][r.label]["rigid_body"],
-                state["truth_errors"][r.label]["worst_joint_torque"],
-            ]
-            for r in results
-        ]
-        sections = [
-            (
-                "Against the simulated truth",
-                '<p class="note">The simulator knows the robot it drove. Relative error of the identified '
-                "rigid-body parameters (base parameters and armature, weighted by how much torque each one "
-                "makes on the held-out motion): the RMS over joints of Y(x - x_true) over the RMS of Y x_true, "
-                "and the largest joint's.</p>"
-                + html_table(
-                    ["model", "relative error (all joints)", "worst joint"], truth_rows, table_id="truth"
-                ),
-            ),
-            (
-                "How this report was made",
-                html_table(
-                    ["stage", "status", "summary", "seconds"], stage_rows, table_id="stages", text_columns=3
-                ),
-            ),
-        ]
-        if "diagnosis" in state:
-            fragment = _diagnosis_html(state["diagnosis"], full.label)
-            if "diagnosis_report" in state:
-                name = html.escape(Path(state["diagnosis_report"]).name)
-                fragment += (
-                    f'<p class="note">The diagnosis in full (gap map, decomposition, every candidate): '
-                    f'<a href="{name}">{name}</a>, beside this file.</p>'
-                )
-            sections.insert(0, ("Sim-to-real gap diagnosis", fragment))
-        else:
-            row = next((r for r in stages.rows if r["stage"].startswith("sim-to-real")), None)
-            why = row["summary"] if row else "not run"
-            sections.insert(0, ("Sim-to-real gap diagnosis", f'<p class="note">{html.escape(why)}.</p>'))
-        exc = state["excitation"]
-        rep = render_report(
-            results,
-            figures=json_ready(figures),
-            title="dynid demo: UR5 identified from a simulated run, validated on another",
-            context={
-                "identification data": f"{state['paths']['identification'].name} (the optimised excitation)",
-                "truth": f"UR5 with inertial parameters perturbed by {100 * _PERTURB:g} %, the paper's friction",
-                "mode": mode,
-            },
-            sections=sections,
-            conditions=[
-                ("excitation design (cond of H* on its grid)", exc.cond),
-                (f"best of {cfg['baseline']} random feasible trajectories", exc.baseline_cond),
-            ],
-        )
-        path = rep.write(out / "report.html")
-        state["report"] = path
-        return f"wrote {path} ({len(rep.figures)} figures, {len(rep.html) / 1e6:.1f} MB)"
-
-    # One BLAS / OpenMP thread: on small matrices a threaded BLAS is many times slower here (the
-    # excitation's figures took 5 s instead of 0.1 s on 2 busy cores); joblib's workers set their own.
-    import scipy.linalg  # noqa: F401  (loads scipy's BLAS, so that the limit below covers it)
-    from threadpoolctl import threadpool_limits
-
-    with threadpool_limits(limits=1):
-        stages.run("symbolic dynamics, base parameters and compiled C (Pinocchio on CasADi)", symbolic)
-        stages.run("excitation design (Fourier series, IPOPT)", excite, needs=("dynid.optim.excitation",))
-        stages.run(
-            "simulated identification and validation runs", simulate_runs, needs=("dynid.sim.simulator",)
-        )
-        stages.run("identification: the full three-layer method, OLS and IRLS", identify_models)
-        stages.run("validation on the held-out run", validation)
-        stages.run(
-            "sim-to-real gap diagnosis", diagnosis, needs=("dynid.diagnosis.core",), may_fail=True
-        )
-        stages.run("HTML report", report)
-
-    total = time.perf_counter() - started
-    figures["stages"] = stages.rows
-    figures["stages_missing"] = stages.missing
-    figures["stages_failed"] = stages.failed
-    figures["total_s"] = total
-    _print_summary(state, stages, total)
-    from dynid.validation.report import json_ready
-
-    write_json(json_path, json_ready(figures))
-    return 1 if stages.failed else 0
+    result = run_demo(out, quick=args.quick, seed=args.seed, progress=_show)
+    _print_summary(result)
+    if json_path is not None:
+        write_json(json_path, result.figures)
+    return 1 if result.failed else 0
 
 
-def _truth_errors(truth, models: dict[str, Any]) -> dict[str, dict[str, float]]:
-    """How far each model's rigid body is from the simulated truth, in torque on random states."""
-    import numpy as np
-
-    from dynid.identify.linear_system import linear_torque
-
-    out = {}
-    robot = truth.nominal
-    rng = np.random.default_rng(0)
-    q = rng.uniform(robot.q_min, robot.q_max, size=(2000, robot.n))
-    dq = rng.uniform(-robot.dq_max, robot.dq_max, size=q.shape)
-    ddq = rng.uniform(-robot.ddq_max, robot.ddq_max, size=q.shape)
-    for label, model in models.items():
-        cols = model.columns
-        n = robot.n
-        phi = np.concatenate([truth.robot.params, truth.robot.armature, np.zeros(3 * n)])
-        x_true = cols.P @ phi
-        tau_true = linear_torque(cols, x_true, q, dq, ddq, mask=cols.link_mask)
-        err = linear_torque(cols, model.params - x_true, q, dq, ddq, mask=cols.link_mask)
-        per_joint = np.sqrt(np.mean(err**2, axis=0)) / np.sqrt(np.mean(tau_true**2, axis=0))
-        total = float(np.sqrt(np.mean(err**2)) / np.sqrt(np.mean(tau_true**2)))
-        out[label] = {"rigid_body": total, "worst_joint_torque": float(per_joint.max())}
-    return out
-
-
-def _diagnosis_html(result: Any, label: str) -> str:
-    """The diagnosis as a report section: its verdict in words and the best-ranked candidates."""
-    from dynid.validation.report import html_table
-
-    doc = result.to_dict()
-    lines = "".join(f"<li>{html.escape(line)}</li>" for line in result.summary().splitlines() if line.strip())
-    rows = []
-    for r in doc.get("ranking", [])[:10]:
-        joint = r.get("joint")
-        joint = ", ".join(map(str, joint)) if isinstance(joint, list) else joint
-        rows.append(
-            [
-                str(r.get("effect")),
-                "-" if joint is None else str(joint),
-                "yes" if r.get("accepted") else "no",
-                r.get("closure"),
-                r.get("p_value"),
-            ]
-        )
-    return (
-        f"<p>Model '{html.escape(label)}' on the held-out run; verdict: "
-        f"<strong>{html.escape(', '.join(doc.get('verdict', [])))}</strong>.</p><ul>{lines}</ul>"
-        + html_table(
-            ["candidate effect", "joint", "accepted", "closure", "p (Holm)"],
-            rows,
-            table_id="diagnosis",
-            text_columns=3,
-        )
-    )
-
-
-def _print_summary(state: dict[str, Any], stages: Stages, total: float) -> None:
+def _print_summary(result: Any) -> None:
     print("\nsummary")
-    for row in stages.rows:
-        print(f"  {row['stage']:<72} {row['status']:>9} {row['seconds']:6.1f} s")
-    results = state.get("results")
+    for row in result.stages:
+        print(f"  {row.stage:<72} {row.status:>9} {row.seconds:6.1f} s")
+    results = result.results
     if results:
         n = results[0].n
         print("\nheld-out RMS per joint (N m), validation run on another trajectory")
@@ -573,6 +83,6 @@ def _print_summary(state: dict[str, Any], stages: Stages, total: float) -> None:
         print(
             f"  {'noise floor':<12}" + "".join(f"{v:>10.4g}" for v in noise.std) + f"{noise.rms_mean:>10.4g}"
         )
-    if "report" in state:
-        print(f"\nreport: {Path(state['report']).resolve()}")
-    print(f"total {total:.1f} s", file=sys.stdout)
+    if result.report is not None:
+        print(f"\nreport: {Path(result.report).resolve()}")
+    print(f"total {result.total_s:.1f} s")
