@@ -20,11 +20,12 @@ from dynid.cli import main
 from dynid.diagnosis import stats as st
 from dynid.diagnosis.candidates import EFFECT_NAMES, _relay
 from dynid.diagnosis.cases import run_case
-from dynid.diagnosis.core import detect_period, diagnose, measure_noise
+from dynid.diagnosis.core import diagnose
 from dynid.exceptions import DataError, IdentificationError, ShapeError, UsageError
 from dynid.identify.dataset import Dataset, save_dataset
 from dynid.sim.cases import case_excitation
 from dynid.sim.simulator import simulate
+from dynid.validation.noise import detect_period, measure_noise
 
 FAST = {"train_seconds": 20.0, "heldout_seconds": 20.0, "base_freq": 0.2}
 DIAG = {"max_samples": 6000, "max_effects": 2}

@@ -53,6 +53,7 @@ import scipy.linalg
 from numpy.typing import NDArray
 from scipy import optimize, stats
 
+from dynid._io import to_jsonable
 from dynid.diagnosis import stats as st
 from dynid.diagnosis.candidates import (
     EFFECT_NAMES,
@@ -75,123 +76,13 @@ from dynid.identify.linear_system import (
     compiled_base_regressor,
     prepare,
 )
-from dynid.identify.model import _clean  # the model file's JSON cleaner: arrays to lists, NaN to None
-from dynid.validation.metrics import NoiseFloor, noise_floor
+from dynid.validation.metrics import NoiseFloor
+from dynid.validation.noise import measure_noise
 
-__all__ = ["Diagnosis", "RankedCandidate", "detect_period", "diagnose", "measure_noise"]
+__all__ = ["Diagnosis", "RankedCandidate", "diagnose"]
 
-_MIN_SPECTRAL_SAMPLES = 4096
 _STATE_FACTOR = 2.0  # state filter cut-off over the parallel filter's in the refit
 _WEIGHT_PASSES = 6  # reweighting passes of the baseline refit, at most
-_PERIOD_TOL = 1e-3  # relative mismatch of q over one period for the data to count as periodic
-
-
-# ---------------------------------------------------------------------------- noise floor
-def detect_period(t: NDArray[np.float64], q: NDArray[np.float64], *, min_period: float = 0.5) -> float | None:
-    """Period (s) of a periodic motion, or None when the data hold fewer than two periods.
-
-    The angles must repeat after the period to ``1e-3`` of their spread (quantised encoders and noise
-    pass; a non-periodic run does not).
-
-    Parameters
-    ----------
-    t : ndarray, shape (M,)
-        Uniform time stamps (s).
-    q : ndarray, shape (M, n)
-        Joint angles (rad).
-    min_period : float
-        Shortest period considered (s).
-    """
-    q = np.asarray(q, dtype=float)
-    m = len(t)
-    if m < 8:
-        return None
-    dt = float(np.median(np.diff(t)))
-    x = q - q.mean(axis=0)
-    spread = float(np.sum(x**2) / m)
-    if spread <= 0:
-        return None
-    nfft = 1 << math.ceil(math.log2(2 * m))
-    f = np.fft.rfft(x, nfft, axis=0)
-    ac = np.fft.irfft(np.sum(np.abs(f) ** 2, axis=1), nfft)[:m]
-    lo = max(1, int(min_period / dt))
-    hi = m // 2
-    if hi <= lo:
-        return None
-    # Normalised by the overlap, the autocorrelation peaks at multiples of the period.
-    lags = np.arange(lo, hi + 1)
-    score = ac[lags] / (m - lags)
-    order = np.argsort(score)[::-1][:20]
-
-    def mismatch(k: int) -> float:
-        return float(np.mean((x[k:] - x[:-k]) ** 2))
-
-    for L in sorted(lags[order]):
-        if mismatch(L) < 0.1 * spread:
-            # The exact period: the least mismatch in a window around the peak.
-            width = max(3, int(0.01 * L))
-            best = min(range(max(lo, L - width), min(hi, L + width) + 1), key=mismatch)
-            if mismatch(best) < _PERIOD_TOL**2 * spread * 1e2:
-                return best * dt
-    return None
-
-
-def _filter_noise_gain(prep: Prepared) -> float:
-    """Variance gain of the parallel filter (run forward and backward) on white noise."""
-    if prep.sos is None:
-        return 1.0
-    from scipy.signal import sosfreqz
-
-    _w, h = sosfreqz(prep.sos, worN=8192)
-    return float(np.mean(np.abs(h) ** 4))
-
-
-def measure_noise(prep: Prepared, *, period: float | None = None) -> NoiseFloor:
-    """Noise floor of the filtered torque of prepared data (the level the model's residual is compared with).
-
-    Parameters
-    ----------
-    prep : Prepared
-        The data as the model sees them.
-    period : float, optional
-        Period (s) of the excitation; detected from the angles when not given.
-
-    Returns
-    -------
-    NoiseFloor
-        Standard deviation per joint (N m) of the filtered torque that does not repeat.
-
-    Raises
-    ------
-    DataError
-        Fewer than two periods and too few samples for the spectral method.
-    """
-    run = max(prep.runs, key=lambda r: r.stop - r.start)
-    rows = prep.rows[(prep.rows >= run.start) & (prep.rows < run.stop)]
-    span = slice(int(rows[0]), int(rows[-1]) + 1)
-    t = prep.t[span]
-    if period is None:
-        period = detect_period(t, prep.q[span])
-    if period is not None and (t[-1] - t[0]) >= 2 * period - 1.5 / prep.fs:
-        tau_f = prep.filter(prep.tau)[span]
-        floor = noise_floor(t, tau_f, period=period)
-        if floor.method == "periods":
-            return floor
-    m = run.stop - run.start
-    if m < _MIN_SPECTRAL_SAMPLES:
-        have = f"{(t[-1] - t[0]) / period:.2f} periods of {period:.3g} s" if period else "no repeated period"
-        raise DataError(
-            f"cannot measure the noise floor of the held-out data: they hold {have} and {m} samples, "
-            f"fewer than the {_MIN_SPECTRAL_SAMPLES} the spectral method needs; record at least two whole "
-            "periods of a periodic excitation (or a longer run)."
-        )
-    raw = noise_floor(prep.t[run], prep.tau[run])
-    gain = _filter_noise_gain(prep)
-    return NoiseFloor(
-        std=raw.std * math.sqrt(gain),
-        method="spectrum",
-        detail=raw.detail + (f", times the filter's noise gain {gain:.3g}" if gain != 1.0 else ""),
-    )
 
 
 # ---------------------------------------------------------------------------- data sides
@@ -509,7 +400,7 @@ class Diagnosis:
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON-ready figures (``gap_map``, ``ranking``, ``verdict``, ``parametric``, and more)."""
-        return _clean(
+        return to_jsonable(
             {
                 "verdict": list(self.verdict),
                 "provisional": self.provisional,

@@ -20,10 +20,12 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 from scipy import stats
 
 from dynid.exceptions import DataError
+from dynid.identify.estimators import long_run_variance
 
 __all__ = [
     "DMResult",
@@ -58,18 +60,15 @@ def newey_west_variance(x: ArrayLike, lag: int | None = None) -> float:
     Returns
     -------
     float
-        Long-run variance (u^2); the variance of the mean is this divided by m.
+        Long-run variance (u^2); the variance of the mean is this divided by m
+        (:func:`dynid.identify.estimators.long_run_variance`, at least ``1e-300``).
     """
     x = np.asarray(x, dtype=float)
     m = x.size
     if m < 2:
         raise DataError(f"a long-run variance needs at least 2 values; got {m}: give a longer series.")
     lag = default_lag(m) if lag is None else int(min(max(lag, 0), m - 1))
-    d = x - x.mean()
-    var = float(d @ d) / m
-    for k in range(1, lag + 1):
-        var += 2.0 * (1.0 - k / (lag + 1.0)) * float(d[k:] @ d[:-k]) / m
-    return max(var, 1e-300)
+    return max(float(long_run_variance(x, lag)), 1e-300)
 
 
 @dataclass(frozen=True)
@@ -296,6 +295,10 @@ def ljung_box(x: ArrayLike, lags: int = 20) -> tuple[float, float]:
 def principal_angles(A: ArrayLike, B: ArrayLike) -> NDArray[np.float64]:
     """Principal angles (rad, ascending) between the column spaces of A and B (same row count).
 
+    :func:`scipy.linalg.subspace_angles` of their column spaces, where directions whose singular value is
+    below ``1e-10`` of the largest count as absent (numerically rank-deficient columns); an empty column
+    space is at right angles to every other.
+
     Parameters
     ----------
     A : array_like, shape (r, ka)
@@ -309,16 +312,14 @@ def principal_angles(A: ArrayLike, B: ArrayLike) -> NDArray[np.float64]:
     qb = _orth(np.asarray(B, dtype=float))
     if qa.shape[1] == 0 or qb.shape[1] == 0:
         return np.array([math.pi / 2])
-    s = np.linalg.svd(qa.T @ qb, compute_uv=False)
-    return np.arccos(np.clip(s, -1.0, 1.0))
+    return np.sort(scipy.linalg.subspace_angles(qa, qb))
 
 
 def _orth(A: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Orthonormal basis of the column space, directions below 1e-10 of the largest dropped."""
     if A.size == 0:
         return A.reshape(A.shape[0], 0)
-    u, s, _ = np.linalg.svd(A, full_matrices=False)
-    keep = s > max(s.max(), 1e-300) * 1e-10
-    return u[:, keep]
+    return scipy.linalg.orth(A, rcond=1e-10)
 
 
 @dataclass(frozen=True)

@@ -70,6 +70,7 @@ __all__ = [
     "LinkEstimator",
     "check_is_fitted",
     "long_run_factor",
+    "long_run_variance",
     "residual_correlation",
 ]
 
@@ -411,14 +412,58 @@ def long_run_factor(E: NDArray[np.float64], floor: float = 1.0) -> tuple[NDArray
     lag = int(min(max(np.ceil(8 * floor), np.floor(4 * (m / 100.0) ** (2 / 9))), m // 4))
     if lag < 1:
         return np.full(E.shape[1], max(floor, 1.0)), 0
-    size = 1 << int(np.ceil(np.log2(2 * m)))
-    F = np.fft.rfft(E, n=size, axis=0)
-    acov = np.fft.irfft(np.abs(F) ** 2, n=size, axis=0)[: lag + 1]
+    acov = _autocovariance(E, lag)
     var = np.where(acov[0] > 0, acov[0], 1.0)
     rho = acov[1:] / var
-    weights = 1.0 - np.arange(1, lag + 1) / (lag + 1.0)
-    kappa = 1.0 + 2.0 * (weights @ rho)
+    kappa = 1.0 + 2.0 * (_bartlett(lag) @ rho)
     return np.maximum(kappa, max(floor, 1.0)), lag
+
+
+def long_run_variance(E: NDArray[np.float64], lag: int) -> NDArray[np.float64]:
+    """Newey-West long-run variance of each column of a time series (Bartlett weights).
+
+    ``gamma_0 + 2 sum_{k=1..L} (1 - k / (L + 1)) gamma_k`` with ``gamma_k = sum_t d_t d_{t+k} / m`` of
+    the demeaned columns ``d``; the variance of a column's mean is this divided by m.
+
+    Parameters
+    ----------
+    E : ndarray, shape (m,) or (m, n)
+        The series in time order, uniformly sampled (any unit u).
+    lag : int
+        Truncation lag L, from 0 to m - 1.
+
+    Returns
+    -------
+    ndarray, shape () or (n,)
+        Long-run variance (u^2), one per column.
+
+    Raises
+    ------
+    UsageError
+        A lag outside 0 to m - 1.
+    """
+    E = np.asarray(E, dtype=np.float64)
+    m = len(E)
+    if not 0 <= lag < max(m, 1):
+        raise UsageError(
+            f"the Newey-West lag is {lag}; with {m} samples it must be from 0 to {m - 1}: give a lag in that range."
+        )
+    D = (E - E.mean(axis=0)).reshape(m, -1)
+    acov = _autocovariance(D, lag)
+    out = (acov[0] + 2.0 * (_bartlett(lag) @ acov[1:])) / m
+    return out.reshape(E.shape[1:])
+
+
+def _autocovariance(E: NDArray[np.float64], lag: int) -> NDArray[np.float64]:
+    """``sum_t e_t e_{t+k}`` for k = 0..lag of each column of E (m, n) (zero-padded FFT), (lag + 1, n)."""
+    size = 1 << int(np.ceil(np.log2(2 * len(E))))
+    F = np.fft.rfft(E, n=size, axis=0)
+    return np.fft.irfft(np.abs(F) ** 2, n=size, axis=0)[: lag + 1]
+
+
+def _bartlett(lag: int) -> NDArray[np.float64]:
+    """Bartlett weights ``1 - k / (L + 1)`` for k = 1..L, (L,)."""
+    return 1.0 - np.arange(1, lag + 1) / (lag + 1.0)
 
 
 def _check_rank(system: LinearSystem, R: NDArray[np.float64]) -> None:

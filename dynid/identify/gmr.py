@@ -54,12 +54,12 @@ from scipy.special import logsumexp
 
 from dynid.exceptions import DataError, ModelFileError, UsageError
 from dynid.identify._threads import one_blas_thread
+from dynid.identify.periodic import period_of  # one detector for the package; re-exported here
 
 __all__ = ["GMRCorrection", "conditional_mean", "period_of", "validation_mask"]
 
 _MODES = ("vector", "per_joint", "own", "position")
 _GRID = (1, 2, 3, 4, 6, 8, 12, 16)  # mixture sizes tried by n_components="auto"
-_PERIODIC = 0.98  # autocorrelation of the inputs at a lag above which the data count as periodic
 _PHASE_WINDOWS = 8  # phase windows per period when the data are periodic
 
 
@@ -137,43 +137,6 @@ def _blocks(m: int, n_blocks: int, fraction: float) -> NDArray[np.bool_]:
         if b % every == every // 2:
             mask[edges[b] : edges[b + 1]] = True
     return mask
-
-
-def period_of(u: NDArray[np.float64]) -> int | None:
-    """Period (in samples) of inputs that repeat, or None.
-
-    The autocorrelation of the standardised inputs (summed over columns) beyond its first drop below
-    0.5: the peak of its first stretch above 0.98 is the period, if the data hold 1.5 periods (two
-    periods trimmed at both ends for the filter still count).
-
-    Parameters
-    ----------
-    u : ndarray, shape (m, d)
-        Inputs in time order.
-    """
-    m = len(u)
-    if m < 40:
-        return None
-    x = u - u.mean(axis=0)
-    sd = x.std(axis=0)
-    x = x[:, sd > 0] / sd[sd > 0]
-    if x.shape[1] == 0:
-        return None
-    size = 1 << int(np.ceil(np.log2(2 * m)))
-    F = np.fft.rfft(x, n=size, axis=0)
-    # lags up to 2 m / 3: beyond, under a third of the samples overlap and the estimate is noise
-    acov = np.fft.irfft(np.abs(F) ** 2, n=size, axis=0)[: m * 2 // 3 + 1].sum(axis=1)
-    r = acov / (acov[0] * (m - np.arange(len(acov))) / m)  # unbiased at each lag
-    below = np.flatnonzero(r < 0.5)
-    if len(below) == 0:
-        return None
-    high = below[0] + np.flatnonzero(r[below[0] :] > _PERIODIC)
-    if len(high) == 0:
-        return None
-    # the first stretch of lags above the threshold holds the period (later ones its multiples)
-    stop = high[0] + int(np.argmax(np.diff(high) > 1)) + 1 if np.any(np.diff(high) > 1) else high[-1] + 1
-    lag = int(high[0] + np.argmax(r[high[0] : stop]))
-    return lag if m >= 1.5 * lag else None
 
 
 def validation_mask(u: NDArray[np.float64], n_blocks: int, fraction: float) -> tuple[NDArray[np.bool_], str]:

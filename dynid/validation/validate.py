@@ -21,7 +21,7 @@ The prediction is split into its layers, so a report can show each of them:
 The noise floor
 ---------------
 What no model can predict, measured on the compared torque (never assumed), exactly as the gap
-diagnosis measures it (:func:`dynid.diagnosis.core.measure_noise`): the spread across periods
+diagnosis measures it (:func:`dynid.validation.noise.measure_noise`): the spread across periods
 when the data repeat a motion (``period`` given, read from the simulator's sidecar
 ``<data>.truth.json``, or detected from the angles) at least twice; otherwise the white-noise level
 of the raw torque's spectrum carried through the filter.
@@ -48,6 +48,7 @@ from dynid.identify.friction import FrictionLayer
 from dynid.identify.linear_system import Prepared, Preprocessing, column_set, linear_torque, prepare
 from dynid.identify.model import IdentifiedModel, identify
 from dynid.validation.metrics import NoiseFloor, torque_metrics
+from dynid.validation.noise import measure_noise
 
 __all__ = [
     "COMPARISON",
@@ -294,7 +295,7 @@ def sidecar_period(data: Dataset) -> float | None:
 def reference_noise_floor(prep: Prepared, *, period: float | None = None) -> NoiseFloor:
     """Noise floor of the torque as compared: the gap diagnosis' measurement, never an error.
 
-    The same figure as :func:`dynid.diagnosis.core.measure_noise` (spread across periods, the
+    The same figure as :func:`dynid.validation.noise.measure_noise` (spread across periods, the
     period given or detected from the angles; else the raw spectrum through the filter's noise gain),
     so a validation and a diagnosis of the same data agree.  Data whose floor cannot be measured (no
     repeated period and too few samples for the spectrum) get NaN with the reason, not an error: the
@@ -311,8 +312,6 @@ def reference_noise_floor(prep: Prepared, *, period: float | None = None) -> Noi
     -------
     NoiseFloor
     """
-    from dynid.diagnosis.core import measure_noise
-
     try:
         return measure_noise(prep, period=period)
     except DataError as err:

@@ -1,0 +1,115 @@
+"""The noise floor of prepared data: the level a model's held-out error is compared with.
+
+Both :func:`dynid.validation.validate.reference_noise_floor` and the gap diagnosis
+(:func:`dynid.diagnosis.core.diagnose`) measure it here, so a validation and a diagnosis of the same data
+agree: the spread of the filtered torque across the periods of a periodic excitation
+(:func:`dynid.validation.metrics.noise_floor`), else the spectral level of the raw torque through the
+filter's noise gain.
+
+>>> floor = measure_noise(model.prepare(heldout))      # NoiseFloor: std (N m) per joint
+>>> detect_period(prep.t, prep.q)                       # s, or None
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dynid.exceptions import DataError
+from dynid.identify.linear_system import Prepared
+from dynid.identify.periodic import period_of
+from dynid.validation.metrics import NoiseFloor, noise_floor
+
+__all__ = ["MIN_SPECTRAL_SAMPLES", "detect_period", "filter_noise_gain", "measure_noise"]
+
+MIN_SPECTRAL_SAMPLES = 4096
+"""Fewest samples of one run for the spectral noise floor (when the data do not repeat a period)."""
+
+
+def detect_period(t: NDArray[np.float64], q: NDArray[np.float64], *, min_period: float = 0.5) -> float | None:
+    """Period (s) of a periodic motion, or None when the data hold fewer than two periods.
+
+    The angles must repeat after the period to ``1e-3`` of their spread (quantised encoders and noise
+    pass; a non-periodic run does not): :func:`dynid.identify.periodic.period_of` with
+    ``rule="repeat"``, in seconds.
+
+    Parameters
+    ----------
+    t : ndarray, shape (M,)
+        Uniform time stamps (s).
+    q : ndarray, shape (M, n)
+        Joint angles (rad).
+    min_period : float
+        Shortest period considered (s).
+    """
+    if len(t) < 2:
+        return None
+    dt = float(np.median(np.diff(t)))
+    lag = period_of(np.asarray(q, dtype=float), rule="repeat", min_lag=int(min_period / dt))
+    return None if lag is None else lag * dt
+
+
+def filter_noise_gain(prep: Prepared) -> float:
+    """Variance gain of the parallel filter (run forward and backward) on white noise (1 without a filter).
+
+    Parameters
+    ----------
+    prep : Prepared
+        The prepared data (their torque filter).
+    """
+    if prep.sos is None:
+        return 1.0
+    from scipy.signal import sosfreqz
+
+    _w, h = sosfreqz(prep.sos, worN=8192)
+    return float(np.mean(np.abs(h) ** 4))
+
+
+def measure_noise(prep: Prepared, *, period: float | None = None) -> NoiseFloor:
+    """Noise floor of the filtered torque of prepared data (the level the model's residual is compared with).
+
+    Parameters
+    ----------
+    prep : Prepared
+        The data as the model sees them.
+    period : float, optional
+        Period (s) of the excitation; detected from the angles when not given.
+
+    Returns
+    -------
+    NoiseFloor
+        Standard deviation per joint (N m) of the filtered torque that does not repeat.
+
+    Raises
+    ------
+    DataError
+        Fewer than two periods and too few samples for the spectral method.
+    """
+    run = max(prep.runs, key=lambda r: r.stop - r.start)
+    rows = prep.rows[(prep.rows >= run.start) & (prep.rows < run.stop)]
+    span = slice(int(rows[0]), int(rows[-1]) + 1)
+    t = prep.t[span]
+    if period is None:
+        period = detect_period(t, prep.q[span])
+    if period is not None and (t[-1] - t[0]) >= 2 * period - 1.5 / prep.fs:
+        tau_f = prep.filter(prep.tau)[span]
+        floor = noise_floor(t, tau_f, period=period)
+        if floor.method == "periods":
+            return floor
+    m = run.stop - run.start
+    if m < MIN_SPECTRAL_SAMPLES:
+        have = f"{(t[-1] - t[0]) / period:.2f} periods of {period:.3g} s" if period else "no repeated period"
+        raise DataError(
+            f"cannot measure the noise floor of the held-out data: they hold {have} and {m} samples, "
+            f"fewer than the {MIN_SPECTRAL_SAMPLES} the spectral method needs; record at least two whole "
+            "periods of a periodic excitation (or a longer run)."
+        )
+    raw = noise_floor(prep.t[run], prep.tau[run])
+    gain = filter_noise_gain(prep)
+    return NoiseFloor(
+        std=raw.std * math.sqrt(gain),
+        method="spectrum",
+        detail=raw.detail + (f", times the filter's noise gain {gain:.3g}" if gain != 1.0 else ""),
+    )
