@@ -1,21 +1,26 @@
 """dynid.sim: the simulated arm, the ONE catalogue of unmodelled effects, and synthetic cases.
 
 :mod:`dynid.sim.simulator` runs a truth robot under closed-loop tracking with sensor noise and
-unmodelled effects; :mod:`dynid.sim.effects` is the effect catalogue that ``simulate --effects``,
-``identify --effects`` and ``diagnose`` all read; :mod:`dynid.sim.synthetic` makes data whose truth is
-known exactly (tests, benchmarks).  Submodules are imported on first use.
+unmodelled effects (its parts: :mod:`~dynid.sim.truth`, :mod:`~dynid.sim.tracking`,
+:mod:`~dynid.sim.sensors`, :mod:`~dynid.sim.results`); :mod:`dynid.sim.effects` is the effect
+catalogue (:data:`~dynid.sim.effects.EFFECT_NAMES`) that ``simulate --effects``, ``identify --effects``
+and ``diagnose`` all read; :mod:`dynid.sim.synthetic` makes data whose truth is known exactly and holds
+the ONE random excitation (:func:`~dynid.sim.synthetic.random_fourier`); :mod:`dynid.sim.cases`
+sizes the effects of the diagnosis' withheld-effect cases.  Submodules are imported on first use.
 """
 
 from __future__ import annotations
 
 _EXPORTS = {
     "EFFECTS": "effects",
+    "EFFECT_NAMES": "effects",
     "parse_effects": "effects",
     "NoiseModel": "simulator",
     "SimulationResult": "simulator",
     "build_truth": "simulator",
     "simulate": "simulator",
     "write_simulation": "simulator",
+    "random_fourier": "synthetic",
 }
 __all__ = sorted(_EXPORTS)
 
