@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import math
 import os
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -606,3 +607,75 @@ def test_cli_writes_data_and_truth(trajectory_file, tmp_path, capsys):
     assert truth["seed"] == 3 and truth["sampling"]["rate_hz"] == 500
     assert [e["name"] for e in truth["effects"]] == ["offset", "cogging"]
     assert truth["effects"][1]["joints"] == [6] and truth["effects"][1]["value"] == 2.0
+
+
+# ---------------------------------------------------------------------------- synthetic excitation
+# Coefficients of the one random Fourier generator, recorded before the two generators were merged:
+# the diagnosis' cases (whole-arm scaling about the case posture) and the regressor datasets
+# (each joint scaled on its own) must keep drawing exactly these motions.
+EXCITATIONS = {
+    ("ur5", "case"): (
+        [-0.08972417262407402, -0.012806589022348078, -0.08268187218159277, -0.04444031927816023,
+         0.017183492226907463, -0.20289655222893674],
+        [0.0, -1.2, 1.0, -1.0, 0.5, 0.0],
+    ),
+    ("ur5", "joint"): (
+        [0.5790071132235814, -0.7586638486511877, 0.1927623970246147, -0.1628283145681508,
+         -0.3000785135743055, -0.11819708351084215],
+        [-0.0005516029716521315, -4.375501179619438e-06, 0.0001489106166283706, -0.00022862686216057202,
+         0.0005182180880442467, 0.0006602579282799676],
+    ),
+    ("panda", "case"): (
+        [-0.08085478809879336, -0.011540636278795372, -0.0745086308331193, -0.04004731939221323,
+         0.015484875281325054, -0.18283988870179615, -0.015652160733754906],
+        [0.0, 0.0, 0.0, -1.5708, 0.0, 1.5620463267948965, 0.0],
+    ),
+    ("panda", "joint"): (
+        [0.5006081106448432, -0.33397569172122066, 0.10610615626755972, -0.22700286461369198,
+         -0.12366028710753972, -0.07010112591260578, -0.7443198784491186],
+        [0.00020046183423346752, -0.0004643442027347436, 0.00014447125888636438, -1.5709675363113602,
+         -0.0002065459089026692, 1.8675419884821443, 5.743802683948732e-05],
+    ),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize(("name", "kind"), list(EXCITATIONS))
+def test_random_fourier_draws_the_recorded_motions(name, kind):
+    from dynid.sim.cases import case_excitation
+    from dynid.sim.synthetic import random_fourier
+    from dynid.symbolic import load_robot
+
+    robot = load_robot(name)
+    if kind == "case":
+        traj = case_excitation(robot, 11, base_freq=0.5)
+    else:
+        traj = random_fourier(robot, np.random.default_rng(3), periods=2)
+    a0, c = EXCITATIONS[name, kind]
+    np.testing.assert_allclose(traj.a[0], a0, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(traj.c, c, rtol=1e-12, atol=1e-15)
+    q, dq, ddq = traj.evaluate(np.linspace(0.0, traj.duration, 2001))
+    assert np.all(q >= robot.q_min) and np.all(q <= robot.q_max)
+    # Within 60 % of the limits (checked on a grid: a peak between its points may pass by a little).
+    assert np.all(np.abs(dq) <= 0.61 * robot.dq_max) and np.all(np.abs(ddq) <= 0.61 * robot.ddq_max)
+
+
+def test_case_posture_is_data_and_other_robots_swing_about_mid_range(robot):
+    from dynid.sim.cases import CASE_POSTURES, case_centre, case_excitation
+
+    assert np.array_equal(case_centre(robot), CASE_POSTURES["ur5"])
+    other = replace(robot, name="my_arm")  # the same arm under a name the table does not list
+    assert case_centre(other) is None
+    traj = case_excitation(other, 11, base_freq=0.5)
+    assert np.array_equal(traj.c, 0.5 * (np.maximum(robot.q_min, -np.pi) + np.minimum(robot.q_max, np.pi)))
+
+
+def test_random_fourier_rejects_bad_options(robot):
+    from dynid.sim.synthetic import random_fourier
+
+    rng = np.random.default_rng(0)
+    with pytest.raises(UsageError, match="scaling"):
+        random_fourier(robot, rng, scaling="both")
+    with pytest.raises(UsageError, match="still joints"):
+        random_fourier(robot, rng, scaling="arm", still=(2,))
+    with pytest.raises(UsageError, match="6 angles"):
+        random_fourier(robot, rng, centre=[0.0, 1.0])
