@@ -78,7 +78,7 @@ def _joint(effect: str, seed: int, n: int, avoid: int | None = None) -> int | No
 
 
 def build_cases(seeds: list[int], none_per_seed: int, n: int = 6) -> list[dict]:
-    from dynid.diagnosis.candidates import EFFECT_NAMES
+    from dynid.sim.effects import EFFECT_NAMES
 
     cases = []
     for seed in seeds:
@@ -110,8 +110,8 @@ def build_cases(seeds: list[int], none_per_seed: int, n: int = 6) -> list[dict]:
 
 
 def run_one(case: dict) -> dict:
-    from dynid.diagnosis.candidates import EFFECT_NAMES
     from dynid.diagnosis.cases import run_case
+    from dynid.sim.effects import EFFECT_NAMES
     from dynid.symbolic import load_robot
 
     robot = load_robot("ur5")
@@ -143,7 +143,7 @@ def run_one(case: dict) -> dict:
 
 
 def report(results: list[dict]) -> str:
-    from dynid.diagnosis.candidates import EFFECT_NAMES
+    from dynid.sim.effects import EFFECT_NAMES
 
     lines = []
     cols = [*EFFECT_NAMES, "parametric", "none", "unexplained", "error"]
