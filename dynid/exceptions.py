@@ -1,4 +1,4 @@
-"""Errors raised by dynid.
+"""Errors and warnings of dynid: every class of them lives here.
 
 Every message says what was expected, what came, and how to fix it, in one sentence.  The command
 line prints the message alone (no traceback) and exits with a non-zero code.
@@ -9,10 +9,15 @@ from __future__ import annotations
 __all__ = [
     "CompilerNotFoundError",
     "DataError",
+    "DataWarning",
     "DynidError",
+    "DynidWarning",
+    "ExcitationError",
     "GeneratorError",
     "IdentificationError",
+    "IdentificationWarning",
     "ModelFileError",
+    "NotFittedError",
     "RobotModelError",
     "ShapeError",
     "UsageError",
@@ -53,3 +58,28 @@ class GeneratorError(DynidError, RuntimeError):
 
 class UsageError(DynidError, ValueError):
     """An option or argument has a value dynid cannot use."""
+
+
+class ExcitationError(UsageError):
+    """An excitation cannot be designed as asked (no feasible trajectory, rank-deficient regressor)."""
+
+
+class NotFittedError(IdentificationError, UsageError):
+    """An estimator, friction model or correction was used before ``fit``.
+
+    The one not-fitted error of dynid, raised by :func:`dynid.identify.checks.check_is_fitted`.  It is
+    a :class:`ValueError` like scikit-learn's ``NotFittedError``, and an :class:`IdentificationError`
+    and a :class:`UsageError`, the types these checks raised before.
+    """
+
+
+class DynidWarning(UserWarning):
+    """Base class of every warning dynid issues."""
+
+
+class DataWarning(DynidWarning):
+    """Data that can be used but look suspicious (e.g. joint angles that look like degrees)."""
+
+
+class IdentificationWarning(DynidWarning):
+    """An identification finished but something deserves attention (e.g. IRLS did not converge)."""

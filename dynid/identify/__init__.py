@@ -1,13 +1,17 @@
 """dynid.identify: datasets, preprocessing, the three layers (link parameters, friction, GMR), model files.
 
 The submodules are imported on demand: :mod:`dynid.identify.dataset` (the :class:`Dataset` type and its
-files), :mod:`dynid.identify.preprocess` (resampling, filtering, differentiation, parallel filtering) and
-:mod:`dynid.identify.adapters` (the real recordings under ``../shared/data``).
+files), :mod:`dynid.identify.preprocess` (resampling, filtering, differentiation, parallel filtering),
+:mod:`dynid.identify.preparation` (the preprocessing settings and the prepared data),
+:mod:`dynid.identify.columns` (the identified parameters), :mod:`dynid.identify.linear_system` (the
+compressed least-squares system) and :mod:`dynid.identify.adapters` (the real recordings under
+``../shared/data``).
 """
 
 from __future__ import annotations
 
-from dynid.identify.dataset import Dataset, DataWarning, load_dataset, save_dataset
+from dynid.exceptions import DataWarning
+from dynid.identify.dataset import Dataset, load_dataset, save_dataset
 
 __all__ = ["DataWarning", "Dataset", "load_dataset", "save_dataset"]
 
@@ -21,7 +25,7 @@ _IDENTIFY = {
     "ConsistentLS": "consistent",
     "FrictionLayer": "friction",
     "GMRCorrection": "gmr",
-    "Preprocessing": "linear_system",
+    "Preprocessing": "preparation",
     "build_system": "linear_system",
     "IdentifiedModel": "model",
     "ThreeLayerModel": "model",

@@ -52,9 +52,11 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
-from dynid.exceptions import UsageError
-from dynid.identify.estimators import ESTIMATORS, IdentificationWarning, LinkEstimator
-from dynid.identify.linear_system import EXTRA_KINDS, ColumnSet, LinearSystem, Preprocessing
+from dynid.exceptions import IdentificationWarning, UsageError
+from dynid.identify.columns import EXTRA_KINDS, ColumnSet
+from dynid.identify.estimators import ESTIMATORS, LinkEstimator
+from dynid.identify.linear_system import LinearSystem
+from dynid.identify.preparation import Preprocessing
 
 _RHO = 1e-6  # weight of the vanishing pull toward the starting bodies (fixes the directions data do not see)
 _MU_FACTOR = 0.1  # barrier weight decrease per centring
@@ -264,9 +266,10 @@ class ConsistentLS(LinkEstimator):
         unc._fit_system(system)
         cols = system.columns
         n, p = cols.n, cols.p
-        R, x_hat = unc.R_, unc.params_
-        sigma2 = unc.rss_ / max(system.m * n - p, 1)
-        power = (float(unc.rhs_ @ unc.rhs_) + unc.rss_) / (system.m * n)
+        sol = unc.solution_
+        R, x_hat = sol.R, unc.params_
+        sigma2 = sol.rss / max(system.m * n - p, 1)
+        power = (float(sol.rhs @ sol.rhs) + sol.rss) / (system.m * n)
         phi_opt, solver = consistent_solution(
             self.robot,
             cols,
@@ -298,6 +301,7 @@ class ConsistentLS(LinkEstimator):
             "omega_",
             "sigma2_",
             "whitener_",
+            "solution_",
             "R_",
             "rhs_",
             "rss_",

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from dynid.exceptions import DataError
+from dynid.exceptions import DataError, DataWarning
 
 __all__ = [
     "DEGREES_THRESHOLD",
@@ -48,10 +48,6 @@ _OPTIONAL = ("dq", "ddq")
 _CONTRACT = "a dataset needs t, q_1..q_n and tau_1..tau_n (see DESIGN.md)"
 _COLUMN = re.compile(r"^(q|tau|dq|ddq)_([0-9]+)$")
 _UNIFORM_RTOL = 1e-6
-
-
-class DataWarning(UserWarning):
-    """Data that can be used but look suspicious (e.g. joint angles that look like degrees)."""
 
 
 def _describe(x: float) -> str:

@@ -47,19 +47,13 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import NDArray
 
-from dynid.exceptions import IdentificationError, UsageError
+from dynid.exceptions import IdentificationError, IdentificationWarning, UsageError
 from dynid.identify._threads import single_blas_thread
+from dynid.identify.checks import check_is_fitted
+from dynid.identify.columns import ColumnSet, linear_torque
 from dynid.identify.dataset import Dataset
-from dynid.identify.linear_system import (
-    ColumnSet,
-    LinearSystem,
-    Preprocessing,
-    build_system,
-    describe_joints,
-    linear_torque,
-    prepare,
-    still_joints,
-)
+from dynid.identify.linear_system import LinearSystem, WeightedSolution, build_system
+from dynid.identify.preparation import Preprocessing, prepare
 
 __all__ = [
     "GLS",
@@ -73,30 +67,6 @@ __all__ = [
     "long_run_variance",
     "residual_correlation",
 ]
-
-RANK_TOL = 1e-10
-"""Relative singular value (of the column-normalised weighted regressor) below which a direction of
-the parameters counts as not excited by the data."""
-
-
-class IdentificationWarning(UserWarning):
-    """An identification finished but something deserves attention (e.g. IRLS did not converge)."""
-
-
-def check_is_fitted(estimator: Any, attribute: str = "params_") -> None:
-    """Raise an :class:`IdentificationError` if ``estimator`` has not been fitted.
-
-    Parameters
-    ----------
-    estimator : object
-        An estimator of dynid.
-    attribute : str
-        A fitted attribute (ending in ``_``) that ``fit`` sets.
-    """
-    if not hasattr(estimator, attribute):
-        raise IdentificationError(
-            f"this {type(estimator).__name__} is not fitted yet; call fit(...) before using it"
-        )
 
 
 def whitener(omega: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -165,6 +135,10 @@ class LinkEstimator:
         The identified parameters (names, kinds, base map).
     preprocessing_ : dict
         Resolved preprocessing settings.
+    solution_ : WeightedSolution
+        The weighted least squares the estimate solves: ``x``, its triangular factor ``R``, ``rhs``,
+        ``rss`` and the whitener (``R_``, ``rhs_``, ``rss_`` and ``whitener_`` repeat them).  For
+        :class:`dynid.identify.consistent.ConsistentLS`, that of the unconstrained fit.
     """
 
     method: ClassVar[str] = ""
@@ -226,11 +200,8 @@ class LinkEstimator:
             armature=self.armature,
         )
 
-    def _weighted_fit(self, system: LinearSystem, W: NDArray[np.float64]) -> tuple[NDArray[np.float64], Any]:
-        R, rhs, rss = system.whitened(W)
-        _check_rank(system, R)
-        x = scipy.linalg.solve_triangular(R, rhs, check_finite=False)
-        return x, (R, rhs, rss)
+    def _weighted_fit(self, system: LinearSystem, W: NDArray[np.float64]) -> WeightedSolution:
+        return system.solve(W)
 
     def _omega(self, system: LinearSystem, x: NDArray[np.float64]) -> NDArray[np.float64]:
         m, p = system.m, system.p
@@ -244,23 +215,23 @@ class LinkEstimator:
 
     def _reweighted_fit(
         self, system: LinearSystem, x: NDArray[np.float64], *, diagonal: bool
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], Any]:
+    ) -> tuple[WeightedSolution, NDArray[np.float64]]:
         """Refit weighted by ``Omega`` of the residual of ``x`` (its diagonal only with ``diagonal``).
 
-        Returns (new x, Omega used, (R, rhs, rss)).
+        Returns (the new solution, Omega used).
         """
         omega = self._omega(system, x)
         if diagonal:
             omega = np.diag(np.diag(omega))
-        x_new, fac = self._weighted_fit(system, whitener(omega))
-        return x_new, omega, fac
+        return self._weighted_fit(system, whitener(omega)), omega
 
-    def _iterate(self, system: LinearSystem) -> tuple[NDArray[np.float64], NDArray[np.float64], Any]:
-        """Return (x, Omega used, (R, rhs, rss)); subclasses choose the weighting."""
+    def _iterate(self, system: LinearSystem) -> tuple[WeightedSolution, NDArray[np.float64]]:
+        """Return (the solution, Omega used); subclasses choose the weighting."""
         raise NotImplementedError
 
     def _fit_system(self, system: LinearSystem) -> None:
-        x, omega, (R, rhs, rss) = self._iterate(system)
+        sol, omega = self._iterate(system)
+        x, R, rss = sol.x, sol.R, sol.rss
         m, n, p = system.m, system.n, system.p
         dof = m * n - p
         sigma2 = rss / dof
@@ -269,7 +240,7 @@ class LinkEstimator:
         kappa, lag = residual_correlation(system, x, W)
         # per whitened joint row i: its information M_i, residual variance s_i^2 and correlation kappa_i
         c = len(system.z_joint)
-        blocks = system._maps(W)[:, :p]
+        blocks = system.stacked(W)[:, :p]
         resid = W @ system.residual_matrix(x) @ W.T
         s2 = np.maximum(np.diag(resid), 0.0) / max(m - p / n, 1.0)
         middle = np.zeros((p, p))
@@ -297,8 +268,9 @@ class LinkEstimator:
         self.notes_ = cols.notes
         self.columns_ = cols
         self.preprocessing_ = system.prepared.settings
+        self.solution_ = sol
         self.R_ = R
-        self.rhs_ = rhs
+        self.rhs_ = sol.rhs
         self.rss_ = rss
         self.whitener_ = W
         self.correlation_ = kappa
@@ -466,41 +438,6 @@ def _bartlett(lag: int) -> NDArray[np.float64]:
     return 1.0 - np.arange(1, lag + 1) / (lag + 1.0)
 
 
-def _check_rank(system: LinearSystem, R: NDArray[np.float64]) -> None:
-    """Raise an IdentificationError naming the parameters the data do not excite."""
-    cols = system.columns
-    norms = np.linalg.norm(R, axis=0)
-    scale = norms.max(initial=0.0)
-    zero = norms <= 1e-13 * max(scale, 1e-300)
-    Rs = R / np.where(zero, 1.0, norms)
-    Rs[:, zero] = 0.0
-    _, sv, Vt = np.linalg.svd(Rs)
-    small = sv <= RANK_TOL * max(sv[0], 1e-300)
-    if not small.any():
-        return
-    null = Vt[small]
-    weight = np.sqrt((null**2).sum(axis=0))
-    involved = np.flatnonzero((weight > 0.05) | zero)
-    names = [cols.names[k] for k in involved]
-    rank = int((~small).sum())
-    still = still_joints(system.prepared)
-    links = sorted({int(cols.joints[k]) for k in involved})
-    if still:
-        hint = (
-            f"{describe_joints(still)} never move{'s' if len(still) == 1 else ''} in the data: record a motion "
-            f"that moves {describe_joints(still)} too, with varied velocity and acceleration"
-        )
-    else:
-        hint = (
-            f"record a richer motion of {describe_joints(links)} (larger, varied velocities and accelerations; "
-            "an optimised excitation from 'dynid excite'), or identify without those terms"
-        )
-    raise IdentificationError(
-        f"the data do not excite the base parameters {', '.join(names)} (the weighted regressor has rank {rank} "
-        f"of {system.p}); {hint}"
-    )
-
-
 class OLS(LinkEstimator):
     """Ordinary least squares: ``x = argmin || tau - W x ||^2`` (METHOD.md section 4).
 
@@ -513,10 +450,9 @@ class OLS(LinkEstimator):
     method = "ols"
 
     def _iterate(self, system):
-        n = system.n
-        x, fac = self._weighted_fit(system, np.eye(n))
+        sol = self._weighted_fit(system, np.eye(system.n))
         dof = max(system.m - system.p, 1)
-        return x, system.residual_matrix(x) / dof, fac
+        return sol, system.residual_matrix(sol.x) / dof
 
 
 class WLS(LinkEstimator):
@@ -531,8 +467,8 @@ class WLS(LinkEstimator):
     method = "wls"
 
     def _iterate(self, system):
-        x0, _ = self._weighted_fit(system, np.eye(system.n))
-        return self._reweighted_fit(system, x0, diagonal=True)
+        start = self._weighted_fit(system, np.eye(system.n))
+        return self._reweighted_fit(system, start.x, diagonal=True)
 
 
 class GLS(LinkEstimator):
@@ -550,8 +486,8 @@ class GLS(LinkEstimator):
     method = "gls"
 
     def _iterate(self, system):
-        x0, _ = self._weighted_fit(system, np.eye(system.n))
-        return self._reweighted_fit(system, x0, diagonal=False)
+        start = self._weighted_fit(system, np.eye(system.n))
+        return self._reweighted_fit(system, start.x, diagonal=False)
 
 
 class IRLS(LinkEstimator):
@@ -601,14 +537,14 @@ class IRLS(LinkEstimator):
             raise UsageError(
                 f"IRLS needs max_iter >= 1 and tol > 0; got max_iter={self.max_iter!r}, tol={self.tol!r}"
             )
-        x, fac = self._weighted_fit(system, np.eye(system.n))
+        sol = self._weighted_fit(system, np.eye(system.n))
+        x = sol.x
         converged = False
         it = 0
         omega = np.eye(system.n)
         for it in range(1, int(self.max_iter) + 1):  # noqa: B007 (it is kept)
-            x_new, omega, fac = self._reweighted_fit(system, x, diagonal=self.weighting == "diagonal")
-            R = fac[0]
-            rss = fac[2]
+            sol, omega = self._reweighted_fit(system, x, diagonal=self.weighting == "diagonal")
+            x_new, R, rss = sol.x, sol.R, sol.rss
             dof = max(system.m * system.n - system.p, 1)
             Rinv_diag = np.sqrt(np.sum(scipy.linalg.solve_triangular(R, np.eye(system.p)) ** 2, axis=1))
             std = np.sqrt(rss / dof) * Rinv_diag
@@ -627,7 +563,7 @@ class IRLS(LinkEstimator):
                 IdentificationWarning,
                 stacklevel=3,
             )
-        return x, omega, fac
+        return sol, omega
 
 
 ESTIMATORS: dict[str, type[LinkEstimator]] = {"ols": OLS, "wls": WLS, "gls": GLS, "irls": IRLS}

@@ -45,6 +45,7 @@ from scipy.special import expit
 
 from dynid.exceptions import DataError, ModelFileError, UsageError
 from dynid.identify._threads import one_blas_thread
+from dynid.identify.checks import check_is_fitted
 from dynid.identify.preprocess import lowpass
 
 __all__ = [
@@ -55,6 +56,7 @@ __all__ = [
     "SeedFriction",
     "SigmoidFriction",
     "StribeckFriction",
+    "bounded_lsq",
     "friction_model",
 ]
 
@@ -189,8 +191,7 @@ class _Friction:
         raise NotImplementedError
 
     def _check_fitted(self) -> None:
-        if not hasattr(self, "coef_"):
-            raise UsageError(f"this {type(self).__name__} is not fitted yet; call fit(dq, F) first")
+        check_is_fitted(self, "coef_", call="fit(dq, F)")
 
     def predict(self, dq: ArrayLike) -> NDArray[np.float64]:
         """Friction torque (N m) at velocities ``dq`` (rad/s), same shape as ``dq``.
@@ -256,7 +257,7 @@ class _Friction:
     ) -> tuple[NDArray[np.float64], float]:
         """Bounded least squares of F on the (filtered) columns ``columns(dq)``: (coef, rss)."""
         A = columns(dq) if sampling is None else sampling.full(columns(dq))
-        return _bounded_lsq(A, F, bounds)
+        return bounded_lsq(A, F, bounds)
 
     def to_dict(self) -> dict[str, Any]:
         """``{"model": name, "coef": {name: value}}`` (JSON-ready)."""
@@ -271,10 +272,27 @@ class _Friction:
         self.rms_ = float(np.sqrt(max(rss, 0.0) / max(m, 1)))
 
 
-def _bounded_lsq(
+def bounded_lsq(
     A: NDArray[np.float64], F: NDArray[np.float64], bounds: tuple[float, ...]
 ) -> tuple[NDArray[np.float64], float]:
-    """min ||A c - F||^2 with c >= bounds (0 or -inf each), compressed by QR first: (c, rss)."""
+    """``min ||A c - F||^2`` with ``c >= bounds`` (0 or -inf each), compressed by QR first: (c, rss).
+
+    Parameters
+    ----------
+    A : ndarray, shape (m, k)
+        Columns.
+    F : ndarray, shape (m,)
+        Target.
+    bounds : tuple of float, length k
+        Lower bound of each coefficient: 0 or -inf.
+
+    Returns
+    -------
+    c : ndarray, shape (k,)
+        Coefficients.
+    rss : float
+        Residual sum of squares at ``c``.
+    """
     R, qtb, rest = _compress(A, F)
     lb = np.asarray(bounds, dtype=np.float64)
     if np.all(lb == 0):
@@ -460,12 +478,12 @@ class _ShapedFriction(_Friction):
             d_s, F_s = dq[s], F[s]
 
             def cost(shape):
-                return _bounded_lsq(columns(d_s, shape), F_s, bounds)[1]
+                return bounded_lsq(columns(d_s, shape), F_s, bounds)[1]
         else:
             d_w, F_w = sampling.window_of(dq), F[sampling.search_rows]
 
             def cost(shape):
-                return _bounded_lsq(sampling.search(columns(d_w, shape)), F_w, bounds)[1]
+                return bounded_lsq(sampling.search(columns(d_w, shape)), F_w, bounds)[1]
 
         shape, sse = _shape_search(cost, cands, refine=self._refine)
         coef, rss = self._fit_columns(lambda v: columns(v, shape), dq, F, sampling, bounds)
@@ -593,14 +611,11 @@ class SigmoidFriction(_Friction):
             phi1 = float(g @ f) / gg if gg > 0 else 0.0
             return phi1 * g - f
 
-        best = None
-        for k2 in (1.0, 10.0, 100.0):
-            for k3 in (0.0, 0.3, -0.3):
-                z0 = np.array([np.log(k2 / scale), k3 * scale])
-                sol = least_squares(resid, z0, method="lm", max_nfev=200)
-                if best is None or sol.cost < best.cost:
-                    best = sol
-        assert best is not None
+        starts = [
+            np.array([np.log(k2 / scale), k3 * scale]) for k2 in (1.0, 10.0, 100.0) for k3 in (0.0, 0.3, -0.3)
+        ]
+        fits = [least_squares(resid, z0, method="lm", max_nfev=200) for z0 in starts]
+        best = min(fits, key=lambda sol: sol.cost)  # the first of the least cost, as before
         phi2, phi3 = float(np.exp(best.x[0])), float(best.x[1])
         coef, rss = self._fit_columns(
             lambda v: self._shape(v, phi2, phi3)[:, None], dq, F, sampling, self._bounds
@@ -662,8 +677,7 @@ class FrictionLayer:
         return f"FrictionLayer(model={self.model!r})"
 
     def _check_fitted(self) -> None:
-        if not hasattr(self, "models_"):
-            raise UsageError("this FrictionLayer is not fitted yet; call fit(dq, F) first")
+        check_is_fitted(self, "models_", call="fit(dq, F)")
 
     def _speeds(self, dq: ArrayLike) -> NDArray[np.float64]:
         """Joint velocities (m, n) checked against the fitted joints."""

@@ -54,6 +54,7 @@ from scipy.special import logsumexp
 
 from dynid.exceptions import DataError, ModelFileError, UsageError
 from dynid.identify._threads import one_blas_thread
+from dynid.identify.checks import check_is_fitted
 from dynid.identify.periodic import period_of  # one detector for the package; re-exported here
 
 __all__ = ["GMRCorrection", "conditional_mean", "period_of", "validation_mask"]
@@ -251,20 +252,27 @@ class GMRCorrection:
             return [(np.array([j]), np.array([j])) for j in range(n)]
         return [(np.array([j, n + j]), np.array([j])) for j in range(n)]
 
-    def _check(
-        self, u: ArrayLike, y: ArrayLike | None = None
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+    @staticmethod
+    def _check(u: ArrayLike) -> NDArray[np.float64]:
+        """The inputs as a finite (m, d) array."""
         u = np.atleast_2d(np.asarray(u, dtype=np.float64))
-        if y is not None:
-            y = np.asarray(y, dtype=np.float64)
-            y = y.reshape(-1, 1) if y.ndim == 1 else y
-            if y.shape[0] != u.shape[0]:
-                raise DataError(
-                    f"u has {u.shape[0]} rows but the residual has {y.shape[0]}; give one row per sample"
-                )
-        for label, a in (("u", u), ("tau_err", y)):
-            if a is not None and not np.all(np.isfinite(a)):
-                raise DataError(f"{label} holds non-finite values; drop or interpolate those samples")
+        if not np.all(np.isfinite(u)):
+            raise DataError("u holds non-finite values; drop or interpolate those samples")
+        return u
+
+    @classmethod
+    def _check_pair(cls, u: ArrayLike, y: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Inputs (m, d) and residual (m, n), one row per sample, finite."""
+        u = np.atleast_2d(np.asarray(u, dtype=np.float64))
+        y = np.asarray(y, dtype=np.float64)
+        y = y.reshape(-1, 1) if y.ndim == 1 else y
+        if y.shape[0] != u.shape[0]:
+            raise DataError(
+                f"u has {u.shape[0]} rows but the residual has {y.shape[0]}; give one row per sample"
+            )
+        u = cls._check(u)
+        if not np.all(np.isfinite(y)):
+            raise DataError("tau_err holds non-finite values; drop or interpolate those samples")
         return u, y
 
     def _em(self, K: int, data: NDArray[np.float64]):
@@ -322,8 +330,7 @@ class GMRCorrection:
             self.n_components == "auto" or (isinstance(self.n_components, int) and self.n_components >= 1)
         ):
             raise UsageError(f"n_components is {self.n_components!r}; give a positive integer or 'auto'")
-        u, y = self._check(u, y)
-        assert y is not None
+        u, y = self._check_pair(u, y)
         m, n = y.shape
         if m < 20 * self.n_blocks:
             raise DataError(
@@ -356,7 +363,11 @@ class GMRCorrection:
                     worse += 1
                     if worse >= 2:
                         break
-            assert best is not None
+            if best is None:  # no size tried
+                raise UsageError(
+                    f"max_components is {self.max_components!r}; give a positive integer (the largest mixture "
+                    "n_components='auto' tries)"
+                )
             chosen.append(best[0])
             pred_val[:, out] = best[2]
             self.scores_.append(scores)
@@ -405,8 +416,7 @@ class GMRCorrection:
         """
         if self.mode not in _MODES:
             raise UsageError(f"mode is {self.mode!r}; choose one of {', '.join(_MODES)}")
-        u, y = self._check(u, y)
-        assert y is not None
+        u, y = self._check_pair(u, y)
         m, n = y.shape
         specs = self._specs(u.shape[1], n)
         if len(sizes) != len(specs):
@@ -452,9 +462,8 @@ class GMRCorrection:
         -------
         ndarray, shape (m, n)
         """
-        if not hasattr(self, "active_"):
-            raise UsageError("this GMRCorrection is not fitted yet; call fit(u, tau_err) first")
-        u, _ = self._check(u)
+        check_is_fitted(self, "active_", call="fit(u, tau_err)")
+        u = self._check(u)
         if not self.active_.any():
             return np.zeros((u.shape[0], self.n_outputs_))
         return self._raw_predict(u, self.n_outputs_)
@@ -473,9 +482,8 @@ class GMRCorrection:
         u : array_like, shape (m, d)
             Inputs, as in :meth:`fit`.
         """
-        if not hasattr(self, "active_"):
-            raise UsageError("this GMRCorrection is not fitted yet; call fit(u, tau_err) first")
-        u, _ = self._check(u)
+        check_is_fitted(self, "active_", call="fit(u, tau_err)")
+        u = self._check(u)
         cols: list[NDArray[np.float64]] = [np.zeros((len(u), 0)) for _ in range(self.n_outputs_)]
         for mdl in self.models_:
             inp = mdl["inputs"]
@@ -538,8 +546,7 @@ class GMRCorrection:
         prefix : str
             Prefix of the array names.
         """
-        if not hasattr(self, "active_"):
-            raise UsageError("this GMRCorrection is not fitted yet; call fit(u, tau_err) first")
+        check_is_fitted(self, "active_", call="fit(u, tau_err)")
         arrays: dict[str, NDArray[Any]] = {
             f"{prefix}_active": self.active_,
             f"{prefix}_count": np.array(len(self.models_)),

@@ -56,7 +56,7 @@ from numpy.typing import NDArray
 
 from dynid.identify._threads import single_blas_thread
 from dynid.identify.estimators import long_run_factor
-from dynid.identify.friction import FrictionLayer, _bounded_lsq
+from dynid.identify.friction import FrictionLayer, bounded_lsq
 from dynid.identify.gmr import GMRCorrection, validation_mask
 from dynid.identify.linear_system import LinearSystem
 
@@ -110,7 +110,7 @@ class _Columns:
     """Per joint, the refined parameters' columns at the kept rows: (indices into the mask, (m, k))."""
 
     def __init__(self, system: LinearSystem, mask: NDArray[np.bool_]) -> None:
-        Z = system._need_Z()
+        Z = system.data_matrix()
         rows = system.prepared.rows
         self.sel = np.flatnonzero(mask)
         where = -np.ones(system.p, dtype=np.intp)
@@ -162,7 +162,7 @@ def _nuisance(
     A, norms = _ridge_rows(N, ridge)
     b = np.concatenate([target, np.zeros(N.shape[1])])
     # the bounds are 0 or -inf, unchanged by the column scaling
-    c, _ = _bounded_lsq(A, b, tuple(float(v) for v in np.where(np.isfinite(lower), 0.0, -np.inf)))
+    c, _ = bounded_lsq(A, b, tuple(float(v) for v in np.where(np.isfinite(lower), 0.0, -np.inf)))
     return c / norms
 
 

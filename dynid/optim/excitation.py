@@ -101,7 +101,7 @@ import casadi as ca
 import numpy as np
 import scipy.linalg
 
-from dynid.exceptions import UsageError
+from dynid.exceptions import ExcitationError, UsageError
 from dynid.optim.trajectory import FourierTrajectory
 from dynid.symbolic.robot import RobotModel
 
@@ -149,10 +149,6 @@ _WARM_OPTIONS = {
 
 CV_MEAN_FLOOR = 1e-3
 """Floor of ``|mean|`` relative to the RMS of a column in the coefficient-of-variation weights (ours)."""
-
-
-class ExcitationError(UsageError):
-    """An excitation cannot be designed as asked (no feasible trajectory, rank-deficient regressor)."""
 
 
 Progress = Callable[[str], None]

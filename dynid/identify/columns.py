@@ -1,0 +1,338 @@
+"""The identified parameters of a robot (the column set) and the torque of the linear model.
+
+Layer 1 of the identification (METHOD.md section 4) solves ``tau = W x`` with ``x`` the identified
+parameters: the base parameters of the links, optionally the armature and the linear friction of
+each joint (Coulomb, viscous, offset: the columns of ``friction_columns``).  :func:`column_set`
+names those parameters and maps them to the physical ones (:class:`ColumnSet`);
+:func:`linear_torque` evaluates ``W(q, dq, ddq) x`` through the compiled batch regressor
+(:func:`dynid.symbolic.export.compiled_functions`).
+
+Armature columns that duplicate a base column (joint 1 of an arm whose first axis is vertical:
+its armature acts exactly like ``Izz1R``) are not given a column of their own; their parameter is
+folded into the base parameter it duplicates and a note says so (:attr:`ColumnSet.notes`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from dynid.exceptions import DataError, ShapeError
+from dynid.identify._threads import single_blas_thread
+
+__all__ = [
+    "CHUNK_SAMPLES",
+    "EXTRA_KINDS",
+    "ColumnSet",
+    "column_set",
+    "compiled_base_regressor",
+    "linear_torque",
+]
+
+EXTRA_KINDS = ("armature", "coulomb", "viscous", "offset")
+"""Kinds of the extra (non-link) parameters, in the order of the physical vector ``phi``."""
+CHUNK_SAMPLES = 16384
+"""Samples per call of the compiled regressor (and per block of the QR of the linear system)."""
+_EXTRA_PREFIX = {"armature": "ia", "coulomb": "fc", "viscous": "fv", "offset": "fo"}
+_DEPENDENT_TOL = 1e-8  # relative residual below which an extra column lies in the span of the others
+
+
+@dataclass(frozen=True, eq=False)
+class ColumnSet:
+    """The identified parameters of a robot: base parameters plus optional armature and friction.
+
+    The physical parameter vector is ``phi = [pi (10 n), ia (n), fc (n), fv (n), fo (n)]``: standard
+    link parameters, armature (kg m^2), Coulomb (N m), viscous (N m s/rad) and offset (N m) per joint.
+    The identified vector is ``x = P @ phi`` (p values): the base parameters, then the extras that have
+    a column of their own.
+
+    Attributes
+    ----------
+    robot : RobotModel
+    base : BaseParameters
+    friction, armature : bool
+        Whether linear friction and armature columns are part of the system.
+    names, kinds, expressions : tuple of str, length p
+        Name (``Izz1R``, ``ia2``, ``fc3``...), kind (``link`` or one of :data:`EXTRA_KINDS`) and
+        expression in the physical parameters of each identified parameter.
+    joints : ndarray of int, shape (p,)
+        Link (for a link parameter, the link of its leading standard parameter) or joint (extras) it
+        belongs to, numbered from 1.
+    extras : ndarray of int, shape (p - n_b,)
+        Index into the 4 n extras of ``phi`` of each extra column kept.
+    P : ndarray, shape (p, 14 n)
+        ``x = P @ phi``.
+    pattern : ndarray of bool, shape (n, p)
+        Structurally non-zero entries of the identified regressor.
+    notes : tuple of str
+        What was folded where (duplicated columns).
+    """
+
+    robot: Any
+    base: Any
+    friction: bool
+    armature: bool
+    names: tuple[str, ...]
+    kinds: tuple[str, ...]
+    expressions: tuple[str, ...]
+    joints: NDArray[np.intp]
+    extras: NDArray[np.intp]
+    P: NDArray[np.float64]
+    pattern: NDArray[np.bool_]
+    notes: tuple[str, ...]
+
+    @property
+    def n(self) -> int:
+        """Number of joints."""
+        return int(self.robot.n)
+
+    @property
+    def p(self) -> int:
+        """Number of identified parameters."""
+        return len(self.names)
+
+    @property
+    def n_base(self) -> int:
+        """Number of base link parameters (the first ``n_base`` entries of ``x``)."""
+        return int(self.base.n_base)
+
+    @cached_property
+    def link_mask(self) -> NDArray[np.bool_]:
+        """Parameters of the rigid-body model: base parameters and armature (no friction)."""
+        return np.array([k in ("link", "armature") for k in self.kinds])
+
+    @cached_property
+    def friction_mask(self) -> NDArray[np.bool_]:
+        """Linear friction parameters (Coulomb, viscous, offset)."""
+        return np.array([k in ("coulomb", "viscous", "offset") for k in self.kinds])
+
+    @property
+    def extra_names(self) -> tuple[str, ...]:
+        """Names of the 4 n extras of ``phi`` (``ia1..ia_n, fc1.., fv1.., fo1..``)."""
+        n = self.n
+        return tuple(f"{_EXTRA_PREFIX[k]}{j + 1}" for k in EXTRA_KINDS for j in range(n))
+
+    @property
+    def enabled_extras(self) -> NDArray[np.bool_]:
+        """Which of the 4 n extras are part of the model (identified alone or folded into another)."""
+        n = self.n
+        return np.concatenate([np.full(n, self.armature), np.full(3 * n, self.friction)])
+
+    def extra_columns(self, dq: NDArray[np.float64], ddq: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Values of the kept extra columns: (m, p - n_b); column k acts on joint ``extra_joint[k]``.
+
+        Armature ``ddq_j``, Coulomb ``sign(dq_j)``, viscous ``dq_j``, offset ``1``, as in
+        ``friction_columns`` / ``armature_columns`` of :mod:`dynid.symbolic.functions`.
+
+        Parameters
+        ----------
+        dq, ddq : ndarray, shape (m, n)
+            Joint velocities (rad/s) and accelerations (rad/s^2).
+        """
+        n = self.n
+        out = np.empty((len(dq), len(self.extras)))
+        for k, e in enumerate(self.extras):
+            kind, j = EXTRA_KINDS[e // n], e % n
+            if kind == "armature":
+                out[:, k] = ddq[:, j]
+            elif kind == "coulomb":
+                out[:, k] = np.sign(dq[:, j])
+            elif kind == "viscous":
+                out[:, k] = dq[:, j]
+            else:
+                out[:, k] = 1.0
+        return out
+
+    @property
+    def extra_joint(self) -> NDArray[np.intp]:
+        """Joint (0-based) each kept extra column acts on."""
+        return (self.extras % self.n).astype(np.intp)
+
+
+_COLUMN_CACHE: dict[tuple[str, bool, bool], ColumnSet] = {}
+_BASE_CACHE: dict[str, Any] = {}
+
+
+def _base_and_lib(robot):
+    from dynid.symbolic.base import base_parameters
+    from dynid.symbolic.export import compiled_functions
+    from dynid.symbolic.functions import robot_functions
+
+    # compiled_functions recomputes the base parameters on each call: keep both per robot.
+    if robot.key not in _BASE_CACHE:
+        with single_blas_thread():
+            _BASE_CACHE[robot.key] = (base_parameters(robot_functions(robot)), compiled_functions(robot))
+    return _BASE_CACHE[robot.key]
+
+
+def compiled_base_regressor(robot, q, dq, ddq) -> NDArray[np.float64]:
+    """Base regressor ``Y_b`` of a batch through the compiled path: (m, n, n_b)."""
+    _, lib = _base_and_lib(robot)
+    return lib.base_regressor(q, dq, ddq)
+
+
+def column_set(robot, *, friction: bool = True, armature: bool = True) -> ColumnSet:
+    """The identified parameters of ``robot`` (cached per robot and options).
+
+    Parameters
+    ----------
+    robot : RobotModel
+        The robot.
+    friction : bool
+        Identify linear friction (Coulomb, viscous, offset per joint) with the link parameters.
+    armature : bool
+        Identify the armature (rotor inertia) of each joint with the link parameters.
+
+    Returns
+    -------
+    ColumnSet
+    """
+    key = (robot.key, bool(friction), bool(armature))
+    cached = _COLUMN_CACHE.get(key)
+    if cached is not None:
+        return cached
+    with single_blas_thread():
+        out = _column_set(robot, friction, armature)
+    _COLUMN_CACHE[key] = out
+    return out
+
+
+def _column_set(robot, friction: bool, armature: bool) -> ColumnSet:
+    from dynid.symbolic.base import random_states
+
+    base, lib = _base_and_lib(robot)
+    n, nb = robot.n, base.n_base
+    rng = np.random.default_rng(0)
+    m = max(200, 40 * n)
+    q, dq, ddq = random_states(robot, m, rng)
+    Yb = lib.base_regressor(q, dq, ddq)  # (m, n, nb)
+    pattern_b = np.any(Yb != 0.0, axis=0)
+    enabled = np.concatenate([np.full(n, bool(armature)), np.full(3 * n, bool(friction))])
+    extra_names = [f"{_EXTRA_PREFIX[k]}{j + 1}" for k in EXTRA_KINDS for j in range(n)]
+    P = np.zeros((nb, 14 * n))
+    P[:, : 10 * n] = base.matrix
+    kept_cols = [Yb.reshape(m * n, nb)]
+    kept_extra: list[int] = []
+    expressions = list(base.expressions)
+    notes = []
+    ones = np.ones(m)
+    for e in np.flatnonzero(enabled):
+        kind, j = EXTRA_KINDS[e // n], e % n
+        values = {"armature": ddq[:, j], "coulomb": np.sign(dq[:, j]), "viscous": dq[:, j], "offset": ones}[
+            kind
+        ]
+        col = np.zeros((m, n))
+        col[:, j] = values
+        col = col.reshape(m * n, 1)
+        W = np.hstack(kept_cols)
+        coef, *_ = np.linalg.lstsq(W, col, rcond=None)
+        resid = np.linalg.norm(col - W @ coef) / max(np.linalg.norm(col), 1e-300)
+        if resid < _DEPENDENT_TOL:
+            coef = coef.ravel()
+            coef[np.abs(coef) < 1e-9 * max(1.0, np.abs(coef).max())] = 0.0
+            rows = np.flatnonzero(coef)
+            P_col = np.zeros(P.shape[0])
+            P_col[rows] = coef[rows]
+            P[:, 10 * n + e] = P_col
+            targets = []
+            for r in rows:
+                if r < nb:
+                    c = coef[r]
+                    term = extra_names[e] if abs(c - 1) < 1e-12 else f"{c:.6g}*{extra_names[e]}"
+                    expressions[r] += f" + {term}"
+                    targets.append(base.names[r])
+                else:
+                    targets.append(extra_names[kept_extra[r - nb]])
+            notes.append(
+                f"the {kind} column of joint {j + 1} ({extra_names[e]}) duplicates the column of "
+                f"{', '.join(targets)}; {extra_names[e]} is identified inside {', '.join(targets)} "
+                "instead of alone"
+            )
+            continue
+        kept_cols.append(col)
+        kept_extra.append(int(e))
+        row = np.zeros((1, 14 * n))
+        row[0, 10 * n + e] = 1.0
+        P = np.vstack([P, row])
+        expressions.append(extra_names[e])
+    extras = np.array(kept_extra, dtype=np.intp)
+    pattern_x = np.zeros((n, len(extras)), dtype=bool)
+    pattern_x[extras % n, np.arange(len(extras))] = True
+    link_of = (base.independent // 10 + 1).astype(np.intp)
+    return ColumnSet(
+        robot=robot,
+        base=base,
+        friction=bool(friction),
+        armature=bool(armature),
+        names=tuple(base.names) + tuple(extra_names[e] for e in extras),
+        kinds=("link",) * nb + tuple(EXTRA_KINDS[e // n] for e in extras),
+        expressions=tuple(expressions),
+        joints=np.concatenate([link_of, extras % n + 1]).astype(np.intp),
+        extras=extras,
+        P=P,
+        pattern=np.hstack([pattern_b, pattern_x]),
+        notes=tuple(notes),
+    )
+
+
+def linear_torque(
+    columns: ColumnSet,
+    x: ArrayLike,
+    q: ArrayLike,
+    dq: ArrayLike,
+    ddq: ArrayLike,
+    *,
+    mask: NDArray[np.bool_] | None = None,
+) -> NDArray[np.float64]:
+    """Torque of the linear model ``W(q, dq, ddq) x`` for a batch, through the compiled regressor.
+
+    Parameters
+    ----------
+    columns : ColumnSet
+        The identified parameters.
+    x : array_like, shape (p,)
+        Their values.
+    q, dq, ddq : array_like, shape (m, n)
+        States (rad, rad/s, rad/s^2).
+    mask : ndarray of bool, shape (p,), optional
+        Use only these parameters (e.g. ``columns.link_mask``: the rigid-body part).
+
+    Returns
+    -------
+    ndarray, shape (m, n)
+        Joint torques (N m).
+    """
+    robot = columns.robot
+    q, dq, ddq = (robot.check_state(label, v) for label, v in (("q", q), ("dq", dq), ("ddq", ddq)))
+    for label, v in (("q", q), ("dq", dq), ("ddq", ddq)):
+        if not np.all(np.isfinite(v)):
+            row = int(np.argmax(~np.all(np.isfinite(v), axis=1)))
+            raise DataError(
+                f"{label} holds a non-finite value at row {row}; give finite states (drop or interpolate that row)"
+            )
+    if not (q.shape == dq.shape == ddq.shape):
+        raise ShapeError(
+            f"q, dq and ddq have shapes {q.shape}, {dq.shape}, {ddq.shape}; give three (m, n) arrays of one shape"
+        )
+    x = np.asarray(x, dtype=np.float64)
+    if mask is not None:
+        x = np.where(mask, x, 0.0)
+    nb = columns.n_base
+    m = len(q)
+    out = np.zeros((m, robot.n))
+    xb = x[:nb]
+    for a in range(0, m, CHUNK_SAMPLES):
+        s = slice(a, min(a + CHUNK_SAMPLES, m))
+        out[s] = compiled_base_regressor(robot, q[s], dq[s], ddq[s]) @ xb
+    if len(columns.extras):
+        xe = x[nb:]
+        used = xe != 0
+        if used.any():
+            E = columns.extra_columns(dq, ddq)
+            for k in np.flatnonzero(used):
+                out[:, columns.extra_joint[k]] += E[:, k] * xe[k]
+    return out

@@ -1,0 +1,242 @@
+"""The column set, the compressed linear system and its weighted solutions, the preprocessing settings."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections import Counter
+
+import numpy as np
+import pinocchio as pin
+import pytest
+import scipy.linalg
+
+from dynid.exceptions import DataError, DynidError, IdentificationError, NotFittedError, UsageError
+from dynid.identify.columns import column_set, linear_torque
+from dynid.identify.dataset import Dataset
+from dynid.identify.estimators import OLS
+from dynid.identify.friction import FrictionLayer, SeedFriction
+from dynid.identify.gmr import GMRCorrection
+from dynid.identify.linear_system import LinearSystem, WeightedSolution, build_system
+from dynid.identify.preparation import Preprocessing, prepare
+from dynid.sim.synthetic import random_fourier, synthetic_dataset
+
+
+# ---------------------------------------------------------------------------- the column set
+def test_the_column_set_names_and_counts_the_parameters(ur5) -> None:
+    cols = column_set(ur5)
+    assert (cols.n, cols.n_base, cols.p) == (6, 36, 58)
+    kinds = Counter(cols.kinds)
+    # the armature of joints 1 and 2 acts exactly like a base parameter and is folded into it
+    assert kinds == {"link": 36, "armature": 4, "coulomb": 6, "viscous": 6, "offset": 6}
+    assert cols.names[36:] == (
+        *(f"ia{j}" for j in range(3, 7)),
+        *(f"fc{j}" for j in range(1, 7)),
+        *(f"fv{j}" for j in range(1, 7)),
+        *(f"fo{j}" for j in range(1, 7)),
+    )
+    assert len(cols.notes) == 2
+    assert "(ia1) duplicates the column of Izz1R" in cols.notes[0]
+    assert "(ia2) duplicates the column of Iyy2R" in cols.notes[1]
+    assert "ia1" in cols.expressions[cols.names.index("Izz1R")]
+    assert cols.P.shape == (58, 14 * 6) and cols.pattern.shape == (6, 58)
+    assert len(cols.names) == len(cols.kinds) == len(cols.expressions) == len(cols.joints) == 58
+    np.testing.assert_array_equal(cols.joints[36:], [3, 4, 5, 6] + list(range(1, 7)) * 3)
+    # the two masks split the parameters: rigid body (links, armature) and linear friction
+    assert not np.any(cols.link_mask & cols.friction_mask)
+    assert np.all(cols.link_mask | cols.friction_mask)
+    assert int(cols.friction_mask.sum()) == 18
+
+
+def test_a_column_set_without_extras_holds_the_base_parameters_only(ur5) -> None:
+    cols = column_set(ur5, friction=False, armature=False)
+    assert cols.p == cols.n_base == 36
+    assert cols.notes == () and len(cols.extras) == 0
+    assert set(cols.kinds) == {"link"}
+    assert not cols.enabled_extras.any()
+    assert Counter(column_set(ur5, friction=False).kinds) == {"link": 36, "armature": 4}
+
+
+def _physical(ur5, rng):
+    """Standard parameters of the URDF plus random armature and linear friction: phi (14 n,)."""
+    n = ur5.n
+    extras = [
+        rng.uniform(0.01, 0.05, n),
+        rng.uniform(0.5, 3, n),
+        rng.uniform(0.2, 2, n),
+        rng.uniform(-0.5, 0.5, n),
+    ]
+    return np.concatenate([ur5.params, *extras])
+
+
+def _reference_torque(ur5, phi, q, dq, ddq):
+    """Pinocchio's inverse dynamics with the standard parameters, plus armature and friction by hand."""
+    n = ur5.n
+    model, data = ur5.pin_model, ur5.pin_model.createData()
+    rigid = np.array([pin.rnea(model, data, q[k], dq[k], ddq[k]) for k in range(len(q))])
+    rigid -= ur5.armature * ddq  # Pinocchio adds the model's own rotor inertia; phi holds ours
+    ia, fc, fv, fo = (phi[10 * n + k * n : 10 * n + (k + 1) * n] for k in range(4))
+    return rigid + ia * ddq + fc * np.sign(dq) + fv * dq + fo
+
+
+# ---------------------------------------------------------------------------- the linear system
+@pytest.fixture(scope="module")
+def exact_data(ur5):
+    """Noise-free data with exact derivatives (no filter, nothing trimmed) and the true parameters."""
+    rng = np.random.default_rng(31)
+    cols = column_set(ur5)
+    phi = _physical(ur5, rng)
+    x = cols.P @ phi
+    ds = synthetic_dataset(cols, x, random_fourier(ur5, rng), rate=40, rng=rng)
+    return cols, phi, x, ds
+
+
+def test_the_linear_model_is_inverse_dynamics_with_armature_and_friction(ur5, exact_data) -> None:
+    cols, phi, x, ds = exact_data
+    expected = _reference_torque(ur5, phi, ds.q, ds.dq, ds.ddq)
+    scale = np.abs(expected).max()
+    np.testing.assert_allclose(
+        linear_torque(cols, x, ds.q, ds.dq, ds.ddq), expected, rtol=1e-10, atol=1e-10 * scale
+    )
+    system = build_system(ur5, ds)
+    assert system.m == len(ds.t) and system.p == 58  # no filter, no trimming: every sample
+    np.testing.assert_allclose(system.predict(x), expected, rtol=1e-10, atol=1e-10 * scale)
+    np.testing.assert_allclose(system.tau(), ds.tau, rtol=1e-12, atol=1e-12 * scale)
+    # the compressed factor holds the residual of any parameters: here none at the truth ...
+    assert np.all(system.rms(x) < 1e-9 * scale)
+    # ... and E^T E of a wrong vector as the per-sample residual gives it
+    x_wrong = x * (1 + 0.1 * np.random.default_rng(1).standard_normal(len(x)))
+    E = system.tau() - system.predict(x_wrong)
+    np.testing.assert_allclose(
+        system.residual_matrix(x_wrong), E.T @ E, rtol=1e-9, atol=1e-9 * np.abs(E.T @ E).max()
+    )
+    # the rigid-body part alone: friction columns masked out
+    no_friction = phi.copy()
+    no_friction[11 * 6 :] = 0.0
+    np.testing.assert_allclose(
+        system.predict(x, mask=cols.link_mask),
+        _reference_torque(ur5, no_friction, ds.q, ds.dq, ds.ddq),
+        rtol=1e-10,
+        atol=1e-10 * scale,
+    )
+
+
+def test_ordinary_least_squares_on_exact_data_returns_the_truth(ur5, exact_data) -> None:
+    _, _, x, ds = exact_data
+    sol = build_system(ur5, ds).solve(np.eye(6))
+    assert isinstance(sol, WeightedSolution)
+    np.testing.assert_allclose(sol.x, x, rtol=1e-7, atol=1e-9 * np.abs(x).max())
+    assert sol.rss < 1e-16 * float(np.sum(ds.tau**2))
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        sol.x = x  # type: ignore[misc]
+
+
+def _dense(ur5, cols, ds):
+    """The stacked regressor (m n, p) column by column through linear_torque: the plain reference."""
+    m, n, p = len(ds.t), ur5.n, cols.p
+    W = np.empty((m * n, p))
+    for k in range(p):
+        e = np.zeros(p)
+        e[k] = 1.0
+        W[:, k] = linear_torque(cols, e, ds.q, ds.dq, ds.ddq).reshape(m * n)
+    return W
+
+
+def test_a_weighted_solution_is_the_whitened_least_squares(ur5) -> None:
+    rng = np.random.default_rng(32)
+    cols = column_set(ur5)
+    x_true = cols.P @ _physical(ur5, rng)
+    A = rng.normal(size=(6, 6))
+    omega = 0.01 * (A @ A.T + 0.5 * np.eye(6))  # correlated joint noise
+    ds = synthetic_dataset(cols, x_true, random_fourier(ur5, rng), rate=40, rng=rng, noise=omega)
+    system = build_system(ur5, ds)
+    L_inv = scipy.linalg.solve_triangular(np.linalg.cholesky(omega), np.eye(6), lower=True)
+    sol = system.solve(L_inv)
+    # reference: whiten every sample of the dense stacked system, plain least squares
+    m, n = len(ds.t), 6
+    W = _dense(ur5, cols, ds).reshape(m, n, cols.p)
+    Ww = np.einsum("ij,mjp->mip", L_inv, W).reshape(m * n, cols.p)
+    yw = (ds.tau @ L_inv.T).reshape(m * n)
+    x_ref, rss_ref, *_ = np.linalg.lstsq(Ww, yw, rcond=None)
+    np.testing.assert_allclose(sol.R.T @ sol.R, Ww.T @ Ww, rtol=1e-9, atol=1e-9 * np.abs(Ww.T @ Ww).max())
+    np.testing.assert_allclose(sol.x, x_ref, rtol=1e-7, atol=1e-8 * np.abs(x_ref).max())
+    np.testing.assert_allclose(sol.rss, float(rss_ref[0]), rtol=1e-8)
+    np.testing.assert_array_equal(sol.whitener, L_inv)
+    # the weighting matters: unweighted least squares gives another estimate and a larger whitened residual
+    ols = system.solve(np.eye(6))
+    assert np.max(np.abs(ols.x - sol.x)) > 1e-3 * np.abs(sol.x).max()
+    assert float(np.sum((Ww @ ols.x - yw) ** 2)) > sol.rss
+    # the estimators read their solution from the same record
+    fit = OLS(robot=ur5).fit(system)
+    np.testing.assert_allclose(fit.params_, ols.x, rtol=1e-12, atol=0)
+    np.testing.assert_array_equal(fit.solution_.R, ols.R)
+
+
+def test_a_released_system_keeps_its_factor_and_refuses_per_sample_values(ur5, exact_data) -> None:
+    _, _, x, ds = exact_data
+    system = build_system(ur5, ds, keep_samples=False)
+    assert isinstance(system, LinearSystem) and system.Z is None
+    assert np.all(system.rms(x) < 1e-9 * np.abs(ds.tau).max())
+    with pytest.raises(IdentificationError, match="the data matrix of this system was released"):
+        system.predict(x)
+
+
+# ---------------------------------------------------------------------------- preprocessing settings
+def _dataset(ur5, rate: float, *, derivatives: bool) -> Dataset:
+    rng = np.random.default_rng(33)
+    cols = column_set(ur5, friction=False, armature=False)
+    x = cols.P @ np.concatenate([ur5.params, np.zeros(4 * ur5.n)])
+    traj = random_fourier(ur5, rng, base_freq=0.5)
+    return synthetic_dataset(cols, x, traj, rate=rate, rng=rng, with_derivatives=derivatives)
+
+
+def test_preprocessing_defaults(ur5) -> None:
+    default = Preprocessing()
+    assert (default.cutoff, default.state_cutoff, default.order) == ("auto", "auto", 5)
+    assert (default.decimate, default.trim, default.parallel) == (1, None, True)
+    # measured derivatives: no filter, nothing trimmed
+    measured = default.resolve(_dataset(ur5, 1000.0, derivatives=True))
+    assert measured == {
+        "cutoff_hz": None,
+        "state_cutoff_hz": None,
+        "order": 5,
+        "decimate": 1,
+        "trim_s": 0.0,
+        "parallel": True,
+    }
+    # angles only: 20 Hz on torque and states, 5 / cutoff trimmed at both ends
+    only_q = _dataset(ur5, 1000.0, derivatives=False)
+    settings = default.resolve(only_q)
+    assert settings["cutoff_hz"] == settings["state_cutoff_hz"] == 20.0
+    assert settings["trim_s"] == pytest.approx(0.25, rel=1e-12)
+    # at most a fifth of the sampling rate
+    assert default.resolve(_dataset(ur5, 50.0, derivatives=False))["cutoff_hz"] == pytest.approx(10.0)
+    # the resolved settings describe the preprocessing again
+    assert Preprocessing.from_settings(settings).resolve(only_q) == settings
+    prepared = prepare(only_q)
+    assert prepared.settings["cutoff_hz"] == 20.0 and prepared.parallel_filter
+    trimmed = int(np.ceil(0.25 * 1000 - 1e-9))
+    np.testing.assert_array_equal(prepared.rows, np.arange(trimmed, len(only_q.t) - trimmed))
+    assert prepared.reference == "filtered and trimmed"
+
+
+def test_preprocessing_rejects_a_cut_off_above_nyquist(ur5) -> None:
+    ds = _dataset(ur5, 1000.0, derivatives=False)
+    with pytest.raises(DataError, match=r"cutoff is 600.*Nyquist frequency 500 Hz"):
+        Preprocessing(cutoff=600.0).resolve(ds)
+    with pytest.raises(DataError, match="decimate is 0; give a positive integer"):
+        Preprocessing(decimate=0).resolve(ds)
+
+
+# ---------------------------------------------------------------------------- one not-fitted error
+def test_every_unfitted_estimator_raises_the_one_not_fitted_error(ur5) -> None:
+    zeros = np.zeros((3, 6))
+    for call in (
+        lambda: OLS(robot=ur5).predict(zeros, zeros, zeros),
+        lambda: GMRCorrection().predict(np.zeros((3, 12))),
+        lambda: FrictionLayer().predict(zeros),
+        lambda: SeedFriction().predict(np.zeros(3)),
+    ):
+        with pytest.raises(NotFittedError, match="is not fitted yet; call fit") as info:
+            call()
+        assert isinstance(info.value, DynidError)  # the command line's catch
+    assert issubclass(NotFittedError, IdentificationError) and issubclass(NotFittedError, UsageError)
