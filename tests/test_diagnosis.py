@@ -114,7 +114,7 @@ def test_structured_change_picks_the_hypothesis_that_made_the_change(rng):
 
 # ---------------------------------------------------------------------------- noise floor
 def test_period_detection_and_noise_floor_of_a_periodic_run(ur5):
-    from dynid.identify.linear_system import Preprocessing, prepare
+    from dynid.identify.preparation import Preprocessing, prepare
 
     traj = case_excitation(ur5, 11, base_freq=0.5)
     res = simulate(ur5, traj, duration=8.0, friction="linear", seed=3)

@@ -91,7 +91,7 @@ def test_seed_model_fitted_through_the_torque_filter_finds_the_threshold(rng) ->
     # at 1 kHz with a 20 Hz filter the Coulomb step of every reversal is smeared over ~25 ms:
     # fitted unfiltered against the filtered torque, the threshold came out 3-10 times too small
     from dynid.identify.dataset import Dataset
-    from dynid.identify.linear_system import Preprocessing, prepare
+    from dynid.identify.preparation import Preprocessing, prepare
 
     t = np.arange(40_000) * 1e-3
     q = 0.6 * np.sin(2 * np.pi * 0.2 * t) * np.sin(2 * np.pi * 0.05 * t)

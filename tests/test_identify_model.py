@@ -10,6 +10,7 @@ import pytest
 
 from dynid.cli import main
 from dynid.exceptions import ModelFileError
+from dynid.identify.columns import column_set
 from dynid.identify.consistent import (
     EPS,
     ConsistentLS,
@@ -22,7 +23,7 @@ from dynid.identify.consistent import (
 from dynid.identify.dataset import save_dataset
 from dynid.identify.estimators import IRLS, IdentificationWarning
 from dynid.identify.friction import SeedFriction
-from dynid.identify.linear_system import build_system, column_set
+from dynid.identify.linear_system import build_system
 from dynid.identify.model import identify, load_model, save_model
 from dynid.sim.simulator import perturb_params
 from dynid.sim.synthetic import random_fourier, synthetic_dataset, true_parameters

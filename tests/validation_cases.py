@@ -31,8 +31,8 @@ class Case:
 def simulated_case(base: Path) -> Case:
     import warnings
 
-    from dynid.identify.linear_system import Preprocessing
     from dynid.identify.model import identify, save_model
+    from dynid.identify.preparation import Preprocessing
     from dynid.optim.excitation import ExcitationProblem
     from dynid.sim.simulator import build_truth, simulate, write_simulation
     from dynid.symbolic import load_robot
