@@ -17,8 +17,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynid.exceptions import UsageError
+from dynid.identify.columns import ColumnSet, linear_torque
 from dynid.identify.dataset import Dataset
-from dynid.identify.linear_system import ColumnSet, linear_torque
 from dynid.optim.trajectory import FourierTrajectory
 
 __all__ = ["random_fourier", "synthetic_dataset", "true_parameters"]
