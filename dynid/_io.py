@@ -5,7 +5,7 @@ Every file dynid writes goes through :func:`atomic_path` (or its shorthands :fun
 is flushed to disk, gets the mode a plain ``open()`` would give it (an existing file's own mode, else
 ``0666`` less the umask; not ``mkstemp``'s private ``0600``), and replaces the target in one
 :func:`os.replace`.  An interrupted or failed write leaves no partial file, no stray temporary file,
-and an older file intact.
+and an older file intact.  :func:`atomic_dir` does the same for a whole folder.
 
 Every JSON document goes through :func:`to_jsonable`: arrays to lists, numpy scalars to Python
 numbers, paths to text, non-finite floats to ``null`` (JSON has no NaN).
@@ -17,14 +17,16 @@ import contextlib
 import json
 import math
 import os
+import shutil
 import tempfile
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 __all__ = [
+    "atomic_dir",
     "atomic_path",
     "dumps_json",
     "file_mode",
@@ -83,9 +85,21 @@ def jsonable(value: Any) -> Any:
     raise TypeError(f"{type(value).__name__} is not JSON serialisable")
 
 
-def dumps_json(value: Any, *, indent: int | None = 2) -> str:
-    """``value`` as strict JSON text (cleaned by :func:`to_jsonable`), ending in a newline."""
-    return json.dumps(to_jsonable(value), indent=indent, default=jsonable, allow_nan=False) + "\n"
+def dumps_json(value: Any, *, indent: int | None = 2, default: Callable[[Any], Any] | None = None) -> str:
+    """``value`` as strict JSON text (cleaned by :func:`to_jsonable`), ending in a newline.
+
+    Parameters
+    ----------
+    value : Any
+        Figures: mappings, sequences, numbers, arrays, paths.
+    indent : int or None
+        Indentation of nested values; None writes one line.
+    default : callable, optional
+        What to write for a value nothing above knows (e.g. ``str``: its text); default
+        :func:`jsonable`, which raises :class:`TypeError`.
+    """
+    text = json.dumps(to_jsonable(value), indent=indent, default=default or jsonable, allow_nan=False)
+    return text + "\n"
 
 
 # ---------------------------------------------------------------------------- atomic files
@@ -97,6 +111,11 @@ def file_mode(path: str | os.PathLike[str]) -> int:
     umask = os.umask(0)
     os.umask(umask)
     return 0o666 & ~umask
+
+
+def _check_folder(path: Path) -> None:
+    if not path.parent.is_dir():
+        raise FileNotFoundError(f"the folder '{path.parent}' does not exist; create it or write elsewhere.")
 
 
 @contextlib.contextmanager
@@ -116,8 +135,14 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     ------
     Path
         The temporary file (created empty, in ``path``'s folder, named ``.NAME.XXXX.tmp``).
+
+    Raises
+    ------
+    FileNotFoundError
+        If the folder of ``path`` does not exist (nothing is written).
     """
     path = Path(path)
+    _check_folder(path)
     fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     os.close(fd)
     tmp = Path(tmp_name)
@@ -147,3 +172,39 @@ def write_text(path: str | os.PathLike[str], text: str) -> Path:
 def write_json(path: str | os.PathLike[str], value: Any) -> Path:
     """Write ``value`` as strict, indented JSON (see :func:`dumps_json`) to ``path`` atomically."""
     return write_text(path, dumps_json(value))
+
+
+@contextlib.contextmanager
+def atomic_dir(path: str | os.PathLike[str]) -> Iterator[Path]:
+    """A temporary folder beside ``path`` that replaces the folder ``path`` when the block ends without error.
+
+    Write the folder's files into the yielded folder; on leaving the block an older ``path`` is
+    removed and the new folder renamed onto it.  On an error (or an interrupt) the temporary folder
+    is removed and ``path`` is left as it was.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The folder to write; its parent must exist.
+
+    Yields
+    ------
+    Path
+        The temporary folder (created empty, beside ``path``, named ``.NAME.XXXX.tmp``).
+
+    Raises
+    ------
+    FileNotFoundError
+        If the parent folder of ``path`` does not exist (nothing is written).
+    """
+    path = Path(path)
+    _check_folder(path)
+    work = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp"))
+    try:
+        yield work
+        if path.exists():
+            shutil.rmtree(path)
+        os.replace(work, path)
+    finally:
+        if work.exists():
+            shutil.rmtree(work, ignore_errors=True)

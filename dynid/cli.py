@@ -15,11 +15,8 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import json
-import os
 import sys
 from collections.abc import Sequence
-from pathlib import Path
 
 __all__ = ["main"]
 
@@ -51,16 +48,6 @@ def build_parser() -> argparse.ArgumentParser:
         mod.add_arguments(p)
         p.set_defaults(_module=mod)
     return parser
-
-
-def write_json(path: str | os.PathLike | None, figures: dict) -> None:
-    """Write the figures of a command to ``--json FILE`` (atomically), if asked."""
-    if path is None:
-        return
-    from dynid._io import jsonable
-    from dynid.optim.trajectory import write_atomic
-
-    write_atomic(Path(path), json.dumps(figures, indent=2, default=jsonable) + "\n")
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -422,7 +422,8 @@ def run_demo(
 
     # ------------------------------------------------------------------ 7. report
     def report() -> str:
-        from dynid.validation.report import html_table, json_ready, render_report
+        from dynid._io import to_jsonable
+        from dynid.validation.report import html_table, render_report
 
         results = state["results"]
         full = results[0]
@@ -476,7 +477,7 @@ def run_demo(
         exc = state["excitation"]
         rep = render_report(
             results,
-            figures=json_ready(figures),
+            figures=to_jsonable(figures),
             title="dynid demo: UR5 identified from a simulated run, validated on another",
             context={
                 "identification data": f"{state['paths']['identification'].name} (the optimised excitation)",
@@ -507,7 +508,7 @@ def run_demo(
         stages.run("sim-to-real gap diagnosis", diagnosis, may_fail=True)
         stages.run("HTML report", report)
 
-    from dynid.validation.report import json_ready
+    from dynid._io import to_jsonable
 
     total = time.perf_counter() - started
     figures["stages"] = [r.to_dict() for r in stages.records]
@@ -519,7 +520,7 @@ def run_demo(
         out_dir=out,
         mode=mode,
         stages=tuple(stages.records),
-        figures=json_ready(figures),
+        figures=to_jsonable(figures),
         results=tuple(state["results"]),
         diagnosis=state.get("diagnosis"),
         report=state.get("report"),

@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import os
+from pathlib import Path
+from typing import Any
 
-from dynid.exceptions import RobotModelError
+from dynid.exceptions import RobotModelError, UsageError
 
-__all__ = ["add_json_argument", "add_robot_arguments", "robot_from_args"]
+__all__ = ["add_json_argument", "add_robot_arguments", "robot_from_args", "write_figures"]
 
 
 def add_robot_arguments(parser: argparse.ArgumentParser, *, default: str | None = None) -> None:
@@ -29,6 +32,31 @@ def add_robot_arguments(parser: argparse.ArgumentParser, *, default: str | None 
 
 def add_json_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", metavar="FILE", help="also write the figures as JSON to FILE")
+
+
+def write_figures(path: str | os.PathLike[str] | None, figures: Any) -> None:
+    """Write a command's figures to ``--json FILE`` (strict JSON, atomically), if a file was given.
+
+    Parameters
+    ----------
+    path : str, path-like or None
+        The ``--json`` file; None writes nothing.
+    figures : Any
+        The figures; non-finite numbers are written as ``null``.
+
+    Raises
+    ------
+    UsageError
+        If the folder of ``path`` does not exist.
+    """
+    if path is None:
+        return
+    from dynid._io import write_json
+
+    path = Path(path)
+    if not path.parent.is_dir():
+        raise UsageError(f"the folder '{path.parent}' does not exist; create it or write elsewhere.")
+    write_json(path, figures)
 
 
 def _floats(option: str, text: str | None):

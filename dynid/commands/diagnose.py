@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from dynid.commands.common import add_json_argument
+from dynid.commands.common import add_json_argument, write_figures
 
 HELP = "diagnose the sim-to-real gap of a model: gap map, the effect behind it, its closure; HTML report"
 
@@ -41,15 +41,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from dynid.cli import write_json
     from dynid.diagnosis.candidates import EFFECT_NAMES
     from dynid.diagnosis.core import diagnose
-    from dynid.diagnosis.report import check_report_path, write_diagnosis_report
+    from dynid.diagnosis.report import write_diagnosis_report
     from dynid.exceptions import UsageError
     from dynid.identify.dataset import load_dataset
     from dynid.identify.model import load_model
+    from dynid.validation.html_page import check_report_path
 
-    report = check_report_path(args.report) if args.report else None
+    report = check_report_path(args.report, pdf=False) if args.report else None
     if args.json is not None and not Path(args.json).parent.is_dir():
         raise UsageError(f"the folder of --json '{args.json}' does not exist; create it or write elsewhere.")
     effects = EFFECT_NAMES
@@ -76,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
     for j in range(model.robot.n):
         c = dec["closure"][j]
         print(f"{j + 1:>5}  {result.excess['ratio'][j]:6.2f}  {'-' if c != c else f'{c:6.2f}'}")
-    write_json(args.json, result.to_dict())
+    write_figures(args.json, result.to_dict())
     if report is not None:
         write_diagnosis_report(
             result,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from dynid.commands.common import add_json_argument, add_robot_arguments, robot_from_args
+from dynid.commands.common import add_json_argument, add_robot_arguments, robot_from_args, write_figures
 from dynid.exceptions import UsageError
 
 HELP = "design an excitation trajectory (Fourier series optimised with IPOPT) and write it as JSON and CSV"
@@ -87,7 +87,6 @@ def output_paths(out: Path, count: int) -> list[Path]:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from dynid.cli import write_json
     from dynid.optim.approach import check_pose, executable_trajectory
     from dynid.optim.excitation import CartesianLimits, ExcitationProblem, design_excitation
 
@@ -152,7 +151,7 @@ def run(args: argparse.Namespace) -> int:
     if sampled is not None:
         sampled.to_csv(csv)
         figures["csv"] = {"path": str(csv), "rate": args.rate, "segments": sampled.meta["segments"]}
-    write_json(args.json, figures)
+    write_figures(args.json, figures)
     ratio = result.cond / result.baseline_cond
     print(
         f"cond {result.cond:.4g} (best of {args.baseline} random feasible: {result.baseline_cond:.4g}, ratio "

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from dynid.commands.common import add_json_argument, add_robot_arguments, robot_from_args
+from dynid.commands.common import add_json_argument, add_robot_arguments, robot_from_args, write_figures
 
 HELP = "identify link parameters, friction and a GMM correction from a dataset; write a model file"
 
@@ -97,7 +97,6 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from dynid.cli import write_json
     from dynid.identify.dataset import load_dataset
     from dynid.identify.linear_system import Preprocessing
     from dynid.identify.model import identify, save_model
@@ -153,5 +152,5 @@ def run(args: argparse.Namespace) -> int:
             f"unconstrained estimate; smallest pseudo-inertia eigenvalue {min(c['min_eigenvalues']):.3g}"
         )
     print(f"wrote {json_path} and {arrays_path}")
-    write_json(args.json, {**figures, "elapsed_s": elapsed, "model": str(json_path)})
+    write_figures(args.json, {**figures, "elapsed_s": elapsed, "model": str(json_path)})
     return 0

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from dynid.commands.common import add_json_argument, add_robot_arguments, robot_from_args
+from dynid.commands.common import add_json_argument, add_robot_arguments, robot_from_args, write_figures
 
 HELP = "show a robot's joints, limits and base parameters"
 
@@ -15,7 +15,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from dynid.cli import write_json
     from dynid.symbolic.base import base_parameters
     from dynid.symbolic.functions import robot_functions
 
@@ -34,7 +33,7 @@ def run(args: argparse.Namespace) -> int:
     print("base parameters (g: gravity-related):")
     for k, row in enumerate(base.table()):
         print(f"{k + 1:>4} {'g' if row['gravity_related'] else ' '} {row['name']:<8} = {row['expression']}")
-    write_json(
+    write_figures(
         args.json,
         {
             "robot": robot.name,

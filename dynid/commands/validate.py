@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from dynid.commands.common import add_json_argument
+from dynid.commands.common import add_json_argument, write_figures
 from dynid.exceptions import UsageError
 
 HELP = "validate identified models on held-out data: RMS, NRMS, R^2 per joint, noise floor, HTML report"
@@ -71,10 +71,10 @@ def _row(values, fmt: str = "{:>10.4g}") -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from dynid.cli import write_json
+    from dynid._io import to_jsonable
     from dynid.identify.dataset import load_dataset
     from dynid.identify.model import load_model
-    from dynid.validation.report import check_report_path, json_ready, render_report
+    from dynid.validation.report import check_report_path, render_report
     from dynid.validation.validate import compare, validate, write_predictions
 
     # Every output is checked before any work, and written only once everything is computed.
@@ -108,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
         "report": None if report_path is None else str(report_path),
         "predictions": None if predictions_path is None else str(predictions_path),
     }
-    figures = json_ready(figures)
+    figures = to_jsonable(figures)
     report = None
     if report_path is not None:
         report = render_report(results, figures=figures, pdf=report_path.suffix.lower() == ".pdf")
@@ -145,5 +145,5 @@ def run(args: argparse.Namespace) -> int:
     if report is not None and report_path is not None:
         report.write(report_path)
         print(f"wrote {report_path}")
-    write_json(json_path, figures)
+    write_figures(json_path, figures)
     return 0

@@ -18,69 +18,14 @@ from typing import Any
 
 import numpy as np
 
-from dynid.exceptions import UsageError
+from dynid._io import write_text
+from dynid.validation.html_page import check_report_path, figure_html, format_number, html_page, html_table
 
 __all__ = ["diagnosis_figures", "render_diagnosis_html", "write_diagnosis_report"]
 
-_STYLE = """
-body { font-family: sans-serif; max-width: 1100px; margin: 2em auto; color: #222; }
-table { border-collapse: collapse; margin: 0.6em 0 1.2em 0; font-size: 0.92em; }
-th, td { border: 1px solid #ccc; padding: 3px 8px; text-align: right; }
-th { background: #f3f3f3; } td.text { text-align: left; }
-figure { margin: 1em 0; } figure img { max-width: 100%; } figcaption { font-size: 0.9em; color: #555; }
-.verdict { font-size: 1.15em; padding: 0.6em 1em; background: #f6f8fa; border-left: 4px solid #1f77b4; }
-"""
-
-
-def check_report_path(path: str | os.PathLike[str]) -> Path:
-    """Check that the report can be written at ``path`` (an ``.html`` file in an existing folder).
-
-    Parameters
-    ----------
-    path : str or path-like
-        The report file.
-
-    Raises
-    ------
-    UsageError
-        Another extension, a missing folder, or a folder given as the file.
-    """
-    path = Path(path)
-    if path.suffix.lower() not in (".html", ".htm"):
-        raise UsageError(
-            f"the report '{path}' has the extension '{path.suffix}'; give a file name ending in .html."
-        )
-    if not path.parent.is_dir():
-        raise UsageError(
-            f"the folder '{path.parent}' of the report does not exist; create it or write the report elsewhere."
-        )
-    if path.is_dir():
-        raise UsageError(f"the report '{path}' is a folder; give a file name ending in .html.")
-    return path
-
-
-def _fmt(v: Any, digits: int = 3) -> str:
-    if v is None:
-        return "-"
-    if isinstance(v, float | np.floating):
-        if not np.isfinite(v):
-            return "-"
-        return f"{v:.{digits}g}"
-    return html.escape(str(v))
-
 
 def _table(headers: list[str], rows: list[list[Any]], text_columns: int = 1) -> str:
-    head = "".join(f"<th>{html.escape(h)}</th>" for h in headers)
-    body = "".join(
-        "<tr>"
-        + "".join(
-            f'<td class="text">{_fmt(c)}</td>' if k < text_columns else f"<td>{_fmt(c)}</td>"
-            for k, c in enumerate(row)
-        )
-        + "</tr>"
-        for row in rows
-    )
-    return f"<table><tr>{head}</tr>{body}</table>"
+    return html_table(headers, rows, text_columns=text_columns, digits=3)
 
 
 def diagnosis_figures(result) -> list[tuple[str, str, bytes]]:
@@ -236,19 +181,15 @@ def render_diagnosis_html(
     context : dict, optional
         Extra facts shown in a table (model file, data files, robot).
     """
-    from dynid.validation.plots import png_base64
-
     doc = result.to_dict()
     dec = doc["decomposition"]
     n = len(result.joint_names)
-    parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"]
-    parts.append(f"<style>{_STYLE}</style></head><body><h1>{html.escape(title)}</h1>")
-    parts.append(f'<p class="verdict">Verdict: <strong>{html.escape(", ".join(result.verdict))}</strong></p>')
+    parts = [f'<p class="verdict">Verdict: <strong>{html.escape(", ".join(result.verdict))}</strong></p>']
     parts.append(
         "<ul>" + "".join(f"<li>{html.escape(line)}</li>" for line in result.summary().splitlines()) + "</ul>"
     )
     if context:
-        parts.append(_table(["", ""], [[k, v] for k, v in context.items()], text_columns=2))
+        parts.append(html_table(None, [[k, str(v)] for k, v in context.items()], text_columns=2))
     parts.append("<h2>Where the held-out error lies</h2>")
     rows = []
     for j in range(n):
@@ -282,14 +223,11 @@ def render_diagnosis_html(
         )
     )
     parts.append(
-        f"<p>Noise floor: {html.escape(result.noise.detail)}. Closure overall: {_fmt(dec['closure_overall'])}. "
+        f"<p>Noise floor: {html.escape(result.noise.detail)}. Closure overall: {format_number(dec['closure_overall'], 3)}. "
         "MSE on the filtered held-out torque, samples near zero speed left out (sticking).</p>"
     )
     for title_f, caption, png in diagnosis_figures(result):
-        parts.append(
-            f"<figure><h3>{html.escape(title_f)}</h3><img src='{png_base64(png)}' alt='{html.escape(title_f)}'>"
-            f"<figcaption>{html.escape(caption)}</figcaption></figure>"
-        )
+        parts.append(figure_html(png, title=title_f, caption=caption, show_title=True))
     parts.append("<h2>Which effect: candidate ranking</h2>")
     rows = []
     for r in doc["ranking"][:20]:
@@ -370,8 +308,7 @@ def render_diagnosis_html(
         parts.append(
             "<h2>Notes</h2><ul>" + "".join(f"<li>{html.escape(x)}</li>" for x in result.notes) + "</ul>"
         )
-    parts.append("</body></html>\n")
-    return "".join(parts)
+    return html_page(title, parts)
 
 
 def write_diagnosis_report(
@@ -398,17 +335,5 @@ def write_diagnosis_report(
     -------
     Path
     """
-    import tempfile
-
-    path = check_report_path(path)
-    text = render_diagnosis_html(result, title=title, context=context)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        os.fchmod(fd, 0o644)
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    path = check_report_path(path, pdf=False)
+    return write_text(path, render_diagnosis_html(result, title=title, context=context))

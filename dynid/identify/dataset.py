@@ -20,7 +20,6 @@ import itertools
 import json
 import os
 import re
-import tempfile
 import warnings
 from collections.abc import Iterable, Mapping
 from dataclasses import KW_ONLY, InitVar, dataclass, field
@@ -30,6 +29,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from dynid._io import atomic_path, dumps_json
 from dynid.exceptions import DataError, DataWarning
 
 __all__ = [
@@ -691,14 +691,6 @@ def load_dataset(
     )
 
 
-def _json_default(obj: Any) -> Any:
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    return str(obj)
-
-
 def _write_csv(ds: Dataset, f: Any) -> None:
     columns = ds.to_columns()
     f.write(",".join(columns) + "\n")
@@ -707,7 +699,7 @@ def _write_csv(ds: Dataset, f: Any) -> None:
 
 def _write_npz(ds: Dataset, f: Any) -> None:
     columns = ds.to_columns()
-    meta = json.dumps(ds.meta, default=_json_default)
+    meta = dumps_json(ds.meta, indent=None, default=str)  # anything JSON cannot hold as its text
     np.savez(f, **columns, meta=np.array(meta))
 
 
@@ -740,24 +732,12 @@ def save_dataset(ds: Dataset, path: str | os.PathLike[str]) -> Path:
     folder = path.parent
     if not folder.is_dir():
         raise DataError(f"cannot write {path.name}: the folder {folder} does not exist; create it first")
-    mode = path.stat().st_mode & 0o777 if path.is_file() else 0o644  # mkstemp's own mode is 0600
-    fd, tmp_name = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".tmp")
-    tmp = Path(tmp_name)
-    try:
-        os.fchmod(fd, mode)
+    with atomic_path(path) as tmp:
         if suffix == ".csv":
-            with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as f:
+            with open(tmp, "w", encoding="utf-8", newline="\n") as f:
                 _write_csv(ds, f)
-                f.flush()
-                os.fsync(f.fileno())
         else:
-            with os.fdopen(fd, "wb") as f:
+            with open(tmp, "wb") as f:
                 _write_npz(ds, f)
-                f.flush()
-                os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
     return path
 

@@ -42,7 +42,6 @@ import hashlib
 import io
 import json
 import os
-import tempfile
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -51,7 +50,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dynid._io import jsonable
+from dynid._io import atomic_path, dumps_json, to_jsonable
 from dynid.exceptions import DynidError, ModelFileError, UsageError
 from dynid.identify._threads import single_blas_thread
 from dynid.identify.consistent import ConsistentLS, pseudo_inertia
@@ -83,10 +82,6 @@ METHODS = (*ESTIMATORS, "consistent")
 """Layer-1 methods: ``ols``, ``wls``, ``gls``, ``irls``, ``consistent``."""
 FORMAT = "dynid-model"
 VERSION = 1
-
-
-def _finite_or_none(v: float) -> float | None:
-    return float(v) if np.isfinite(v) else None
 
 
 @dataclass(frozen=True, eq=False)
@@ -285,7 +280,7 @@ class IdentifiedModel:
                     "kind": kind,
                     "value": float(v),
                     "std": float(s),
-                    "std_percent": _finite_or_none(pc),
+                    "std_percent": to_jsonable(float(pc)),
                 }
                 for name, expr, kind, v, s, pc in zip(
                     cols.names, cols.expressions, cols.kinds, self.params, std, pct, strict=True
@@ -293,7 +288,7 @@ class IdentifiedModel:
             ],
             "base_params": {name: float(v) for name, v in zip(cols.names, self.params, strict=True)},
             "std": {name: float(s) for name, s in zip(cols.names, std, strict=True)},
-            "std_percent": {name: _finite_or_none(pc) for name, pc in zip(cols.names, pct, strict=True)},
+            "std_percent": {name: to_jsonable(float(pc)) for name, pc in zip(cols.names, pct, strict=True)},
             "cond": float(self.cond),
             "layers_filtered": bool(self.layers_filtered),
             "rms": [float(v) for v in self.rms],
@@ -655,35 +650,6 @@ def identify(
 
 
 # ---------------------------------------------------------------------------- files
-def _clean(value: Any) -> Any:
-    """JSON-ready copy: arrays to lists, non-finite floats to None (JSON has no NaN)."""
-    if isinstance(value, dict):
-        return {str(k): _clean(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_clean(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _clean(value.tolist())
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not np.isfinite(value):
-        return None
-    return value
-
-
-def _write_temp(folder: Path, name: str, data: bytes) -> Path:
-    fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=folder)
-    try:
-        os.fchmod(fd, 0o644)
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return Path(tmp)
-
-
 def save_model(model: IdentifiedModel, path: str | os.PathLike[str]) -> tuple[Path, Path]:
     """Write a model to ``path`` (JSON) and the arrays beside it (same name, ``.npz``), all or nothing.
 
@@ -718,20 +684,12 @@ def save_model(model: IdentifiedModel, path: str | os.PathLike[str]) -> tuple[Pa
         "arrays": arrays_path.name,
         "arrays_sha256": hashlib.sha256(blob).hexdigest(),
     }
-    text = json.dumps(_clean(doc), indent=2, default=jsonable, allow_nan=False) + "\n"
-    tmp_arrays = _write_temp(path.parent, arrays_path.name, blob)
-    try:
-        tmp_json = _write_temp(path.parent, path.name, text.encode())
-    except BaseException:
-        tmp_arrays.unlink(missing_ok=True)
-        raise
-    try:
-        os.replace(tmp_arrays, arrays_path)
-        os.replace(tmp_json, path)
-    except BaseException:
-        tmp_arrays.unlink(missing_ok=True)
-        tmp_json.unlink(missing_ok=True)
-        raise
+    text = dumps_json(doc)
+    # Both files are written before either is renamed; the blocks close inner first, so the arrays
+    # replace theirs before the JSON that names them (and carries their sha256) does.
+    with atomic_path(path) as tmp_json, atomic_path(arrays_path) as tmp_arrays:
+        tmp_arrays.write_bytes(blob)
+        tmp_json.write_text(text, encoding="utf-8")
     return path, arrays_path
 
 

@@ -16,14 +16,13 @@ from __future__ import annotations
 import csv
 import json
 import math
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol
 
 import numpy as np
 
+from dynid._io import dumps_json, write_text
 from dynid.exceptions import ModelFileError, ShapeError
 
 __all__ = [
@@ -31,7 +30,6 @@ __all__ = [
     "SampledTrajectory",
     "Trajectory",
     "load_trajectory",
-    "write_atomic",
 ]
 
 
@@ -44,23 +42,12 @@ class Trajectory(Protocol):
     def evaluate(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
 
 
-def write_atomic(path: str | Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file and a rename: never half written."""
+def _write_file(path: str | Path, text: str) -> None:
+    """Write a trajectory file atomically (never half written) into an existing folder."""
     path = Path(path)
     if not path.parent.exists():
         raise ModelFileError(f"the folder '{path.parent}' does not exist; create it or write elsewhere.")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", newline="") as handle:
-            handle.write(text)
-        # mkstemp makes the file private (0600); give it the mode a plain open() would.
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_text(path, text)
 
 
 @dataclass(frozen=True, eq=False)
@@ -175,7 +162,7 @@ class FourierTrajectory:
 
     def save(self, path: str | Path) -> None:
         """Write the coefficients and metadata as JSON."""
-        write_atomic(path, json.dumps(self.to_dict(), indent=2))
+        _write_file(path, dumps_json(self.to_dict()))
 
 
 @dataclass(frozen=True, eq=False)
@@ -247,7 +234,7 @@ def write_trajectory_csv(path, t, q, dq, ddq) -> None:
     rows = np.column_stack([t, q, dq, ddq])
     lines = [",".join(header)]
     lines += [",".join(repr(float(v)) for v in row) for row in rows]
-    write_atomic(path, "\n".join(lines) + "\n")
+    _write_file(path, "\n".join(lines) + "\n")
 
 
 def load_trajectory(path: str | Path) -> FourierTrajectory | SampledTrajectory:

@@ -24,8 +24,6 @@ from __future__ import annotations
 import datetime as _dt
 import html
 import io
-import json
-import math
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -34,7 +32,18 @@ from typing import Any
 
 import numpy as np
 
+from dynid._io import write_bytes
 from dynid.exceptions import UsageError
+from dynid.validation.html_page import (
+    check_report_path,
+    figure_html,
+    format_number,
+    heading,
+    html_page,
+    html_table,
+    json_script,
+    table_cell,
+)
 from dynid.validation.validate import ValidationResult
 
 __all__ = [
@@ -43,101 +52,8 @@ __all__ = [
     "check_report_path",
     "format_number",
     "html_table",
-    "json_ready",
     "render_report",
 ]
-
-_CSS = """
-body { font-family: -apple-system, "Segoe UI", Helvetica, Arial, sans-serif; margin: 2em auto; max-width: 1150px;
-       color: #222; line-height: 1.4; padding: 0 1em; }
-h1 { font-size: 1.6em; margin-bottom: 0.2em; }
-h2 { font-size: 1.25em; margin-top: 1.8em; border-bottom: 1px solid #ccc; padding-bottom: 0.2em; }
-p.lead { color: #555; margin-top: 0; }
-table { border-collapse: collapse; margin: 0.6em 0; font-size: 0.9em; }
-th, td { border: 1px solid #d6d6d6; padding: 0.25em 0.6em; text-align: right; }
-th { background: #f3f3f3; }
-td.text, th.text { text-align: left; }
-tr.mean td { font-weight: bold; background: #fafafa; }
-figure { margin: 1em 0; }
-figure img { max-width: 100%; height: auto; border: 1px solid #eee; }
-figcaption { color: #555; font-size: 0.9em; }
-.note { color: #555; font-size: 0.9em; }
-code { background: #f5f5f5; padding: 0 0.2em; }
-"""
-
-
-def format_number(value: Any, digits: int = 4) -> str:
-    """A number as shown in the report: ``digits`` significant digits, ``-`` for a missing value.
-
-    Parameters
-    ----------
-    value : float or None
-        The number.
-    digits : int
-        Significant digits.
-    """
-    if value is None:
-        return "-"
-    v = float(value)
-    if math.isnan(v):
-        return "-"
-    if math.isinf(v):
-        return "inf" if v > 0 else "-inf"
-    return f"{v:.{digits}g}"
-
-
-def _cell(value: Any, *, key: str | None = None, joint: int | None = None, text: bool = False) -> str:
-    if text:
-        return f'<td class="text">{html.escape(str(value))}</td>'
-    attrs = []
-    if key is not None:
-        attrs.append(f'data-key="{html.escape(key)}"')
-    if joint is not None:
-        attrs.append(f'data-joint="{joint}"')
-    if value is not None and not (isinstance(value, float) and math.isnan(value)):
-        attrs.append(f'data-value="{float(value)!r}"')
-    return (
-        f"<td {' '.join(attrs)}>{format_number(value)}</td>" if attrs else f"<td>{format_number(value)}</td>"
-    )
-
-
-def html_table(
-    headers: Sequence[str],
-    rows: Sequence[Sequence[Any]],
-    *,
-    table_id: str | None = None,
-    text_columns: int = 1,
-) -> str:
-    """An HTML table; the first ``text_columns`` columns are text, the others numbers.
-
-    A cell may also be given ready-made as a string starting with ``<td``.
-
-    Parameters
-    ----------
-    headers : sequence of str
-        Column titles.
-    rows : sequence of sequence
-        Cells.
-    table_id : str, optional
-        The table's ``id``.
-    text_columns : int
-        Leading columns shown as text.
-    """
-    head = "".join(
-        f'<th class="text">{html.escape(h)}</th>' if k < text_columns else f"<th>{html.escape(h)}</th>"
-        for k, h in enumerate(headers)
-    )
-    body = []
-    for row in rows:
-        cells = []
-        for k, value in enumerate(row):
-            if isinstance(value, str) and value.startswith("<td"):
-                cells.append(value)
-            else:
-                cells.append(_cell(value, text=k < text_columns or isinstance(value, str)))
-        body.append("<tr>" + "".join(cells) + "</tr>")
-    ident = f' id="{html.escape(table_id)}"' if table_id else ""
-    return f"<table{ident}><thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
 
 
 @dataclass(frozen=True)
@@ -198,58 +114,10 @@ class Report:
                 raise UsageError(
                     f"the report '{path}' is a PDF but it was rendered without pdf=True; render it again."
                 )
-            _write_bytes(path, self.pdf)
+            write_bytes(path, self.pdf)
         else:
-            _write_bytes(path, self.html.encode("utf-8"))
+            write_bytes(path, self.html.encode("utf-8"))
         return path
-
-
-def _write_bytes(path: Path, data: bytes) -> None:
-    import tempfile
-
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        os.fchmod(fd, 0o644)
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def check_report_path(path: str | os.PathLike[str], *, pdf: bool = True) -> Path:
-    """Check that a report can be written at ``path`` (``.html``/``.htm``/``.pdf``, existing folder).
-
-    Parameters
-    ----------
-    path : str or path-like
-        The report file.
-    pdf : bool
-        Whether a ``.pdf`` name is accepted.
-
-    Returns
-    -------
-    Path
-
-    Raises
-    ------
-    UsageError
-        A missing folder, a folder given as the file, or another extension.
-    """
-    path = Path(path)
-    allowed = (".html", ".htm", ".pdf") if pdf else (".html", ".htm")
-    if path.suffix.lower() not in allowed:
-        raise UsageError(
-            f"the report '{path}' has the extension '{path.suffix}'; give a file name ending in {' or '.join(allowed)}."
-        )
-    if not path.parent.is_dir():
-        raise UsageError(
-            f"the folder '{path.parent}' of the report does not exist; create it or write elsewhere."
-        )
-    if path.is_dir():
-        raise UsageError(f"the report '{path}' is a folder; give a file name.")
-    return path
 
 
 # ---------------------------------------------------------------------------- figures
@@ -367,7 +235,7 @@ def _metrics_table(figures: Mapping[str, Any], n: int) -> str:
             [
                 f"joint {j + 1}",
                 *(
-                    _cell(figures[key][j], key=key, joint=j + 1)
+                    table_cell(figures[key][j], key=key, joint=j + 1)
                     for key in ("rms", "nrms", "r2", "max_error", "noise_floor", "rms_over_noise")
                 ),
             ]
@@ -378,8 +246,8 @@ def _metrics_table(figures: Mapping[str, Any], n: int) -> str:
         table_id="metrics",
     )
     mean = (
-        f'<tr class="mean"><td class="text">mean (the paper&#39;s average RMS)</td>{_cell(figures["rms_mean"], key="rms_mean")}'
-        f"<td></td><td></td><td></td>{_cell(figures['noise_floor_mean'], key='noise_floor_mean')}<td></td></tr>"
+        f'<tr class="mean"><td class="text">mean (the paper&#39;s average RMS)</td>{table_cell(figures["rms_mean"], key="rms_mean")}'
+        f"<td></td><td></td><td></td>{table_cell(figures['noise_floor_mean'], key='noise_floor_mean')}<td></td></tr>"
     )
     return body.replace("</tbody>", mean + "</tbody>")
 
@@ -393,10 +261,10 @@ def _methods_table(results: Sequence[ValidationResult]) -> str:
             [
                 r.label,
                 s["description"],
-                _cell(s["cond"], key=f"models.{k}.cond"),
-                *(_cell(s["rms"][j], key=f"models.{k}.rms", joint=j + 1) for j in range(n)),
-                _cell(s["rms_mean"], key=f"models.{k}.rms_mean"),
-                _cell(s["rms_mean_before_gmm"], key=f"models.{k}.rms_mean_before_gmm"),
+                table_cell(s["cond"], key=f"models.{k}.cond"),
+                *(table_cell(s["rms"][j], key=f"models.{k}.rms", joint=j + 1) for j in range(n)),
+                table_cell(s["rms_mean"], key=f"models.{k}.rms_mean"),
+                table_cell(s["rms_mean_before_gmm"], key=f"models.{k}.rms_mean_before_gmm"),
             ]
         )
     noise = results[0].noise.std
@@ -500,18 +368,11 @@ def _context_table(first: ValidationResult, figures: Mapping[str, Any], context:
         ["noise floor", f"{first.noise.method}: {first.noise.detail}"],
     ]
     rows += [[str(k), str(v)] for k, v in context.items()]
-    return html_table(["", ""], rows, table_id="context", text_columns=2).replace(
-        '<thead><tr><th class="text"></th><th class="text"></th></tr></thead>', ""
-    )
+    return html_table(None, rows, table_id="context", text_columns=2)
 
 
 def _figure_html(fig: ReportFigure) -> str:
-    from dynid.validation.plots import png_base64
-
-    return (
-        f'<figure id="figure-{html.escape(fig.key)}"><img src="{png_base64(fig.png)}" alt="{html.escape(fig.title)}">'
-        f"<figcaption>{html.escape(fig.caption)}</figcaption></figure>"
-    )
+    return figure_html(fig.png, title=fig.title, caption=fig.caption, figure_id=f"figure-{fig.key}")
 
 
 def _pdf_table_page(
@@ -614,85 +475,47 @@ def render_report(
     notes = [str(note) for note in first.model.info.get("notes", [])]
     if first.model.gmr is not None and first.model.gmr.fallback_:
         notes.append(f"GMM layer: {first.model.gmr.fallback_}")
-    payload = json.dumps(json_ready(figures), indent=1, allow_nan=False).replace("</", "<\\/")
 
     parts = [
-        "<!DOCTYPE html>",
-        '<html lang="en">',
-        "<head>",
-        '<meta charset="utf-8">',
-        '<meta name="viewport" content="width=device-width, initial-scale=1">',
-        f"<title>{html.escape(title)}</title>",
-        f"<style>{_CSS}</style>",
-        "</head>",
-        "<body>",
-        f"<h1>{html.escape(title)}</h1>",
         f'<p class="lead">dynid report, {html.escape(_dt.datetime.now().strftime("%Y-%m-%d %H:%M"))}. '
         "Everything is in this one file; it needs no network.</p>",
         _context_table(first, figures, context),
-        '<h2 id="section-error">Held-out error per joint</h2>',
+        heading("Held-out error per joint", "section-error"),
         f"<p class=\"note\">Model '{html.escape(first.label)}'. NRMS: RMS over the standard deviation of the "
         "measured torque; R^2: share of its variance explained; RMS / noise: 1 is as good as the sensor allows.</p>",
         _metrics_table(figures, first.n),
-        '<h2 id="section-methods">Methods side by side</h2>',
+        heading("Methods side by side", "section-methods"),
         _methods_table(results),
         _figure_html(by_key["methods"]),
-        f'<h2 id="section-torque">{html.escape(by_key["torque"].title)}</h2>',
+        heading(by_key["torque"].title, "section-torque"),
         _figure_html(by_key["torque"]),
-        f'<h2 id="section-residual">{html.escape(by_key["residual"].title)}</h2>',
+        heading(by_key["residual"].title, "section-residual"),
         _figure_html(by_key["residual"]),
-        f'<h2 id="section-friction">{html.escape(by_key["friction"].title)}</h2>',
+        heading(by_key["friction"].title, "section-friction"),
         _figure_html(by_key["friction"]),
-        '<h2 id="section-conditions">Condition numbers</h2>',
+        heading("Condition numbers", "section-conditions"),
         '<p class="note">Of the noise-weighted regressor each model was identified from (lower is better '
         "conditioned; the URDF baseline estimated no rigid-body parameter).</p>",
         html_table(["", "condition number"], cond_rows, table_id="conditions"),
     ]
     for section_title, fragment in sections:
         anchor = "".join(ch if ch.isalnum() else "-" for ch in section_title.lower()).strip("-")
-        parts += [f'<h2 id="section-{html.escape(anchor)}">{html.escape(section_title)}</h2>', fragment]
+        parts += [heading(section_title, f"section-{anchor}"), fragment]
     parts += [
-        '<h2 id="section-parameters">Base parameters</h2>',
+        heading("Base parameters", "section-parameters"),
         f"<p class=\"note\">Model '{html.escape(first.label)}' ({html.escape(first.model.method)}): identified "
         "parameters with their standard deviation from the identification's covariance; std (%) relative to "
         "|value| (large: poorly excited by the data).</p>",
         _parameter_table(first),
-        '<h2 id="section-consistent">Physically consistent link parameters</h2>',
+        heading("Physically consistent link parameters", "section-consistent"),
         _consistent_section(results),
     ]
     if notes:
         parts += [
-            '<h2 id="section-notes">Notes</h2>',
+            heading("Notes", "section-notes"),
             "<ul>" + "".join(f"<li>{html.escape(x)}</li>" for x in notes) + "</ul>",
         ]
-    parts += [
-        f'<script type="application/json" id="dynid-figures">{payload}</script>',
-        "</body>",
-        "</html>",
-    ]
+    parts.append(json_script(figures, "dynid-figures"))
     return Report(
-        html="\n".join(parts) + "\n", figures=tuple(figs), pdf=None if pdf_buf is None else pdf_buf.getvalue()
+        html=html_page(title, parts), figures=tuple(figs), pdf=None if pdf_buf is None else pdf_buf.getvalue()
     )
-
-
-def json_ready(value: Any) -> Any:
-    """A JSON-ready copy: arrays to lists, paths to text, non-finite floats to None (JSON has no NaN).
-
-    Parameters
-    ----------
-    value : Any
-        Figures (dicts, lists, numbers, arrays).
-    """
-    if isinstance(value, Mapping):
-        return {str(k): json_ready(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [json_ready(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return json_ready(value.tolist())
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, Path):
-        return str(value)
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value

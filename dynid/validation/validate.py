@@ -468,7 +468,7 @@ def write_predictions(result: ValidationResult, path: str | os.PathLike[str]) ->
     -------
     Path
     """
-    from dynid.optim.trajectory import write_atomic
+    from dynid._io import write_text
 
     n = result.n
     header = ["t", *(f"tau_{j + 1}" for j in range(n)), *(f"tau_pred_{j + 1}" for j in range(n))]
@@ -482,7 +482,7 @@ def write_predictions(result: ValidationResult, path: str | os.PathLike[str]) ->
         fmt="%.10g",
     )
     path = Path(path)
-    write_atomic(path, buf.getvalue())
+    write_text(path, buf.getvalue())
     return path
 
 
