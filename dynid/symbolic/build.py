@@ -17,22 +17,25 @@ import os
 import shutil
 import subprocess
 import sys
-import tempfile
 import threading
 import time
 from collections.abc import Callable, Iterator
 from importlib import metadata
 from pathlib import Path
 
+from dynid._io import atomic_dir
 from dynid.exceptions import CompilerNotFoundError, GeneratorError
 
 __all__ = [
     "FUNCTION_NAMES",
+    "Progress",
     "cache_dir",
+    "file_lock",
     "find_compiler",
     "generator_is_built",
     "generator_path",
     "robot_function_dir",
+    "stderr_progress",
 ]
 
 FUNCTION_NAMES = ("regressor", "rnea", "gravity", "mass_matrix", "aba", "fk")
@@ -48,9 +51,17 @@ _DEFINES = (
 )
 
 Progress = Callable[[str], None]
+"""A callback that shows one line of progress of a long build."""
 
 
-def _stderr(message: str) -> None:
+def stderr_progress(message: str) -> None:
+    """The default :data:`Progress`: print the line to stderr at once.
+
+    Parameters
+    ----------
+    message : str
+        One line of progress.
+    """
     print(message, file=sys.stderr, flush=True)
 
 
@@ -122,8 +133,14 @@ def _generator_key() -> str:
 
 
 @contextlib.contextmanager
-def _locked(path: Path) -> Iterator[None]:
-    """Hold an exclusive file lock so that parallel processes build a thing once."""
+def file_lock(path: Path) -> Iterator[None]:
+    """Hold an exclusive lock on the file ``path`` so that parallel processes build a thing once.
+
+    Parameters
+    ----------
+    path : Path
+        The lock file (created, with its folders, if missing).
+    """
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, "w") as handle:
         fcntl.flock(handle, fcntl.LOCK_EX)
@@ -131,31 +148,6 @@ def _locked(path: Path) -> Iterator[None]:
             yield
         finally:
             fcntl.flock(handle, fcntl.LOCK_UN)
-
-
-@contextlib.contextmanager
-def _staged_dir(dest: Path, prefix: str) -> Iterator[Path]:
-    """A new temporary sibling of ``dest`` to write a folder into, moved into place at the end.
-
-    On a normal exit it replaces ``dest`` (removing an older one); on an error it is removed, so a
-    failure leaves nothing half written.
-
-    Parameters
-    ----------
-    dest : Path
-        The folder to write; its parent must exist.
-    prefix : str
-        Start of the temporary folder's name.
-    """
-    work = Path(tempfile.mkdtemp(prefix=prefix, dir=dest.parent))
-    try:
-        yield work
-        if dest.exists():
-            shutil.rmtree(dest)
-        os.replace(work, dest)
-    finally:
-        if work.exists():
-            shutil.rmtree(work, ignore_errors=True)
 
 
 def _run_with_progress(cmd: list[str], what: str, expected: str, progress: Progress | None) -> None:
@@ -188,14 +180,14 @@ def generator_is_built() -> bool:
     return (cache_dir() / "generator" / _generator_key() / "dynid-generator").is_file()
 
 
-def generator_path(progress: Progress | None = _stderr) -> Path:
+def generator_path(progress: Progress | None = stderr_progress) -> Path:
     """Path of the compiled generator, building it on first use (about 1-2 minutes on 2 cores)."""
     key = _generator_key()
     folder = cache_dir() / "generator" / key
     exe = folder / "dynid-generator"
     if exe.is_file():
         return exe
-    with _locked(cache_dir() / "generator" / f"{key}.lock"):
+    with file_lock(cache_dir() / "generator" / f"{key}.lock"):
         if exe.is_file():  # built by another process while we waited
             return exe
         compiler = find_compiler("c++")
@@ -233,7 +225,7 @@ def generator_path(progress: Progress | None = _stderr) -> Path:
     return exe
 
 
-def robot_function_dir(spec: str, progress: Progress | None = _stderr) -> Path:
+def robot_function_dir(spec: str, progress: Progress | None = stderr_progress) -> Path:
     """Folder of a robot's saved CasADi functions (``<name>.casadi``), generating them on first use.
 
     Parameters
@@ -246,10 +238,10 @@ def robot_function_dir(spec: str, progress: Progress | None = _stderr) -> Path:
     if all((folder / f"{name}.casadi").is_file() for name in FUNCTION_NAMES):
         return folder
     exe = generator_path(progress)
-    with _locked(cache_dir() / "robots" / f"{key}.lock"):
+    with file_lock(cache_dir() / "robots" / f"{key}.lock"):
         if all((folder / f"{name}.casadi").is_file() for name in FUNCTION_NAMES):
             return folder
-        with _staged_dir(folder, prefix=f"{key}.tmp") as work:
+        with atomic_dir(folder) as work:
             (work / "robot.spec").write_text(spec)
             proc = subprocess.run(
                 [str(exe), str(work / "robot.spec"), str(work)], capture_output=True, text=True

@@ -17,7 +17,6 @@ The same library, built in dynid's cache, is dynid's fast path for large batches
 from __future__ import annotations
 
 import hashlib
-import json
 import os
 import re
 import shutil
@@ -28,10 +27,11 @@ from pathlib import Path
 
 import casadi as ca
 
+from dynid._io import atomic_dir, dumps_json
 from dynid.exceptions import GeneratorError, UsageError
 from dynid.symbolic._export.loader import CompiledLibrary
 from dynid.symbolic.base import BaseParameters, base_parameters
-from dynid.symbolic.build import Progress, _locked, _staged_dir, _stderr, cache_dir, find_compiler
+from dynid.symbolic.build import Progress, cache_dir, file_lock, find_compiler, stderr_progress
 from dynid.symbolic.functions import RobotFunctions, robot_functions
 from dynid.symbolic.robot import RobotModel
 
@@ -244,7 +244,7 @@ def export_c(
     out: str | Path,
     *,
     functions=DEFAULT_EXPORT,
-    progress: Progress | None = _stderr,
+    progress: Progress | None = stderr_progress,
 ) -> ExportResult:
     """Write C source, header, shared library, example and loader for ``robot`` into ``out``.
 
@@ -258,14 +258,14 @@ def export_c(
         raise GeneratorError(f"the folder '{out.parent}' does not exist; create it or choose another --out.")
     funcs = robot_functions(robot, progress=progress)
     base = base_parameters(funcs)
-    with _staged_dir(out, prefix=f".{out.name}.tmp") as work:
+    with atomic_dir(out) as work:
         stem, entries = _write_sources(work, robot, funcs, base, tuple(functions))
         _compile(work, stem, progress)
         if "base_regressor" in functions:
             example, makefile = _example(stem, c_identifier(robot.name), robot, base)
             (work / "example.c").write_text(example)
             (work / "Makefile").write_text(makefile)
-        (work / "manifest.json").write_text(json.dumps(_manifest(robot, base, stem, entries), indent=2))
+        (work / "manifest.json").write_text(dumps_json(_manifest(robot, base, stem, entries)))
         shutil.copyfile(_HERE / "loader.py", work / "dynid_loader.py")
     return ExportResult(
         folder=out,
@@ -283,7 +283,7 @@ _COMPILED: dict[str, CompiledLibrary] = {}
 
 
 def compiled_functions(
-    robot: RobotModel, *, functions=DEFAULT_EXPORT, progress: Progress | None = _stderr
+    robot: RobotModel, *, functions=DEFAULT_EXPORT, progress: Progress | None = stderr_progress
 ) -> CompiledLibrary:
     """The robot's functions compiled to C in dynid's cache (built once per robot), for fast batches.
 
@@ -307,7 +307,7 @@ def compiled_functions(
         return _COMPILED[digest]
     folder = cache_dir() / "compiled" / digest
     if not (folder / "manifest.json").is_file():
-        with _locked(cache_dir() / "compiled" / f"{digest}.lock"):
+        with file_lock(cache_dir() / "compiled" / f"{digest}.lock"):
             if not (folder / "manifest.json").is_file():
                 export_c(robot, folder, functions=functions, progress=progress)
     lib = CompiledLibrary(folder)

@@ -28,7 +28,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from dynid.symbolic.build import FUNCTION_NAMES, Progress, _stderr, robot_function_dir
+from dynid.symbolic.build import FUNCTION_NAMES, Progress, robot_function_dir, stderr_progress
 from dynid.symbolic.robot import RobotModel
 
 __all__ = ["RobotFunctions", "friction_columns_function", "robot_functions"]
@@ -101,7 +101,7 @@ class RobotFunctions:
         return outs[0] if len(outs) == 1 else tuple(outs)
 
 
-def robot_functions(robot: RobotModel, *, progress: Progress | None = _stderr) -> RobotFunctions:
+def robot_functions(robot: RobotModel, *, progress: Progress | None = stderr_progress) -> RobotFunctions:
     """Load (generating once, then from cache) the CasADi functions of ``robot``.
 
     Parameters
