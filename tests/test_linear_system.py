@@ -126,7 +126,7 @@ def test_ordinary_least_squares_on_exact_data_returns_the_truth(ur5, exact_data)
     assert isinstance(sol, WeightedSolution)
     np.testing.assert_allclose(sol.x, x, rtol=1e-7, atol=1e-9 * np.abs(x).max())
     assert sol.rss < 1e-16 * float(np.sum(ds.tau**2))
-    with pytest.raises(dataclasses.FrozenInstanceError):
+    with pytest.raises(dataclasses.FrozenInstanceError, match="cannot assign to field 'x'"):
         sol.x = x  # type: ignore[misc]
 
 
