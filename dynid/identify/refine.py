@@ -102,6 +102,20 @@ class Refinement:
     info: dict[str, Any] = field(default_factory=dict)
 
 
+@dataclass(frozen=True, eq=False)
+class _LinkSolution:
+    """The link step's least squares: the refined parameters and the factors of their projected system.
+
+    ``R`` (p_sel, p_sel) is the triangular factor of the stacked, weighted, projected system; ``blocks``
+    holds per joint the indices of its parameters and the triangular factor of its own weighted,
+    projected rows, which the covariance sandwich needs.
+    """
+
+    x: NDArray[np.float64]
+    R: NDArray[np.float64]
+    blocks: list[tuple[NDArray[np.intp], NDArray[np.float64]]]
+
+
 def _rms(r: NDArray[np.float64]) -> list[float]:
     return [float(v) for v in np.sqrt(np.mean(r**2, axis=0))]
 
@@ -251,7 +265,8 @@ def _refine(system, x0, omega, friction, gmm, gmm_mode, rounds, weighting, consi
             else:  # later rounds: the gates again, on the new residual, same sizes and joints
                 gmr = _refit_mixtures(gmr, u_kept, u_full, r3, prep)
             Gb = [prep.filter(G)[rows] if G.shape[1] else G[rows] for G in gmr.design(u_full)]
-        x_sel, projected = _link_step(C, tau, Fb, Gb, weights)
+        step = _link_step(C, tau, Fb, Gb, weights)
+        x_sel = step.x
         fric, corr = _nuisance_step(C, tau, x_sel, Fb, Gb, layer, gmr)
         history.append(float(np.sqrt(np.mean((tau - C.torque(x_sel) - fric - corr) ** 2))))
 
@@ -260,11 +275,11 @@ def _refine(system, x0, omega, friction, gmm, gmm_mode, rounds, weighting, consi
         resid = tau - C.torque(x_sel) - fric - corr
         kappa, _ = long_run_factor(resid, prep.noise_correlation)
         scale2 = float(np.sum(weights * kappa * np.mean(resid**2, axis=0)) / n)
-        x_sel, info["consistency"] = _consistent_step(system, C, x_sel, projected, scale2, consistent, x0)
+        x_sel, info["consistency"] = _consistent_step(system, C, x_sel, step.R, scale2, consistent, x0)
         fric, corr = _nuisance_step(C, tau, x_sel, Fb, Gb, layer, gmr)
     link = C.torque(x_sel)
     resid = tau - link - fric - corr
-    cov_sel, kappa = _covariance(C, projected, resid, weights, prep.noise_correlation, Fb, Gb)
+    cov_sel, kappa = _covariance(step, resid, weights, prep.noise_correlation, Fb, Gb)
     info["correlation"] = [float(k) for k in kappa]
     x = np.asarray(x0, dtype=np.float64).copy()
     x[C.sel] = x_sel
@@ -289,7 +304,7 @@ _EM_SAMPLES = 4000  # samples (evenly strided) of each EM fit of the gates
 
 def _joint_validation(C: _Columns, tau, Fb, Gb, weights, train, val) -> NDArray[np.float64]:
     """Per joint, the validation RMS of the joint fit (link, friction, experts) made on the training rows."""
-    x_sel, _ = _link_step(C, tau, Fb, Gb, weights, rows=train)
+    x_sel = _link_step(C, tau, Fb, Gb, weights, rows=train).x
     out = np.empty(len(C.W))
     for j in range(len(C.W)):
         N = np.hstack([Fb[j], Gb[j]])
@@ -423,7 +438,7 @@ def _ridges(Fb: NDArray[np.float64], Gb: NDArray[np.float64]) -> NDArray[np.floa
     return np.concatenate([np.full(Fb.shape[1], _TINY), np.full(Gb.shape[1], RIDGE)])
 
 
-def _link_step(C: _Columns, tau, Fb, Gb, weights, rows=None):
+def _link_step(C: _Columns, tau, Fb, Gb, weights, rows=None) -> _LinkSolution:
     """Link parameters of the stacked system with friction and experts eliminated per joint.
 
     ``rows``: fit on these samples only (the validation of :func:`_select_mixtures`).
@@ -448,7 +463,7 @@ def _link_step(C: _Columns, tau, Fb, Gb, weights, rows=None):
         projected.append((C.idx[j], Rj[:k, :k] if Rj.shape[0] >= k else Rj[:, :k]))
     R = scipy.linalg.qr(np.vstack(blocks), mode="r", check_finite=False)[0][:p_sel]
     x_sel = scipy.linalg.lstsq(R[:, :p_sel], R[:, p_sel], cond=1e-13, check_finite=False)[0]
-    return x_sel, (R[:, :p_sel], projected)
+    return _LinkSolution(x=x_sel, R=R[:, :p_sel], blocks=projected)
 
 
 def _nuisance_step(C: _Columns, tau, x_sel, Fb, Gb, layer, gmr):
@@ -480,9 +495,9 @@ def _nuisance_step(C: _Columns, tau, x_sel, Fb, Gb, layer, gmr):
     return fric, corr
 
 
-def _covariance(C: _Columns, projected, resid, weights, floor, Fb, Gb):
+def _covariance(step: _LinkSolution, resid, weights, floor, Fb, Gb):
     """Sandwich covariance of the refined link parameters (see the module docstring)."""
-    R, per_joint = projected
+    R, per_joint = step.R, step.blocks
     p_sel = R.shape[1]
     kappa, _ = long_run_factor(resid, floor)
     m = len(resid)
@@ -498,12 +513,11 @@ def _covariance(C: _Columns, projected, resid, weights, floor, Fb, Gb):
     return 0.5 * (cov + cov.T), kappa
 
 
-def _consistent_step(system, C: _Columns, x_sel, projected, scale2, options, x0):
+def _consistent_step(system, C: _Columns, x_sel, R, scale2, options, x0):
     """Project the refined link parameters onto physically consistent ones (Mahalanobis metric)."""
     from dynid.identify.consistent import consistent_solution
 
     cols = system.columns
-    R = projected[0]
     x_full = np.asarray(x0, dtype=np.float64).copy()
     x_full[C.sel] = x_sel
     mask = np.zeros(cols.p, dtype=bool)
