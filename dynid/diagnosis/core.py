@@ -54,6 +54,7 @@ from numpy.typing import NDArray
 from scipy import optimize, stats
 
 from dynid._io import to_jsonable
+from dynid._threads import single_blas_thread
 from dynid.diagnosis import stats as st
 from dynid.diagnosis.candidates import (
     EFFECT_NAMES,
@@ -66,7 +67,6 @@ from dynid.diagnosis.candidates import (
 )
 from dynid.diagnosis.gapmap import gap_map
 from dynid.exceptions import DataError, IdentificationError, ShapeError, UsageError
-from dynid.identify._threads import single_blas_thread
 from dynid.identify.dataset import Dataset
 from dynid.identify.linear_system import (
     ColumnSet,

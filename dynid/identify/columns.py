@@ -21,8 +21,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from dynid._threads import single_blas_thread
 from dynid.exceptions import DataError, ShapeError
-from dynid.identify._threads import single_blas_thread
 
 __all__ = [
     "CHUNK_SAMPLES",

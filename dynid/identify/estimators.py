@@ -47,8 +47,8 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import NDArray
 
+from dynid._threads import single_blas_thread
 from dynid.exceptions import IdentificationError, IdentificationWarning, UsageError
-from dynid.identify._threads import single_blas_thread
 from dynid.identify.checks import check_is_fitted
 from dynid.identify.columns import ColumnSet, linear_torque
 from dynid.identify.dataset import Dataset

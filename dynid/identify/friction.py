@@ -43,8 +43,8 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares, lsq_linear, nnls
 from scipy.special import expit
 
+from dynid._threads import one_blas_thread
 from dynid.exceptions import DataError, ModelFileError, UsageError
-from dynid.identify._threads import one_blas_thread
 from dynid.identify.checks import check_is_fitted
 from dynid.identify.preprocess import lowpass
 

@@ -52,8 +52,8 @@ import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 from scipy.special import logsumexp
 
+from dynid._threads import one_blas_thread
 from dynid.exceptions import DataError, ModelFileError, UsageError
-from dynid.identify._threads import one_blas_thread
 from dynid.identify.checks import check_is_fitted
 from dynid.identify.periodic import period_of  # one detector for the package; re-exported here
 

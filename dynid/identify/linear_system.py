@@ -37,8 +37,8 @@ import scipy.linalg
 from numpy.typing import NDArray
 from scipy.signal import sosfiltfilt
 
+from dynid._threads import single_blas_thread
 from dynid.exceptions import DataError, IdentificationError
-from dynid.identify._threads import single_blas_thread
 from dynid.identify.columns import (
     CHUNK_SAMPLES,
     EXTRA_KINDS,

@@ -51,8 +51,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynid._io import atomic_path, dumps_json, to_jsonable
+from dynid._threads import single_blas_thread
 from dynid.exceptions import DynidError, ModelFileError, UsageError
-from dynid.identify._threads import single_blas_thread
 from dynid.identify.consistent import ConsistentLS, pseudo_inertia
 from dynid.identify.dataset import Dataset
 from dynid.identify.estimators import ESTIMATORS, IdentificationWarning, LinkEstimator, check_is_fitted

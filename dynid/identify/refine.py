@@ -54,7 +54,7 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import NDArray
 
-from dynid.identify._threads import single_blas_thread
+from dynid._threads import single_blas_thread
 from dynid.identify.estimators import long_run_factor
 from dynid.identify.friction import FrictionLayer, bounded_lsq
 from dynid.identify.gmr import GMRCorrection, validation_mask
