@@ -25,11 +25,15 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from dynid.exceptions import DynidError, UsageError
+
+if TYPE_CHECKING:
+    from dynid.diagnosis import Diagnosis
+    from dynid.validation.validate import ValidationResult
 
 __all__ = ["DEFAULT_ROBOT", "PERTURB", "SETTINGS", "DemoResult", "StageRecord", "run_demo"]
 
@@ -118,8 +122,8 @@ class DemoResult:
     mode: str
     stages: tuple[StageRecord, ...]
     figures: dict[str, Any]
-    results: tuple[Any, ...]
-    diagnosis: Any
+    results: tuple[ValidationResult, ...]
+    diagnosis: Diagnosis | None
     report: Path | None
     total_s: float
 

@@ -8,10 +8,13 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from dynid.commands.common import add_json_argument
 from dynid.exceptions import UsageError
+
+if TYPE_CHECKING:
+    from dynid.demo import DemoResult
 
 __all__ = ["HELP", "add_arguments", "run"]
 
@@ -62,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     return 1 if result.failed else 0
 
 
-def _print_summary(result: Any) -> None:
+def _print_summary(result: DemoResult) -> None:
     print("\nsummary")
     for row in result.stages:
         print(f"  {row.stage:<72} {row.status:>9} {row.seconds:6.1f} s")
