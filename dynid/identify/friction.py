@@ -703,7 +703,7 @@ class FrictionLayer:
         F : array_like, shape (m, n)
             Estimated friction torques (N m).
         prepared : Prepared, optional
-            The preprocessing of the data (:func:`dynid.identify.linear_system.prepare`).  Given, the
+            The preprocessing of the data (:func:`dynid.identify.preparation.prepare`).  Given, the
             models are fitted as they will predict the filtered torque: evaluated at full rate,
             filtered like the torque and taken at ``prepared.rows`` (the rows of ``F``).  See the
             module docstring.
