@@ -40,8 +40,8 @@ def diagnose_recording(name: str, split: float, decimate: int, out: Path, root: 
 
     from dynid.diagnosis.core import diagnose
     from dynid.diagnosis.report import write_diagnosis_report
-    from dynid.identify.linear_system import Preprocessing
     from dynid.identify.model import identify, load_model, save_model
+    from dynid.identify.preparation import Preprocessing
 
     data, robot = load_with_robot(name, root)
     train, heldout = split_in_time(data, split)

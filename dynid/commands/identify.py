@@ -98,8 +98,8 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from dynid.identify.dataset import load_dataset
-    from dynid.identify.linear_system import Preprocessing
     from dynid.identify.model import identify, save_model
+    from dynid.identify.preparation import Preprocessing
 
     robot = robot_from_args(args)
     start = time.perf_counter()

@@ -53,20 +53,14 @@ from numpy.typing import NDArray
 from dynid._io import atomic_path, dumps_json, to_jsonable
 from dynid._threads import single_blas_thread
 from dynid.exceptions import DynidError, ModelFileError, UsageError
+from dynid.identify.columns import ColumnSet, column_set, linear_torque
 from dynid.identify.consistent import ConsistentLS, pseudo_inertia
 from dynid.identify.dataset import Dataset
 from dynid.identify.estimators import ESTIMATORS, IdentificationWarning, LinkEstimator, check_is_fitted
 from dynid.identify.friction import FRICTION_MODELS, FrictionLayer
 from dynid.identify.gmr import GMRCorrection
-from dynid.identify.linear_system import (
-    ColumnSet,
-    Prepared,
-    Preprocessing,
-    build_system,
-    column_set,
-    linear_torque,
-    prepare,
-)
+from dynid.identify.linear_system import build_system
+from dynid.identify.preparation import Prepared, Preprocessing, prepare
 from dynid.identify.refine import refine
 
 __all__ = [

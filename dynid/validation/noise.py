@@ -18,8 +18,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynid.exceptions import DataError
-from dynid.identify.linear_system import Prepared
 from dynid.identify.periodic import period_of
+from dynid.identify.preparation import Prepared
 from dynid.validation.metrics import NoiseFloor, noise_floor
 
 __all__ = ["MIN_SPECTRAL_SAMPLES", "detect_period", "filter_noise_gain", "measure_noise"]

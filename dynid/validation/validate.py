@@ -43,10 +43,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynid.exceptions import DataError, ModelFileError, ShapeError, UsageError
+from dynid.identify.columns import column_set, linear_torque
 from dynid.identify.dataset import Dataset
 from dynid.identify.friction import FrictionLayer
-from dynid.identify.linear_system import Prepared, Preprocessing, column_set, linear_torque, prepare
 from dynid.identify.model import IdentifiedModel, identify
+from dynid.identify.preparation import Prepared, Preprocessing, prepare
 from dynid.validation.metrics import NoiseFloor, torque_metrics
 from dynid.validation.noise import measure_noise
 
