@@ -1,13 +1,13 @@
 """The package's structure, read from the source (nothing is imported).
 
 * Layers import one way: symbolic <- optim <- identify <- sim <- validation <- diagnosis <- commands.
-  The bottom holds ``dynid._io``, ``dynid.exceptions`` and any other top-level helper module; the top
+  The bottom holds ``dynid._io``, ``dynid._threads``, ``dynid.exceptions`` and any other top-level helper; the top
   holds ``dynid.cli``, the package's face ``dynid/__init__.py`` and the demo's library module, which
   sits beside the commands.
 * No module imports :mod:`dynid.cli`.
 * No module uses another module's private name (``from dynid.x import _y``, ``dynid_module._y``).
-  A private module (``dynid.identify._threads``) belongs to its package: modules of that package may
-  import it; ``dynid._io`` is private to ``dynid`` and so open to every module of dynid.
+  A private module (``dynid.symbolic._export``) belongs to its package: modules of that package may
+  import it; ``dynid._io`` and ``dynid._threads`` are private to ``dynid`` and so open to every module.
 * Every module has a docstring and an ``__all__``.
 
 Imports inside functions and under ``TYPE_CHECKING`` count like any other: a lazy import of a higher
