@@ -2,3 +2,5 @@
 
 Modules import numpy, CasADi and the rest inside ``run`` so that ``dynid --help`` stays fast.
 """
+
+__all__: list[str] = []

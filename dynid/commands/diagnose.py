@@ -8,6 +8,8 @@ from pathlib import Path
 
 from dynid.commands.common import add_json_argument, write_figures
 
+__all__ = ["HELP", "add_arguments", "run"]
+
 HELP = "diagnose the sim-to-real gap of a model: gap map, the effect behind it, its closure; HTML report"
 
 

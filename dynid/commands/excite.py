@@ -8,6 +8,8 @@ from pathlib import Path
 from dynid.commands.common import add_json_argument, add_robot_arguments, robot_from_args, write_figures
 from dynid.exceptions import UsageError
 
+__all__ = ["HELP", "add_arguments", "output_paths", "run"]
+
 HELP = "design an excitation trajectory (Fourier series optimised with IPOPT) and write it as JSON and CSV"
 
 

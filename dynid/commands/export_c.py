@@ -6,6 +6,8 @@ import argparse
 
 from dynid.commands.common import add_robot_arguments, robot_from_args
 
+__all__ = ["HELP", "add_arguments", "run"]
+
 HELP = "export a robot's regressors as C source, header, compiled library and example"
 
 

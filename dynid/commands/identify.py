@@ -6,6 +6,8 @@ import argparse
 
 from dynid.commands.common import add_json_argument, add_robot_arguments, robot_from_args, write_figures
 
+__all__ = ["HELP", "add_arguments", "run"]
+
 HELP = "identify link parameters, friction and a GMM correction from a dataset; write a model file"
 
 

@@ -6,6 +6,8 @@ import argparse
 
 from dynid.commands.common import add_robot_arguments, robot_from_args
 
+__all__ = ["HELP", "add_arguments", "run"]
+
 HELP = "simulate a robot following a trajectory: measured t, q, tau and a sidecar with the truth"
 
 _EFFECT_HELP = (

@@ -8,6 +8,8 @@ from pathlib import Path
 from dynid.commands.common import add_json_argument, write_figures
 from dynid.exceptions import UsageError
 
+__all__ = ["HELP", "add_arguments", "run"]
+
 HELP = "validate identified models on held-out data: RMS, NRMS, R^2 per joint, noise floor, HTML report"
 
 
