@@ -130,7 +130,8 @@ def run(args: argparse.Namespace) -> int:
             )
         )
     # Mean row: rms under rms, noise under noise (three 11-character columns between them).
-    print(f"{'mean':>5} {figures['rms_mean']:>10.4g}" + " " * 33 + f" {figures['noise_floor_mean']:>10.4g}")
+    # A figure that could not be computed (no measurable noise floor, an infinite error) prints as "-".
+    print(f"{'mean':>5} " + _row([figures["rms_mean"]]) + " " * 34 + _row([figures["noise_floor_mean"]]))
     if len(results) > 1:
         width = max(len(r["label"]) for r in rows)
         print(
@@ -139,7 +140,7 @@ def run(args: argparse.Namespace) -> int:
             + f" {'mean':>10}"
         )
         for r in rows:
-            print(f"{r['label']:<{width}} " + _row(r["rms"]) + f" {r['rms_mean']:>10.4g}")
+            print(f"{r['label']:<{width}} " + _row([*r["rms"], r["rms_mean"]]))
 
     if predictions_path is not None:
         write_predictions(first, predictions_path)
