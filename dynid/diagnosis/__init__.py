@@ -7,9 +7,11 @@ slow to import).
 from __future__ import annotations
 
 _EXPORTS = {
-    "Diagnosis": "core",
-    "RankedCandidate": "core",
+    "Diagnosis": "result",
+    "DiagnosisSettings": "settings",
+    "RankedCandidate": "result",
     "diagnose": "core",
+    "run_diagnosis": "core",
     "EFFECT_NAMES": "candidates",
     "gap_map": "gapmap",
     "write_diagnosis_report": "report",

@@ -31,7 +31,7 @@ payload                   (absorbed by the base parameters: parametric test)   -
 ``tau`` is the identified model's predicted torque (the "first fit"); for backlash its links' share,
 which the transmission carries (the motor's armature and friction act before the gear).
 Elasticity, backlash and delay are not linear in their parameters: the screen uses the first-order
-columns above, the refit (:mod:`dynid.diagnosis.core`) fits their physical parameters (for
+columns above, the refit (:mod:`dynid.diagnosis.refinement`) fits their physical parameters (for
 backlash a dead zone whose sides change once the torque has reversed beyond a threshold, a crossing
 time later).
 """
@@ -66,9 +66,12 @@ PARAMETRIC_EFFECTS = ("drive_gain", "payload", "offset")
 _SIGN_EPS = 1e-3  # rad/s: velocities below this count as zero in sign(dq) (quantised encoders)
 
 
-@dataclass(eq=False)
+@dataclass(frozen=True, eq=False)
 class FeatureSource:
     """Full-rate signals of one dataset from which candidate columns are built.
+
+    Complete when made; ``cache`` only memoises what its methods compute from these signals (the mass
+    matrix, the gravity tilt columns).
 
     Parameters
     ----------

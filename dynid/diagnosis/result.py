@@ -1,0 +1,252 @@
+"""What the gap diagnosis returns: the scored candidates, the diagnosis, and its account in words.
+
+:class:`RankedCandidate` is one catalogue candidate scored on held-out data; :class:`Diagnosis` holds
+the verdict, the ranking, the decomposition of the held-out error, the gap map and the parameter-change
+test (:func:`dynid.diagnosis.core.diagnose` makes it); :func:`verdict_text` says it in a few lines.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dynid._io import to_jsonable
+from dynid.diagnosis.candidates import Candidate, describe_hyper
+from dynid.validation.metrics import NoiseFloor
+
+__all__ = ["Diagnosis", "RankedCandidate", "verdict_text"]
+
+
+@dataclass
+class RankedCandidate:
+    """A scored candidate: the best variant of one effect on one joint (or joint pair).
+
+    Attributes
+    ----------
+    candidate : Candidate
+        Effect, joint(s) and tuned hyper-parameters.
+    gain : float
+        Reduction of the held-out loss ``sum_j r_j^2 / sigma_j^2`` per sample (in noise variances), on
+        the joints it acts on (the tested figure).
+    gain_all : float
+        The same reduction summed over every joint: an effect that the shared base parameters spread to
+        other joints also mends them there.  The choice among acceptable candidates uses it.
+    closure : float
+        ``sum_j (MSE_before_j - MSE_after_j) / noise_j`` over ``sum_j (MSE_before_j - noise_j) / noise_j``
+        on its joint(s), held-out (per joint, in noise variances).
+    p_value, p_holm : float
+        One-sided Diebold-Mariano p-value and its Holm-adjusted value.
+    significant : bool
+        ``p_holm < alpha`` and the gain is relevant (``gain >= min_gain``).
+    round : int
+        Selection round in which it was scored (0: on the baseline).
+    accepted : bool
+        Part of the verdict.
+    confounded_with : list of str
+        Candidates whose columns are nearly parallel to its own (not separable with this excitation).
+    angle_deg : float or None
+        Smallest principal angle (degrees) to the nearest other candidate.
+    """
+
+    candidate: Candidate
+    gain: float
+    closure: float
+    p_value: float
+    p_holm: float = 1.0
+    significant: bool = False
+    round: int = 0
+    accepted: bool = False
+    confounded_with: list[str] = field(default_factory=list)
+    angle_deg: float | None = None
+    mse_joint: NDArray[np.float64] | None = None
+    refit: dict[str, Any] = field(default_factory=dict)
+    loss: NDArray[np.float64] | None = field(default=None, repr=False)  # (m, n): per sample and joint
+    n_columns: int = 0
+    gain_all: float = float("nan")
+
+    def to_dict(self) -> dict[str, Any]:
+        c = self.candidate
+        return {
+            "effect": c.effect,
+            "joint": (c.joint + 1)
+            if c.joint is not None
+            else ([j + 1 for j in c.joints] if c.joints else None),
+            "closure": _num(self.closure),
+            "p_value": _num(self.p_holm),
+            "p_raw": _num(self.p_value),
+            "significant": bool(self.significant),
+            "gain": _num(self.gain),
+            "gain_all_joints": _num(self.gain_all),
+            "accepted": bool(self.accepted),
+            "round": self.round,
+            "hyper": {k: float(v) for k, v in c.hyper.items()},
+            "confounded_with": list(self.confounded_with),
+            "angle_deg": _num(self.angle_deg),
+            "refit": self.refit,
+        }
+
+
+def _num(v) -> float | None:
+    if v is None:
+        return None
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+@dataclass(eq=False)
+class Diagnosis:
+    """What :func:`diagnose` found.
+
+    Attributes
+    ----------
+    verdict : list of str
+        Accepted effect names, ``["none"]`` or ``["unexplained"]``.
+    accepted : list of RankedCandidate
+        The accepted effects, in the order they were selected.
+    ranking : list of RankedCandidate
+        Every candidate scored on the baseline (round 0), best first.
+    decomposition : dict
+        Held-out MSE per joint (N^2 m^2): ``model`` (as given), ``refit`` (baseline re-identified),
+        ``after`` (with the accepted effects), ``noise``; and the parts ``parametric``, ``attributed``,
+        ``unexplained``; ``closure`` per joint and ``closure_overall``.
+    gap_map : dict
+        Residual excess over the noise floor per joint and bin, global flags (see
+        :func:`dynid.diagnosis.gapmap.gap_map`).
+    parametric : dict
+        The parameter-change test.
+    noise : NoiseFloor
+        Held-out noise floor.
+    excess : dict
+        Excess of the baseline over the noise floor: ``ratio`` (per joint and overall), ``p_value``,
+        ``significant``.
+    notes : list of str
+        Confounded candidates and the motion that would separate them; other remarks.
+    provisional : bool
+        The noise floor was estimated from the spectrum (the held-out data do not repeat a period), a
+        lower bound when the noise is coloured: the excess, and an ``"unexplained"`` verdict, may be
+        overstated.
+    """
+
+    verdict: list[str]
+    accepted: list[RankedCandidate]
+    ranking: list[RankedCandidate]
+    decomposition: dict[str, Any]
+    gap_map: dict[str, Any]
+    parametric: dict[str, Any]
+    noise: NoiseFloor
+    excess: dict[str, Any]
+    notes: list[str]
+    joint_names: list[str]
+    settings: dict[str, Any]
+    residuals: dict[str, Any] = field(default_factory=dict, repr=False)
+    provisional: bool = False
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON-ready figures (``gap_map``, ``ranking``, ``verdict``, ``parametric``, and more)."""
+        return to_jsonable(
+            {
+                "verdict": list(self.verdict),
+                "provisional": self.provisional,
+                "ranking": [r.to_dict() for r in self.ranking],
+                "accepted": [r.to_dict() for r in self.accepted],
+                "gap_map": self.gap_map,
+                "parametric": self.parametric,
+                "decomposition": self.decomposition,
+                "noise_floor": {
+                    "std": self.noise.std.tolist(),
+                    "method": self.noise.method,
+                    "detail": self.noise.detail,
+                },
+                "excess": self.excess,
+                "notes": list(self.notes),
+                "joint_names": list(self.joint_names),
+                "settings": self.settings,
+            }
+        )
+
+    def summary(self) -> str:
+        """The verdict and the gap in plain words."""
+        return verdict_text(self)
+
+
+def _describe_refit(r: RankedCandidate) -> str:
+    """The fitted physical parameters of an accepted effect, in words."""
+    eff = r.refit.get("effective")
+    if not eff:
+        return describe_hyper(r.candidate)
+    e = r.candidate.effect
+    if e == "delay":
+        return f"delay {1000 * eff['d']:.2g} ms"
+    if e == "elasticity":
+        bound = (
+            ", at an end of the searched range: the data do not pin the resonance down"
+            if r.refit.get("at_bound")
+            else ""
+        )
+        return (
+            f"stiffness {r.refit['stiffness']:.3g} N m/rad, resonance {r.refit['frequency_hz']:.3g} Hz{bound}"
+        )
+    if "h" in eff:
+        return (
+            f"half gap {1000 * eff['a']:.2g} mrad, the teeth changing sides {1000 * eff['d']:.2g} ms after the "
+            f"transmitted torque passes {eff['h']:.2g} N m"
+        )
+    return f"half gap {1000 * eff['a']:.2g} mrad"
+
+
+def verdict_text(d: Diagnosis) -> str:
+    """Plain-words account of a diagnosis (a few lines)."""
+    dec = d.decomposition
+    lines = []
+    ratio = d.excess["ratio_overall"]
+    if d.verdict == ["none"]:
+        lines.append(
+            f"No significant gap: the re-identified model's held-out error is {ratio:.2f} times the noise floor "
+            f"(p = {d.excess['p_value']:.2g})."
+        )
+    elif d.verdict == ["unexplained"]:
+        lines.append(
+            f"Unexplained gap: the held-out error is {ratio:.2f} times the noise floor (significant), and no "
+            "candidate effect of the catalogue both closes enough of it and passes the significance test."
+        )
+        if d.ranking:
+            top = d.ranking[0]
+            closes = (
+                f"{top.candidate.label}, would close {100 * max(top.closure, 0):.0f} % of its joints' gap"
+            )
+            if top.closure >= d.settings.get("min_closure", 0.5) and not top.significant:
+                lines.append(
+                    f"The best candidate, {closes}, but that gain is not significant on these held-out data "
+                    f"once the {len(d.ranking)} candidates tested are accounted for (Holm-adjusted p = "
+                    f"{top.p_holm:.2g}): a longer held-out run would decide."
+                )
+            else:
+                lines.append(f"The closest candidate, {closes}; that is not taken as the cause.")
+    else:
+        for r in d.accepted:
+            hyper = _describe_refit(r)
+            lines.append(
+                f"{r.candidate.label}{' (' + hyper + ')' if hyper else ''}: closes {100 * r.closure:.0f} % of the "
+                f"gap on its joint(s) (Holm-adjusted p = {r.p_holm:.2g})."
+            )
+        lines.append(
+            f"Together the accepted effects close {100 * dec['closure_overall']:.0f} % of the gap overall."
+        )
+    est = np.asarray(d.excess.get("estimation", ()), dtype=float)
+    loud = [j for j in range(est.size) if est[j] >= 0.25]
+    if loud:
+        names = ", ".join(f"{d.joint_names[j]} ({est[j]:.2g})" for j in loud)
+        lines.append(
+            "The training data leave some parameters uncertain: their error alone is expected to add, in noise "
+            f"variances, {names} to the held-out error, and the tests allow for it.  An excitation designed "
+            "for identification (dynid excite) would sharpen the diagnosis there."
+        )
+    par = d.parametric
+    if par.get("finding") not in (None, "none"):
+        lines.append(par["text"])
+    lines.extend(d.notes)
+    return "\n".join(lines)

@@ -1,0 +1,79 @@
+"""The settings of the gap diagnosis: one frozen record that every stage reads.
+
+>>> settings = DiagnosisSettings(max_effects=2, max_samples=6000)
+>>> diagnose(model, train, heldout, max_effects=2, max_samples=6000)   # the same settings, as keywords
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from dynid.diagnosis.candidates import EFFECT_NAMES
+from dynid.exceptions import UsageError
+
+__all__ = ["DiagnosisSettings"]
+
+
+@dataclass(frozen=True)
+class DiagnosisSettings:
+    """How :func:`dynid.diagnosis.core.diagnose` tests and selects the candidate effects.
+
+    Attributes
+    ----------
+    effects : tuple of str
+        The catalogue of candidate effects (default all of :data:`dynid.diagnosis.candidates.EFFECT_NAMES`).
+    alpha : float
+        Family-wise error rate of the candidate tests (Holm).
+    max_effects : int
+        At most this many effects are accepted (forward selection).
+    min_gain : float
+        Smallest relevant reduction of the held-out loss, in noise variances per sample.
+    min_closure : float
+        An accepted candidate must close at least this fraction of the gap on its joint(s); when the
+        excess is significant and none does, the verdict is ``["unexplained"]``.
+    excess_tol : float
+        The baseline's excess counts only when its ratio to the noise floor exceeds ``1 + excess_tol``
+        (state estimation leaves a small excess even on an effect-free robot).
+    period : float or None
+        Period (s) of the held-out excitation; detected from the angles when None.
+    max_samples : int
+        Rows used per dataset (the filtered data are thinned evenly beyond it).
+    block_seconds : float
+        Block length (s) of the Diebold-Mariano block means, the covariance and the bootstrap.
+    refit : bool
+        Refit accepted effects by nonlinear least squares (elasticity, backlash, delay) and refine the
+        continuous hyper-parameters of the others.
+    confound_deg : float
+        Principal angle (degrees) below which two candidates count as not separable.
+    stick_fraction : float
+        Samples of a joint slower than this fraction of its top speed are left out of the fits and
+        losses (sticking and presliding make Coulomb friction ill-defined there; the gap map still
+        shows them in its stiction bin).
+
+    Raises
+    ------
+    UsageError
+        Unknown effect names.
+    """
+
+    effects: tuple[str, ...] = EFFECT_NAMES
+    alpha: float = 0.05
+    max_effects: int = 3
+    min_gain: float = 0.15
+    min_closure: float = 0.5
+    excess_tol: float = 1.0
+    period: float | None = None
+    max_samples: int = 12000
+    block_seconds: float = 0.1
+    refit: bool = True
+    confound_deg: float = 15.0
+    stick_fraction: float = 0.02
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "effects", tuple(self.effects))
+        unknown = [e for e in self.effects if e not in EFFECT_NAMES]
+        if unknown:
+            raise UsageError(
+                f"unknown effect {', '.join(repr(u) for u in unknown)}; the catalogue is "
+                f"{', '.join(EFFECT_NAMES)}: use those names."
+            )
