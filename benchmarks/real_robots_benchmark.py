@@ -1,0 +1,199 @@
+"""Held-out error of dynid on two real recordings against a published reference (prints figures; not a test).
+
+Panda (``../shared/data/panda_gaz2019``): identify on t < 15 s, hold out t >= 15 s.  Every prediction
+and the RAW held-out torque go through the same 10 Hz zero-phase 4th-order Butterworth, and 0.25 s is
+trimmed at both ends of the held-out part.  The reference is Gaz et al.'s published model, computed
+here with numeric Pinocchio (``pin.rnea``): the URDF of the recording's ``model/`` folder (their
+feasible link parameters) plus their sigmoid friction (RA-L 2019, Table I),
+
+    tau_f,j = phi1_j / (1 + exp(-phi2_j (dq_j + phi3_j))) - phi1_j / (1 + exp(-phi2_j phi3_j)),
+
+with the coefficients of ``matlab/dyn_model_panda/get_FrictionTorque.m`` in their public repository
+(``marcocognetti/FrankaEmikaPandaDynModel``, the repository the recording comes from).  Its states are
+the measured ``q`` and ``dq`` low-passed at 10 Hz (4th order) and ``ddq`` their central difference.
+
+TX40 (``../shared/data/tx40``): FIGAROH's split, rows [0, 24750) identify, [29250, 45000) held out;
+predictions and the raw held-out torque through a 100 Hz zero-phase 4th-order Butterworth, scored at
+500 Hz (one sample in 10), 0.02 s trimmed at both ends.  The reference is FIGAROH 0.2.4's own TX40
+example on this split, quoted: held-out RMS [5.34 6.94 4.02 1.67 2.49 1.70] N m.
+
+Models, each identified on the training part only:
+
+- ``defaults``: ``identify(robot, train)`` with no options, as ``dynid identify --robot R --data
+  train.csv`` runs it;
+- ``ols+lin``: OLS with linear friction, no correction (the baseline of the physical layers);
+- ``phys``: the default model's link + friction layers alone (no mixture correction);
+- ``ref``: the reference above.
+
+A model predicts from the states of the whole recording prepared as its identification data were
+(so the held-out part has no filter edge of its own; the held-out torque is never used), without its
+own torque filter; the scoring filter above is then applied to prediction and torque alike.
+
+Run:  OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python benchmarks/real_robots_benchmark.py --robot panda
+      (or ``--robot tx40``; each takes a few minutes on 2 cores)
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import time  # noqa: E402
+import warnings  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+#: Gaz et al.'s sigmoid friction (Table I; get_FrictionTorque.m): phi1 (N m), phi2 (s/rad), phi3 (rad/s).
+GAZ_FRICTION = np.array(
+    [
+        [0.54615, 0.87224, 0.64068, 1.2794, 0.83904, 0.30301, 0.56489],
+        [5.1181, 9.0657, 10.136, 5.5903, 8.3469, 17.133, 10.336],
+        [0.039533, 0.025882, -0.04607, 0.036194, 0.026226, -0.021047, 0.0035526],
+    ]
+)
+#: FIGAROH 0.2.4's held-out RMS (N m) on the TX40 split, as published by its example.
+FIGAROH_TX40 = np.array([5.34, 6.94, 4.02, 1.67, 2.49, 1.70])
+
+SETUPS = {
+    # recording, train rows, held-out rows (by time for the Panda), scoring cut-off (Hz), score step, trim (s)
+    "panda": {"recording": "panda_gaz2019", "split_s": 15.0, "cutoff": 10.0, "step": 1, "trim": 0.25},
+    "tx40": {
+        "recording": "tx40",
+        "train": (0, 24750),
+        "heldout": (29250, 45000),
+        "cutoff": 100.0,
+        "step": 10,
+        "trim": 0.02,
+    },
+}
+
+
+def gaz_friction(dq: np.ndarray) -> np.ndarray:
+    """Gaz et al.'s sigmoid friction torque (N m) at joint velocities ``dq`` (m, 7)."""
+    p1, p2, p3 = GAZ_FRICTION
+    return p1 / (1.0 + np.exp(-p2 * (dq + p3))) - p1 / (1.0 + np.exp(-p2 * p3))
+
+
+def gaz_reference(urdf: str, full) -> tuple[np.ndarray, np.ndarray]:
+    """Published Panda model on the whole recording: (t, tau) at the uniform grid of the prepared states."""
+    import pinocchio as pin
+
+    from dynid.identify.preparation import Preprocessing, prepare
+
+    prep = prepare(full, Preprocessing(cutoff=10.0, order=4, parallel=False, trim=0.0))
+    model = pin.buildModelFromUrdf(urdf)
+    data = model.createData()
+    tau = np.empty_like(prep.q)
+    for k in range(len(prep.q)):
+        tau[k] = pin.rnea(model, data, prep.q[k], prep.dq[k], prep.ddq[k])
+    return prep.t, tau + gaz_friction(prep.dq)
+
+
+def model_parts(model, full) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t, physical layers, full model) at full rate on the whole recording, without the model's torque filter."""
+    prep = model.prepare(full)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        total = model.predict(prep.q, prep.dq, prep.ddq)
+        gmm = np.zeros_like(total) if model.gmr is None else model.gmr.predict(np.hstack([prep.q, prep.dq]))
+    return prep.t, total - gmm, total
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
+    parser.add_argument("--robot", choices=sorted(SETUPS), default="panda")
+    args = parser.parse_args()
+    setup = SETUPS[args.robot]
+
+    from dynid.identify.adapters import load_recording, recording_model_path
+    from dynid.identify.model import identify
+    from dynid.identify.preparation import Preprocessing, prepare
+    from dynid.identify.preprocess import lowpass
+    from dynid.symbolic import load_robot
+
+    warnings.simplefilter("ignore")
+    full = load_recording(setup["recording"])
+    urdf = str(recording_model_path(setup["recording"]))
+    robot = load_robot(urdf)
+    if "split_s" in setup:
+        split_t = full.t[0] + setup["split_s"]
+        train = full.select_rows(np.flatnonzero(full.t < split_t))
+    else:
+        a, b = setup["train"]
+        train = full.select_rows(np.arange(a, b))
+        split_t = full.t[setup["heldout"][0]]
+    t_end = full.t[setup["heldout"][1] - 1] if "heldout" in setup else full.t[-1]
+
+    # the raw torque on the uniform grid (resampled if the stamps are irregular, nothing else)
+    raw = prepare(full, Preprocessing(cutoff=None, trim=0.0))
+    t_grid, tau_raw = raw.t, raw.tau
+    held = (t_grid >= split_t) & (t_grid <= t_end)
+    idx = np.flatnonzero(held)
+    fs = 1.0 / np.median(np.diff(t_grid))
+
+    def score(t: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        if len(t) != len(t_grid) or np.max(np.abs(t - t_grid)) > 1e-9:
+            tau = np.column_stack([np.interp(t_grid, t, tau[:, j]) for j in range(tau.shape[1])])
+        pred = lowpass(tau[idx], fs=fs, cutoff=setup["cutoff"], order=4)
+        ref = lowpass(tau_raw[idx], fs=fs, cutoff=setup["cutoff"], order=4)
+        th = t_grid[idx]
+        keep = (th >= th[0] + setup["trim"]) & (th <= th[-1] - setup["trim"])
+        keep &= np.arange(len(th)) % setup["step"] == 0
+        return np.sqrt(np.mean((pred[keep] - ref[keep]) ** 2, axis=0))
+
+    rows: dict[str, np.ndarray] = {}
+    print(
+        f"{args.robot}: {train.m} training samples ({train.duration:.2f} s), held out {split_t:.3f}..{t_end:.3f} s; "
+        f"scoring: raw torque and predictions through {setup['cutoff']:g} Hz zero-phase (order 4), "
+        f"{setup['trim']} s trimmed, every {setup['step']} sample(s)",
+        flush=True,
+    )
+    start = time.perf_counter()
+    default = identify(robot, train)
+    t_default = time.perf_counter() - start
+    start = time.perf_counter()
+    ols = identify(robot, train, method="ols", friction="linear", gmm="off")
+    t_ols = time.perf_counter() - start
+    t, phys, total = model_parts(default, full)
+    rows["defaults"] = score(t, total)
+    rows["phys"] = score(t, phys)
+    t, _, total = model_parts(ols, full)
+    rows["ols+lin"] = score(t, total)
+    if args.robot == "panda":
+        t, tau = gaz_reference(urdf, full)
+        rows["ref"] = score(t, tau)
+        ref_label = "Gaz et al. 2019 (URDF + Table I friction, pin.rnea)"
+    else:
+        rows["ref"] = FIGAROH_TX40
+        ref_label = "FIGAROH 0.2.4 (quoted)"
+
+    n = robot.n
+    print(f"identify: defaults {t_default:.1f} s, ols+lin {t_ols:.1f} s")
+    print(f"preprocessing of the defaults: {default.preprocessing}")
+    fig = default.figures()
+    print(
+        f"default model: training RMS link+friction {np.round(fig['rms_layers']['friction'], 3).tolist()}, "
+        f"full {np.round(fig['rms_layers']['gmm'], 3).tolist()}"
+    )
+    for note in fig.get("notes", []):
+        print(f"  note: {note}")
+    print(f"\nheld-out RMS (N m); reference: {ref_label}")
+    head = f"{'model':<10}" + "".join(f"{'j' + str(j + 1):>8}" for j in range(n)) + f"{'mean':>8}"
+    print(head)
+    for label in ("defaults", "phys", "ols+lin", "ref"):
+        v = rows[label]
+        print(f"{label:<10}" + "".join(f"{x:>8.3f}" for x in v) + f"{np.mean(v):>8.3f}")
+    print("ratios")
+    for num, den in (("defaults", "ref"), ("phys", "ols+lin"), ("defaults", "phys")):
+        r = rows[num] / rows[den]
+        label = f"{num}/{den}"
+        print(
+            f"{label:<10}" + "".join(f"{x:>8.2f}" for x in r[:n]) + f"   below 1 on {int(np.sum(r < 1))}/{n}"
+        )
+
+
+if __name__ == "__main__":
+    main()

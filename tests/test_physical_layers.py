@@ -1,0 +1,77 @@
+"""The physical layers stand alone: the mixture correction fades outside its states, bounds hold.
+
+A position-dependent torque that the link and friction layers cannot express is learnt by the
+mixture on the training angles; a held-out motion then leaves those angles.  There the correction must
+fade to zero (its density gate), so the full model does no worse than its physical layers alone.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+from dynid.identify import gmr as gmr_module
+from dynid.identify.columns import column_set, linear_torque
+from dynid.identify.model import identify
+from dynid.sim.synthetic import random_fourier, synthetic_dataset, true_parameters
+
+AMPLITUDE = 1.0  # N m, the position-dependent torque the physical layers cannot express
+REACH = 1.2  # rad, the training angles span +-REACH around zero ("arm" scaling)
+
+
+def _bump(q, dq):
+    """A torque of each joint's own angle, -AMPLITUDE at the edges of the training angles, mean zero beyond."""
+    return AMPLITUDE * np.cos(np.pi * q / REACH)
+
+
+@pytest.fixture(scope="module")
+def leaving(ur5):
+    rng = np.random.default_rng(7)
+    cols = column_set(ur5)
+    x = true_parameters(cols, rng)
+    x[~cols.link_mask] = np.abs(x[~cols.link_mask])  # physical armature and friction
+    centre = np.zeros(ur5.n)
+    train = synthetic_dataset(
+        cols,
+        x,
+        random_fourier(ur5, rng, periods=3, scaling="arm", centre=centre),
+        rate=200,
+        rng=rng,
+        noise=0.05,
+        extra=_bump,
+    )
+    far = random_fourier(ur5, rng, periods=1, scaling="arm", centre=centre + 2.6)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = identify(ur5, train, method="irls", friction="linear", gmm="auto", preprocessing=None)
+    _, q, dq, ddq = far.sample(200)
+    tau = linear_torque(cols, x, q, dq, ddq) + _bump(q, dq)
+    return model, train, (q, dq, ddq, tau)
+
+
+def _heldout_rms(model, states):
+    q, dq, ddq, tau = states
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        full = model.predict(q, dq, ddq)
+        corr = model.gmr.predict(np.hstack([q, dq]))
+    phys = full - corr
+    return np.sqrt(np.mean((tau - phys) ** 2, axis=0)), np.sqrt(np.mean((tau - full) ** 2, axis=0))
+
+
+def test_the_correction_fades_outside_the_training_states(leaving, monkeypatch) -> None:
+    model, train, states = leaving
+    q = states[0]
+    assert np.all(q.min(axis=0) > train.q.max(axis=0))  # every joint leaves the training angles
+    active = model.gmr.active_
+    assert active.sum() >= 3  # the mixture learnt the position torque on the training motion
+    layers = model.rms_layers
+    assert np.all(np.array(layers["gmm"])[active] < 0.5 * np.array(layers["friction"])[active])
+    phys, full = _heldout_rms(model, states)
+    assert np.all(full <= 1.02 * phys), (full, phys)
+    # the same model without its density gate holds the correction's edge value out there: worse
+    monkeypatch.setattr(gmr_module, "density_gate", lambda mdl, u: np.ones(len(u)))
+    _, ungated = _heldout_rms(model, states)
+    assert np.all(ungated[active] > 1.02 * phys[active]), (ungated, phys)  # the first assertion would fail
