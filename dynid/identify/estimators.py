@@ -59,14 +59,57 @@ __all__ = [
     "GLS",
     "IRLS",
     "OLS",
+    "PHYSICAL_KINDS",
     "WLS",
     "IdentificationWarning",
     "LinkEstimator",
+    "bounded_triangular",
     "check_is_fitted",
     "long_run_factor",
     "long_run_variance",
+    "physical_lower_bounds",
     "residual_correlation",
 ]
+
+
+PHYSICAL_KINDS = ("armature", "coulomb", "viscous")
+"""Parameter kinds that a physical model never has negative: rotor inertia, Coulomb and viscous friction."""
+
+
+def physical_lower_bounds(columns: ColumnSet) -> NDArray[np.float64]:
+    """Lower bound of each identified parameter: 0 for the kinds of :data:`PHYSICAL_KINDS`, else -inf.
+
+    Parameters
+    ----------
+    columns : ColumnSet
+        The identified parameters.
+    """
+    return np.array([0.0 if k in PHYSICAL_KINDS else -np.inf for k in columns.kinds])
+
+
+def bounded_triangular(
+    R: NDArray[np.float64], rhs: NDArray[np.float64], lower: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """``min || R x - rhs ||^2`` subject to ``x >= lower`` (bounded-variable least squares).
+
+    ``R`` is the triangular factor of a (weighted) least squares, so this is the constrained solution
+    of the whole problem.  Without a finite bound it is the plain solution.
+
+    Parameters
+    ----------
+    R : ndarray, shape (p, p)
+        Triangular factor.
+    rhs : ndarray, shape (p,)
+        ``Q^T`` times the target.
+    lower : ndarray, shape (p,)
+        Lower bounds (-inf: none).
+    """
+    from scipy.optimize import lsq_linear
+
+    x = scipy.linalg.lstsq(R, rhs, cond=1e-13, check_finite=False)[0]
+    if not np.any(np.isfinite(lower)) or np.all(x >= lower):
+        return x
+    return lsq_linear(R, rhs, bounds=(lower, np.inf), method="bvls", lsq_solver="exact").x
 
 
 def whitener(omega: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -68,6 +68,7 @@ _MODES = ("vector", "per_joint", "own", "position")
 _GRID = (1, 2, 3, 4, 6, 8, 12, 16)  # mixture sizes tried by n_components="auto"
 _PHASE_WINDOWS = 8  # phase windows per period when the data are periodic
 _FLOOR_QUANTILE = 0.01  # the density gate is 1 above this quantile of the training inputs' density
+_GATE_WIDTH = 2.0  # the gate's density has the components' input spreads this many times wider
 
 
 def conditional_mean(
@@ -149,10 +150,13 @@ def _log_density(
 def density_gate(mdl: dict[str, Any], u: NDArray[np.float64]) -> NDArray[np.float64]:
     """Weight in [0, 1] of a mixture's correction at the inputs ``u`` (m, d): its own input density.
 
-    1 where the mixture's input density is at least its ``log_floor`` (the 1 % quantile of the density
-    over the training inputs), ``p(u) / p_floor`` below it: outside the states the mixture was fitted
-    on, its correction fades to zero like a Gaussian tail instead of holding its edge value.  A mixture
-    without a floor (files written before the gate) is not gated.
+    The density is the mixture's over its inputs with every component twice as wide (so that the gaps
+    between narrow components inside the training states do not count as outside; with the fitted
+    widths, the gate cut corrections on the validation windows between components and the size
+    selection chose too few).  The gate is 1 where that density is at least its ``log_floor`` (its 1 %
+    quantile over the training inputs), ``p(u) / p_floor`` below it: outside the states the mixture was
+    fitted on, its correction fades to zero like a Gaussian tail instead of holding its edge value.  A
+    mixture without a floor (files written before the gate) is not gated.
 
     Parameters
     ----------
@@ -167,7 +171,8 @@ def density_gate(mdl: dict[str, Any], u: NDArray[np.float64]) -> NDArray[np.floa
     inp = mdl["inputs"]
     n_in = len(inp)
     us = (u[:, inp] - mdl["mean"][:n_in]) / mdl["scale"][:n_in]
-    logp = _log_density(us, mdl["weights"], mdl["means"][:, :n_in], mdl["covariances"][:, :n_in, :n_in])
+    covs = _GATE_WIDTH**2 * mdl["covariances"][:, :n_in, :n_in]
+    logp = _log_density(us, mdl["weights"], mdl["means"][:, :n_in], covs)
     return np.exp(np.minimum(logp - floor, 0.0))
 
 
@@ -343,7 +348,9 @@ class GMRCorrection:
         K = max(1, min(int(K), len(X) // (X.shape[1] + 2)))
         gm = self._em(K, (X - mean) / scale)
         us = (X[:, :n_in] - mean[:n_in]) / scale[:n_in]
-        density = _log_density(us, gm.weights_, gm.means_[:, :n_in], gm.covariances_[:, :n_in, :n_in])
+        density = _log_density(
+            us, gm.weights_, gm.means_[:, :n_in], _GATE_WIDTH**2 * gm.covariances_[:, :n_in, :n_in]
+        )
         return {
             "lo": X[:, :n_in].min(axis=0),
             "hi": X[:, :n_in].max(axis=0),

@@ -56,7 +56,14 @@ from dynid.exceptions import DynidError, ModelFileError, UsageError
 from dynid.identify.columns import ColumnSet, column_set, linear_torque
 from dynid.identify.consistent import ConsistentLS, pseudo_inertia
 from dynid.identify.dataset import Dataset
-from dynid.identify.estimators import ESTIMATORS, IdentificationWarning, LinkEstimator, check_is_fitted
+from dynid.identify.estimators import (
+    ESTIMATORS,
+    IdentificationWarning,
+    LinkEstimator,
+    bounded_triangular,
+    check_is_fitted,
+    physical_lower_bounds,
+)
 from dynid.identify.friction import FRICTION_MODELS, FrictionLayer
 from dynid.identify.gmr import GMRCorrection
 from dynid.identify.linear_system import build_system
@@ -195,8 +202,8 @@ class IdentifiedModel:
             warnings.warn(
                 "the motion leaves the states the GMM correction was fitted on: "
                 + "; ".join(dict.fromkeys(out))
-                + "; there the correction holds its edge value and the link parameters fitted with it may "
-                "be off: identify on data that cover this motion's workspace",
+                + "; there the correction fades to zero (the physical layers predict alone) and the link "
+                "parameters fitted with it may be off: identify on data that cover this motion's workspace",
                 IdentificationWarning,
                 stacklevel=3,
             )
@@ -335,6 +342,10 @@ class ThreeLayerModel:
     rounds : int
         Rounds in which the layers are refitted together (:mod:`dynid.identify.refine`; default 2).
         0: the paper's sequence, each layer fitted once on what the previous one left.
+    physical : bool
+        Keep armature, Coulomb and viscous coefficients non-negative (default; bounded-variable least
+        squares on the same weighted system).  False: the unconstrained fit.  ``info["bounds"]`` names
+        the parameters held at a bound.
 
     Attributes
     ----------
@@ -357,6 +368,7 @@ class ThreeLayerModel:
         gmm_mode: str = "position",
         random_state: int = 0,
         rounds: int = 2,
+        physical: bool = True,
     ) -> None:
         self.robot = robot
         self.method = method
@@ -368,6 +380,7 @@ class ThreeLayerModel:
         self.gmm_mode = gmm_mode
         self.random_state = random_state
         self.rounds = rounds
+        self.physical = physical
 
     def __repr__(self) -> str:
         return (
@@ -433,10 +446,15 @@ class ThreeLayerModel:
         }
         if hasattr(est, "n_iter_"):
             info["irls"] = {"iterations": int(est.n_iter_), "converged": bool(est.converged_)}
+        lower = physical_lower_bounds(cols) if self.physical else None
+        x0 = est.params_
+        if lower is not None and hasattr(est, "R_"):
+            x0 = bounded_triangular(est.R_, est.rhs_, lower)
         if joint:
-            x, cov, friction, source, gmr, rms_layers = self._joint(system, est, info)
+            x, cov, friction, source, gmr, rms_layers = self._joint(system, est, info, x0, lower)
         else:
-            x, cov, friction, source, gmr, rms_layers = self._sequence(system, est, info)
+            x, cov, friction, source, gmr, rms_layers = self._sequence(system, est, info, x0)
+        info["bounds"] = _bounds_info(cols, np.asarray(x), lower)
         system.release()
         if isinstance(est, ConsistentLS):
             info["consistency"] = {
@@ -477,11 +495,10 @@ class ThreeLayerModel:
             [xe.get(f"fo{j + 1}", 0.0) for j in range(n)],
         )
 
-    def _sequence(self, system, est: LinkEstimator, info: dict[str, Any]):
+    def _sequence(self, system, est: LinkEstimator, info: dict[str, Any], x):
         """The paper's order: each layer on what the previous one left (friction filtered like the torque)."""
         cols, prep = system.columns, system.prepared
         rows = prep.rows
-        x = est.params_
         with single_blas_thread():
             tau = system.tau()
             resid = tau - system.predict(x, mask=cols.link_mask)  # F_est: what the rigid body leaves
@@ -513,7 +530,7 @@ class ThreeLayerModel:
         info["refinement"] = {"rounds": 0}
         return x, est.cov_, friction, source, gmr, rms_layers
 
-    def _joint(self, system, est: LinkEstimator, info: dict[str, Any]):
+    def _joint(self, system, est: LinkEstimator, info: dict[str, Any], x0, lower):
         """The layers refitted together (:func:`dynid.identify.refine.refine`)."""
         cols = system.columns
         consistent = None
@@ -521,7 +538,7 @@ class ThreeLayerModel:
             consistent = {"reference_weight": self.reference_weight}
         out = refine(
             system,
-            est.params_,
+            x0,
             est.omega_,
             friction=self.friction,
             gmm=self.gmm,
@@ -530,6 +547,7 @@ class ThreeLayerModel:
             weighting="none" if self.method == "ols" else "per-joint",
             consistent=consistent,
             random_state=self.random_state,
+            lower=lower,
         )
         cov = np.array(est.cov_, dtype=np.float64)
         cov[out.mask, :] = 0.0
@@ -574,6 +592,16 @@ def _rms(r: NDArray[np.float64]) -> list[float]:
     return [float(v) for v in np.sqrt(np.mean(r**2, axis=0))]
 
 
+def _bounds_info(
+    cols: ColumnSet, x: NDArray[np.float64], lower: NDArray[np.float64] | None
+) -> dict[str, Any]:
+    """Whether the fit was bounded and which parameters sit at their bound (JSON-ready)."""
+    if lower is None:
+        return {"physical": False, "active": []}
+    at = np.isfinite(lower) & (x <= lower + 1e-12 * max(1.0, float(np.abs(x).max(initial=0.0))))
+    return {"physical": True, "active": [cols.names[i] for i in np.flatnonzero(at)]}
+
+
 def _layer1_friction(cols: ColumnSet, x: NDArray[np.float64], prep: Prepared) -> NDArray[np.float64]:
     """The layer-1 linear friction, filtered like the torque, at the kept rows."""
     full = linear_torque(cols, x, prep.q, prep.dq, prep.ddq, mask=cols.friction_mask)
@@ -593,6 +621,7 @@ def identify(
     gmm_mode: str = "position",
     random_state: int = 0,
     rounds: int = 2,
+    physical: bool = True,
 ) -> IdentifiedModel:
     """Identify a robot's dynamic model from data in three layers (see :class:`ThreeLayerModel`).
 
@@ -620,6 +649,8 @@ def identify(
         Seed of the mixture's EM.
     rounds : int
         Rounds in which the layers are refitted together (0: the paper's sequence).
+    physical : bool
+        Non-negative armature, Coulomb and viscous coefficients (default); False: unconstrained.
 
     Returns
     -------
@@ -637,6 +668,7 @@ def identify(
             gmm_mode=gmm_mode,
             random_state=random_state,
             rounds=rounds,
+            physical=physical,
         )
         .fit(data)
         .model_
@@ -782,7 +814,7 @@ def load_model(path: str | os.PathLike[str], robot=None) -> IdentifiedModel:
         info = {
             k: v
             for k, v in doc.items()
-            if k in ("n_samples", "notes", "reference", "irls", "consistency", "refinement")
+            if k in ("n_samples", "notes", "reference", "irls", "consistency", "refinement", "bounds")
         }
         if doc.get("gmm") is not None:
             info["gmm_validation_rms"] = doc["gmm"].get("validation_rms")

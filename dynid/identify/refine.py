@@ -55,7 +55,7 @@ import scipy.linalg
 from numpy.typing import NDArray
 
 from dynid._threads import single_blas_thread
-from dynid.identify.estimators import long_run_factor
+from dynid.identify.estimators import bounded_triangular, long_run_factor
 from dynid.identify.friction import FrictionLayer, bounded_lsq
 from dynid.identify.gmr import GMRCorrection, validation_mask
 from dynid.identify.linear_system import LinearSystem
@@ -192,6 +192,7 @@ def refine(
     weighting: str = "per-joint",
     consistent: dict[str, Any] | None = None,
     random_state: int = 0,
+    lower: NDArray[np.float64] | None = None,
 ) -> Refinement:
     """Refit link parameters, friction and mixture experts together (see the module docstring).
 
@@ -218,6 +219,10 @@ def refine(
         of :func:`dynid.identify.consistent.consistent_solution` (``reference_weight``, ``eps``, ...).
     random_state : int
         Seed of the mixtures' EM.
+    lower : ndarray, shape (p,), optional
+        Lower bound of each parameter (-inf: none), e.g.
+        :func:`dynid.identify.estimators.physical_lower_bounds`; the link step then solves its least
+        squares within them (bounded-variable least squares on its triangular factor).
 
     Returns
     -------
@@ -225,11 +230,13 @@ def refine(
     """
     with single_blas_thread():
         return _refine(
-            system, x0, omega, friction, gmm, gmm_mode, rounds, weighting, consistent, random_state
+            system, x0, omega, friction, gmm, gmm_mode, rounds, weighting, consistent, random_state, lower
         )
 
 
-def _refine(system, x0, omega, friction, gmm, gmm_mode, rounds, weighting, consistent, random_state):
+def _refine(
+    system, x0, omega, friction, gmm, gmm_mode, rounds, weighting, consistent, random_state, lower=None
+):
     cols = system.columns
     prep = system.prepared
     rows = prep.rows
@@ -237,6 +244,7 @@ def _refine(system, x0, omega, friction, gmm, gmm_mode, rounds, weighting, consi
     layer2 = friction not in ("none", "linear")
     mask = cols.link_mask | (cols.friction_mask if friction == "linear" else False)
     C = _Columns(system, mask)
+    low = None if lower is None else np.asarray(lower, dtype=np.float64)[C.sel]
     tau = np.column_stack(C.tau)
     x_sel = np.asarray(x0, dtype=np.float64)[C.sel].copy()
     weights = 1.0 / np.maximum(np.diag(omega), 1e-300) if weighting == "per-joint" else np.ones(n)
@@ -265,7 +273,7 @@ def _refine(system, x0, omega, friction, gmm, gmm_mode, rounds, weighting, consi
             else:  # later rounds: the gates again, on the new residual, same sizes and joints
                 gmr = _refit_mixtures(gmr, u_kept, u_full, r3, prep)
             Gb = [prep.filter(G)[rows] if G.shape[1] else G[rows] for G in gmr.design(u_full)]
-        step = _link_step(C, tau, Fb, Gb, weights)
+        step = _link_step(C, tau, Fb, Gb, weights, lower=low)
         x_sel = step.x
         fric, corr = _nuisance_step(C, tau, x_sel, Fb, Gb, layer, gmr)
         history.append(float(np.sqrt(np.mean((tau - C.torque(x_sel) - fric - corr) ** 2))))
@@ -438,10 +446,11 @@ def _ridges(Fb: NDArray[np.float64], Gb: NDArray[np.float64]) -> NDArray[np.floa
     return np.concatenate([np.full(Fb.shape[1], _TINY), np.full(Gb.shape[1], RIDGE)])
 
 
-def _link_step(C: _Columns, tau, Fb, Gb, weights, rows=None) -> _LinkSolution:
+def _link_step(C: _Columns, tau, Fb, Gb, weights, rows=None, lower=None) -> _LinkSolution:
     """Link parameters of the stacked system with friction and experts eliminated per joint.
 
-    ``rows``: fit on these samples only (the validation of :func:`_select_mixtures`).
+    ``rows``: fit on these samples only (the validation of :func:`_select_mixtures`); ``lower``: lower
+    bounds of the refined parameters (bounded-variable least squares on the stacked factor).
     """
     p_sel = len(C.sel)
     blocks = []
@@ -462,7 +471,10 @@ def _link_step(C: _Columns, tau, Fb, Gb, weights, rows=None) -> _LinkSolution:
         blocks.append(full)
         projected.append((C.idx[j], Rj[:k, :k] if Rj.shape[0] >= k else Rj[:, :k]))
     R = scipy.linalg.qr(np.vstack(blocks), mode="r", check_finite=False)[0][:p_sel]
-    x_sel = scipy.linalg.lstsq(R[:, :p_sel], R[:, p_sel], cond=1e-13, check_finite=False)[0]
+    if lower is None:
+        x_sel = scipy.linalg.lstsq(R[:, :p_sel], R[:, p_sel], cond=1e-13, check_finite=False)[0]
+    else:
+        x_sel = bounded_triangular(R[:, :p_sel], R[:, p_sel], lower)
     return _LinkSolution(x=x_sel, R=R[:, :p_sel], blocks=projected)
 
 
