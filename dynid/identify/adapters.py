@@ -45,6 +45,7 @@ __all__ = [
     "recording_folder",
     "recording_model_path",
     "tx40_coupling_matrices",
+    "tx40_transmission",
 ]
 
 #: Environment variable naming the folder that holds the recordings (``panda_gaz2019/``, ``tx40/``).
@@ -232,6 +233,19 @@ def tx40_coupling_matrices() -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     Rt = np.diag(ratios)
     Rt[4, 5] = ratios[5]
     return Rm, Rt
+
+
+def tx40_transmission() -> NDArray[np.float64]:
+    """The TX40's coupled wrist as a robot transmission ``R`` (:attr:`RobotModel.transmission`).
+
+    ``R = diag(N)^-1 Rm`` with ``Rm`` of :func:`tx40_coupling_matrices`: motor angles in joint units,
+    unit diagonal, ``R[5, 4] = 1`` (motor 6 turns by ``q_5 + q_6``).  Give it to the robot of the
+    recording's URDF (``load_robot(urdf).with_transmission(tx40_transmission())``, or
+    ``dynid identify --transmission`` with ``coupled = [[5, 6, 1.0]]``) to identify motor 6's inertia
+    and friction on both wrist joints.
+    """
+    Rm, _ = tx40_coupling_matrices()
+    return np.diag(1.0 / np.asarray(TX40_GEAR_RATIOS)) @ Rm
 
 
 def _read_tx40_csv(path: Path) -> NDArray[np.float64]:

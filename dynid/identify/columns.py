@@ -7,6 +7,13 @@ names those parameters and maps them to the physical ones (:class:`ColumnSet`);
 :func:`linear_torque` evaluates ``W(q, dq, ddq) x`` through the compiled batch regressor
 (:func:`dynid.symbolic.export.compiled_functions`).
 
+A coupled transmission (:attr:`RobotModel.transmission`, e.g. the TX40's wrist, where motor 6 also
+turns with joint 5) moves the armature and the Coulomb and viscous friction to the motor side: the
+motor of joint ``i`` turns (in joint units) by ``u_i = R[i] . q``, its inertia and friction act on
+``u_i``, and the torque they cost reaches joint ``j`` as ``R[i, j]`` times theirs (power balance:
+``tau = R^T tau_motor``).  Without a transmission ``R`` is the identity and the columns are the
+joint's own.
+
 Armature columns that duplicate a base column (joint 1 of an arm whose first axis is vertical:
 its armature acts exactly like ``Izz1R``) are not given a column of their own; their parameter is
 folded into the base parameter it duplicates and a note says so (:attr:`ColumnSet.notes`).
@@ -22,7 +29,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from dynid._threads import single_blas_thread
-from dynid.exceptions import DataError, ShapeError
+from dynid.exceptions import DataError, ShapeError, UsageError
 
 __all__ = [
     "CHUNK_SAMPLES",
@@ -31,6 +38,7 @@ __all__ = [
     "column_set",
     "compiled_base_regressor",
     "linear_torque",
+    "robot_coupling",
 ]
 
 EXTRA_KINDS = ("armature", "coulomb", "viscous", "offset")
@@ -70,6 +78,12 @@ class ColumnSet:
         Structurally non-zero entries of the identified regressor.
     notes : tuple of str
         What was folded where (duplicated columns).
+    coupling : ndarray, shape (n, n), optional
+        Motor angles in joint units per joint angle, ``u = R q`` (unit diagonal); None for the identity
+        (every motor on its own joint).
+    effects : tuple
+        Effect terms (:mod:`dynid.identify.effect_terms`) whose coefficients close ``x`` (kind
+        ``effect``, zero rows of ``P``: they are no physical parameter of the links).
     """
 
     robot: Any
@@ -84,6 +98,8 @@ class ColumnSet:
     P: NDArray[np.float64]
     pattern: NDArray[np.bool_]
     notes: tuple[str, ...]
+    coupling: NDArray[np.float64] | None = None
+    effects: tuple[Any, ...] = ()
 
     @property
     def n(self) -> int:
@@ -102,13 +118,78 @@ class ColumnSet:
 
     @cached_property
     def link_mask(self) -> NDArray[np.bool_]:
-        """Parameters of the rigid-body model: base parameters and armature (no friction)."""
-        return np.array([k in ("link", "armature") for k in self.kinds])
+        """Parameters of the rigid-body model: base parameters and armature (no friction), the friction of
+        coupled motors (:attr:`coupled_mask`) and the effect terms (refitted with them)."""
+        return np.array([k in ("link", "armature", "effect") for k in self.kinds]) | self.coupled_mask
+
+    @cached_property
+    def coupled_mask(self) -> NDArray[np.bool_]:
+        """Coulomb and viscous friction of motors that turn with several joints (a coupled transmission):
+        a friction model per joint cannot take them over, so they stay with the link parameters."""
+        out = np.zeros(self.p, dtype=bool)
+        if self.coupling is None:
+            return out
+        nb = self.n_base
+        for k in range(len(self.extras)):
+            if self.kinds[nb + k] in ("coulomb", "viscous") and np.count_nonzero(self.extra_weights[:, k]) > 1:
+                out[nb + k] = True
+        return out
+
+    @cached_property
+    def effect_mask(self) -> NDArray[np.bool_]:
+        """Coefficients of the effect terms (the last ones of ``x``)."""
+        return np.array([k == "effect" for k in self.kinds])
+
+    @property
+    def n_effect(self) -> int:
+        """Number of effect coefficients."""
+        return int(np.count_nonzero(self.effect_mask))
+
+    @cached_property
+    def effect_owner(self) -> NDArray[np.intp]:
+        """Index into :attr:`effects` of each effect coefficient."""
+        owner: list[int] = []
+        for name in self.names[self.p - self.n_effect :]:
+            key = name.rsplit(".", 1)[0]
+            owner.append(next(i for i, t in enumerate(self.effects) if t.key == key))
+        return np.array(owner, dtype=np.intp)
+
+    def with_effects(self, terms, names, pattern) -> ColumnSet:
+        """The column set with effect terms added after the extras.
+
+        Parameters
+        ----------
+        terms : sequence
+            The effect terms (:class:`dynid.identify.effect_terms.Candidate`).
+        names : sequence of str
+            One name per coefficient, ``KEY.coef`` (:func:`dynid.identify.effect_terms.coefficient_names`).
+        pattern : ndarray of bool, shape (n, k)
+            Joints each coefficient's column reaches.
+        """
+        k = len(names)
+        pattern = np.asarray(pattern, dtype=bool).reshape(self.n, k)
+        first = [int(np.flatnonzero(pattern[:, c])[0]) + 1 if pattern[:, c].any() else 1 for c in range(k)]
+        return ColumnSet(
+            robot=self.robot,
+            base=self.base,
+            friction=self.friction,
+            armature=self.armature,
+            names=self.names + tuple(names),
+            kinds=self.kinds + ("effect",) * k,
+            expressions=self.expressions + tuple(names),
+            joints=np.concatenate([self.joints, np.array(first, dtype=np.intp)]),
+            extras=self.extras,
+            P=np.vstack([self.P, np.zeros((k, self.P.shape[1]))]),
+            pattern=np.hstack([self.pattern, pattern]),
+            notes=self.notes,
+            coupling=self.coupling,
+            effects=tuple(terms),
+        )
 
     @cached_property
     def friction_mask(self) -> NDArray[np.bool_]:
-        """Linear friction parameters (Coulomb, viscous, offset)."""
-        return np.array([k in ("coulomb", "viscous", "offset") for k in self.kinds])
+        """Linear friction parameters (Coulomb, viscous, offset) of the joints (not of coupled motors)."""
+        return np.array([k in ("coulomb", "viscous", "offset") for k in self.kinds]) & ~self.coupled_mask
 
     @property
     def extra_names(self) -> tuple[str, ...]:
@@ -123,10 +204,11 @@ class ColumnSet:
         return np.concatenate([np.full(n, self.armature), np.full(3 * n, self.friction)])
 
     def extra_columns(self, dq: NDArray[np.float64], ddq: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Values of the kept extra columns: (m, p - n_b); column k acts on joint ``extra_joint[k]``.
+        """Values of the kept extra columns: (m, p - n_b); column k reaches joint j times ``extra_weights[j, k]``.
 
-        Armature ``ddq_j``, Coulomb ``sign(dq_j)``, viscous ``dq_j``, offset ``1``, as in
-        ``friction_columns`` / ``armature_columns`` of :mod:`dynid.symbolic.functions`.
+        Armature ``ddu_i``, Coulomb ``sign(du_i)``, viscous ``du_i``, offset ``1``, with ``u = R q`` the
+        motor angles in joint units (``u = q`` without a coupled transmission: then these are
+        ``friction_columns`` / ``armature_columns`` of :mod:`dynid.symbolic.functions`).
 
         Parameters
         ----------
@@ -134,26 +216,55 @@ class ColumnSet:
             Joint velocities (rad/s) and accelerations (rad/s^2).
         """
         n = self.n
+        du, ddu = (dq, ddq) if self.coupling is None else (dq @ self.coupling.T, ddq @ self.coupling.T)
         out = np.empty((len(dq), len(self.extras)))
         for k, e in enumerate(self.extras):
             kind, j = EXTRA_KINDS[e // n], e % n
             if kind == "armature":
-                out[:, k] = ddq[:, j]
+                out[:, k] = ddu[:, j]
             elif kind == "coulomb":
-                out[:, k] = np.sign(dq[:, j])
+                out[:, k] = np.sign(du[:, j])
             elif kind == "viscous":
-                out[:, k] = dq[:, j]
+                out[:, k] = du[:, j]
             else:
                 out[:, k] = 1.0
         return out
 
+    @cached_property
+    def extra_weights(self) -> NDArray[np.float64]:
+        """(n, p - n_b): how much of each kept extra column reaches each joint (``R[i, j]`` for the
+        motor-side kinds of motor i, 1 on its own joint for an offset or without a coupling)."""
+        return _extra_weights(self.n, self.extras, self.coupling)
+
     @property
     def extra_joint(self) -> NDArray[np.intp]:
-        """Joint (0-based) each kept extra column acts on."""
+        """Joint (0-based) each kept extra column belongs to (its motor's joint for a coupled one)."""
         return (self.extras % self.n).astype(np.intp)
 
 
-_COLUMN_CACHE: dict[tuple[str, bool, bool], ColumnSet] = {}
+def _extra_weights(n: int, extras, coupling) -> NDArray[np.float64]:
+    W = np.zeros((n, len(extras)))
+    for k, e in enumerate(extras):
+        kind, j = EXTRA_KINDS[e // n], e % n
+        if coupling is None or kind == "offset":
+            W[j, k] = 1.0
+        else:
+            W[:, k] = coupling[j]
+    return W
+
+
+def robot_coupling(robot) -> NDArray[np.float64] | None:
+    """The robot's coupled transmission ``R`` (n, n), or None when every motor drives its own joint."""
+    R = getattr(robot, "transmission", None)
+    if R is None:
+        return None
+    R = np.asarray(R, dtype=np.float64)
+    if np.array_equal(R, np.eye(robot.n)):
+        return None
+    return R
+
+
+_COLUMN_CACHE: dict[tuple[str, bool, bool, bytes], ColumnSet] = {}
 _BASE_CACHE: dict[str, Any] = {}
 
 
@@ -191,7 +302,8 @@ def column_set(robot, *, friction: bool = True, armature: bool = True) -> Column
     -------
     ColumnSet
     """
-    key = (robot.key, bool(friction), bool(armature))
+    R = robot_coupling(robot)
+    key = (robot.key, bool(friction), bool(armature), b"" if R is None else R.tobytes())
     cached = _COLUMN_CACHE.get(key)
     if cached is not None:
         return cached
@@ -210,6 +322,8 @@ def _column_set(robot, friction: bool, armature: bool) -> ColumnSet:
     m = max(200, 40 * n)
     q, dq, ddq = random_states(robot, m, rng)
     Yb = lib.base_regressor(q, dq, ddq)  # (m, n, nb)
+    coupling = robot_coupling(robot)
+    du, ddu = (dq, ddq) if coupling is None else (dq @ coupling.T, ddq @ coupling.T)
     pattern_b = np.any(Yb != 0.0, axis=0)
     enabled = np.concatenate([np.full(n, bool(armature)), np.full(3 * n, bool(friction))])
     extra_names = [f"{_EXTRA_PREFIX[k]}{j + 1}" for k in EXTRA_KINDS for j in range(n)]
@@ -222,11 +336,10 @@ def _column_set(robot, friction: bool, armature: bool) -> ColumnSet:
     ones = np.ones(m)
     for e in np.flatnonzero(enabled):
         kind, j = EXTRA_KINDS[e // n], e % n
-        values = {"armature": ddq[:, j], "coulomb": np.sign(dq[:, j]), "viscous": dq[:, j], "offset": ones}[
+        values = {"armature": ddu[:, j], "coulomb": np.sign(du[:, j]), "viscous": du[:, j], "offset": ones}[
             kind
         ]
-        col = np.zeros((m, n))
-        col[:, j] = values
+        col = values[:, None] * _extra_weights(n, [e], coupling)[:, 0][None, :]
         col = col.reshape(m * n, 1)
         W = np.hstack(kept_cols)
         coef, *_ = np.linalg.lstsq(W, col, rcond=None)
@@ -260,8 +373,7 @@ def _column_set(robot, friction: bool, armature: bool) -> ColumnSet:
         P = np.vstack([P, row])
         expressions.append(extra_names[e])
     extras = np.array(kept_extra, dtype=np.intp)
-    pattern_x = np.zeros((n, len(extras)), dtype=bool)
-    pattern_x[extras % n, np.arange(len(extras))] = True
+    pattern_x = _extra_weights(n, extras, coupling) != 0.0
     link_of = (base.independent // 10 + 1).astype(np.intp)
     return ColumnSet(
         robot=robot,
@@ -276,6 +388,7 @@ def _column_set(robot, friction: bool, armature: bool) -> ColumnSet:
         P=P,
         pattern=np.hstack([pattern_b, pattern_x]),
         notes=tuple(notes),
+        coupling=coupling,
     )
 
 
@@ -287,6 +400,7 @@ def linear_torque(
     ddq: ArrayLike,
     *,
     mask: NDArray[np.bool_] | None = None,
+    effect_values: NDArray[np.float64] | None = None,
 ) -> NDArray[np.float64]:
     """Torque of the linear model ``W(q, dq, ddq) x`` for a batch, through the compiled regressor.
 
@@ -300,6 +414,9 @@ def linear_torque(
         States (rad, rad/s, rad/s^2).
     mask : ndarray of bool, shape (p,), optional
         Use only these parameters (e.g. ``columns.link_mask``: the rigid-body part).
+    effect_values : ndarray, shape (m, n, k), optional
+        The columns of the effect terms at these states (:func:`dynid.identify.effect_terms.effect_values`);
+        needed when the column set has effect terms in use.
 
     Returns
     -------
@@ -328,11 +445,20 @@ def linear_torque(
     for a in range(0, m, CHUNK_SAMPLES):
         s = slice(a, min(a + CHUNK_SAMPLES, m))
         out[s] = compiled_base_regressor(robot, q[s], dq[s], ddq[s]) @ xb
+    k_eff = columns.n_effect
+    if k_eff:
+        xf = x[columns.p - k_eff :]
+        if np.any(xf != 0):
+            if effect_values is None or np.shape(effect_values) != (m, robot.n, k_eff):
+                raise UsageError(
+                    f"the model has {k_eff} effect coefficients ({', '.join(columns.names[-k_eff:][:3])}...) and "
+                    "their columns were not given; predict through IdentifiedModel.predict, which builds them"
+                )
+            out += np.einsum("mnk,k->mn", effect_values, xf)
     if len(columns.extras):
-        xe = x[nb:]
+        xe = x[nb : columns.p - k_eff]
         used = xe != 0
         if used.any():
             E = columns.extra_columns(dq, ddq)
-            for k in np.flatnonzero(used):
-                out[:, columns.extra_joint[k]] += E[:, k] * xe[k]
+            out += (E[:, used] * xe[used]) @ columns.extra_weights[:, used].T
     return out

@@ -38,7 +38,7 @@ from numpy.typing import NDArray
 from scipy.signal import sosfiltfilt
 
 from dynid._threads import single_blas_thread
-from dynid.exceptions import DataError, IdentificationError
+from dynid.exceptions import DataError, IdentificationError, ShapeError
 from dynid.identify.columns import (
     CHUNK_SAMPLES,
     EXTRA_KINDS,
@@ -48,6 +48,7 @@ from dynid.identify.columns import (
     linear_torque,
 )
 from dynid.identify.dataset import Dataset
+from dynid.identify.effect_terms import EffectColumns
 from dynid.identify.preparation import AUTO_CUTOFF_HZ, Prepared, Preprocessing, prepare, still_joints
 
 __all__ = [
@@ -284,7 +285,9 @@ class LinearSystem:
         return out
 
 
-def _fill_Z(columns: ColumnSet, prepared: Prepared, z_cols: list[tuple[int, int]]) -> NDArray[np.float64]:
+def _fill_Z(
+    columns: ColumnSet, prepared: Prepared, z_cols: list[tuple[int, int]], effect_values=None
+) -> NDArray[np.float64]:
     """The data matrix at full rate, (M, c): regressor entries (joint, parameter) then torques."""
     robot, nb, n = columns.robot, columns.n_base, columns.n
     M = len(prepared.t)
@@ -293,15 +296,20 @@ def _fill_Z(columns: ColumnSet, prepared: Prepared, z_cols: list[tuple[int, int]
     link = [(k, j * nb + pi) for k, (j, pi) in enumerate(z_cols) if pi < nb]
     link_z = np.array([k for k, _ in link], dtype=np.intp)
     link_flat = np.array([f for _, f in link], dtype=np.intp)
-    extra = [(k, pi - nb) for k, (_, pi) in enumerate(z_cols) if pi >= nb]
+    p_extra = nb + len(columns.extras)
+    extra = [(k, j, pi - nb) for k, (j, pi) in enumerate(z_cols) if nb <= pi < p_extra]
+    effect = [(k, j, pi - p_extra) for k, (j, pi) in enumerate(z_cols) if pi >= p_extra]
     for a in range(0, M, CHUNK_SAMPLES):
         s = slice(a, min(a + CHUNK_SAMPLES, M))
         Yb = compiled_base_regressor(robot, prepared.q[s], prepared.dq[s], prepared.ddq[s])
         Z[s, link_z] = Yb.reshape(Yb.shape[0], -1)[:, link_flat]
     if extra:
         E = columns.extra_columns(prepared.dq, prepared.ddq)
-        for k, e in extra:
-            Z[:, k] = E[:, e]
+        weights = columns.extra_weights
+        for k, j, e in extra:
+            Z[:, k] = E[:, e] * weights[j, e]
+    for k, j, e in effect:
+        Z[:, k] = effect_values[:, j, e]
     Z[:, len(z_cols) :] = prepared.tau
     return Z
 
@@ -343,6 +351,7 @@ def build_system(
     friction: bool = True,
     armature: bool = True,
     keep_samples: bool = True,
+    effects: EffectColumns | None = None,
 ) -> LinearSystem:
     """Build the compressed identification system of a dataset (the one expensive pass over the data).
 
@@ -361,6 +370,9 @@ def build_system(
     keep_samples : bool
         Keep the filtered data matrix for per-sample residuals (layers 2 and 3 need them); False frees
         it at once.
+    effects : EffectColumns, optional
+        Effect terms identified with the other parameters (:mod:`dynid.identify.effect_terms`), their
+        columns on this dataset's prepared grid.
 
     Returns
     -------
@@ -375,6 +387,15 @@ def build_system(
     """
     prepared = prepare(data, preprocessing, n_joints=robot.n)
     columns = column_set(robot, friction=friction, armature=armature)
+    values = None
+    if effects is not None and len(effects.names):
+        values = np.asarray(effects.values, dtype=np.float64)
+        if values.shape != (len(prepared.t), robot.n, len(effects.names)):
+            raise ShapeError(
+                f"the effect columns have shape {values.shape}; expected {(len(prepared.t), robot.n, len(effects.names))} "
+                "(the prepared samples, the joints, the coefficients): build them on this dataset's prepared states"
+            )
+        columns = columns.with_effects(effects.terms, effects.names, np.any(values != 0.0, axis=0))
     n, p = robot.n, columns.p
     m = prepared.m
     if m * n <= p or m < 2:
@@ -383,7 +404,7 @@ def build_system(
             f"record more than {p // n + 1} samples (in practice at least {10 * p // n}), or trim/decimate less"
         )
     z_cols = [(j, k) for k in range(p) for j in range(n) if columns.pattern[j, k]]
-    Z = _fill_Z(columns, prepared, z_cols)
+    Z = _fill_Z(columns, prepared, z_cols, values)
     _filter_in_place(Z, prepared)
     with single_blas_thread():
         R_Z = _qr_rows(Z, prepared.rows)

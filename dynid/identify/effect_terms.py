@@ -1,0 +1,702 @@
+"""Effects as regressor columns: the one set of column builders that identify and the diagnosis share.
+
+Each effect of the catalogue (the simulator's :mod:`dynid.sim.effects` injects the same names; the
+table of columns is in :mod:`dynid.diagnosis.candidates`) becomes one or a few columns per joint, linear
+in their coefficients, built at full rate from the states of a dataset (:class:`FeatureSource`) and
+then low-passed with the torque's filter like every regressor column (parallel filtering).
+
+``identify(..., effects="coupled_friction@5+6,stribeck@3")`` (:func:`parse_effect_terms`) adds them to
+the identified parameters (:class:`dynid.identify.columns.ColumnSet` kind ``effect``), refitted with the
+base parameters; the diagnosis screens the same columns as candidates.  Effects whose columns need the
+model's own torque (load friction, drive gain, delay, elasticity, backlash) use the torque of a first
+fit without the effects, which the model keeps (``effect_reference``) to predict with.  Delay,
+elasticity and backlash are not linear in their physical parameters: identify takes their refit forms
+with the hyper-parameters given or tuned on the training data (the diagnosis refines them further).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dynid.exceptions import UsageError
+
+__all__ = [
+    "BUILDERS",
+    "EFFECT_GRIDS",
+    "TAU_EFFECTS",
+    "TIME_EFFECTS",
+    "Candidate",
+    "EffectColumns",
+    "FeatureSource",
+    "backlash_grid",
+    "candidate_columns",
+    "coefficient_names",
+    "cogging_grid",
+    "effect_from_dict",
+    "effect_to_dict",
+    "effect_values",
+    "needs_time",
+    "needs_torque",
+    "parse_effect_terms",
+    "relay",
+    "stribeck_grid",
+    "temperature_grid",
+    "term_variants",
+    "tune_terms",
+]
+
+_SIGN_EPS = 1e-3  # rad/s: velocities below this count as zero in sign(dq) (quantised encoders)
+
+
+@dataclass(frozen=True, eq=False)
+class FeatureSource:
+    """Full-rate signals of one dataset from which candidate columns are built.
+
+    Complete when made; ``cache`` only memoises what its methods compute from these signals (the mass
+    matrix, the gravity tilt columns).
+
+    Parameters
+    ----------
+    t : ndarray, shape (M,)
+        Time (s) from the start of the recording.
+    q, dq, ddq : ndarray, shape (M, n)
+        States the regressor is evaluated at (rad, rad/s, rad/s^2).
+    tau_pred : ndarray, shape (M, n)
+        The identified model's torque at those states (N m), unfiltered.
+    robot : RobotModel
+        The robot.
+    fs : float
+        Sampling rate (Hz).
+    runs : list of slice
+        Runs (signals are differentiated within a run only).
+    torque_at : callable, optional
+        ``f(q, dq, ddq) -> (M, n)``: the model's torque at other states (what the exact transmission
+        columns shift); ``tau_pred`` at the recorded states.
+    tau_link, link_torque_at : optional
+        The same for the links' share of the torque, which the transmission carries (without the
+        model's armature and friction, which act on the motor side); the full torque when not given.
+    """
+
+    t: NDArray[np.float64]
+    q: NDArray[np.float64]
+    dq: NDArray[np.float64]
+    ddq: NDArray[np.float64]
+    tau_pred: NDArray[np.float64]
+    robot: Any
+    fs: float
+    runs: list[slice]
+    torque_at: (
+        Callable[[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]], NDArray[np.float64]] | None
+    ) = None
+    cache: dict[str, Any] = field(default_factory=dict)
+    tau_link: NDArray[np.float64] | None = None
+    link_torque_at: (
+        Callable[[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]], NDArray[np.float64]] | None
+    ) = None
+
+    def transmitted(self, j: int) -> NDArray[np.float64]:
+        """Torque (M,) that joint j's transmission carries to the link (N m): what deflects a spring or
+        closes a dead zone.  The motor's friction and inertia act before the gear, not through it."""
+        return (self.tau_pred if self.tau_link is None else self.tau_link)[:, j]
+
+    @property
+    def n(self) -> int:
+        """Number of joints."""
+        return int(self.q.shape[1])
+
+    @property
+    def m(self) -> int:
+        """Number of samples."""
+        return int(self.q.shape[0])
+
+    def derivative(self, x: NDArray[np.float64], order: int = 1) -> NDArray[np.float64]:
+        """Central-difference derivative along time, run by run: shape of ``x``, unit per s^order."""
+        out = np.array(x, dtype=float, copy=True)
+        dt = 1.0 / self.fs
+        for _ in range(order):
+            res = np.empty_like(out)
+            for run in self.runs:
+                seg = out[run]
+                res[run] = np.gradient(seg, dt, axis=0) if len(seg) > 1 else 0.0
+            out = res
+        return out
+
+    def sign(self, v: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``sign(v)`` with |v| < 1e-3 counted as zero."""
+        return np.where(np.abs(v) < _SIGN_EPS, 0.0, np.sign(v))
+
+    def mass_column(self, j: int) -> NDArray[np.float64]:
+        """Column j of the mass matrix M(q) at every sample, (M, n) (kg m^2)."""
+        key = "mass"
+        if key not in self.cache:
+            import pinocchio as pin
+
+            model = self.robot.pin_model
+            data = model.createData()
+            self.cache[key] = np.array([pin.crba(model, data, qi) for qi in self.q])
+        M = self.cache[key]
+        return 0.5 * (M[:, :, j] + M[:, j, :])
+
+    def gravity_tilt(self) -> NDArray[np.float64]:
+        """``d g(q) / d alpha`` for gravity tilted about two horizontal axes: (M, n, 2) (N m/rad)."""
+        if "tilt" in self.cache:
+            return self.cache["tilt"]
+        import pinocchio as pin
+
+        model = self.robot.pin_model.copy()
+        data = model.createData()
+        g0 = np.array(model.gravity.linear, dtype=float)
+        up = g0 / max(np.linalg.norm(g0), 1e-12)
+        a1 = np.cross(up, [1.0, 0.0, 0.0])
+        if np.linalg.norm(a1) < 1e-6:
+            a1 = np.cross(up, [0.0, 1.0, 0.0])
+        a1 /= np.linalg.norm(a1)
+        a2 = np.cross(up, a1)
+        out = np.empty((self.m, self.n, 2))
+        for k, axis in enumerate((a1, a2)):
+            # Small rotation: g' = g + alpha (axis x g); derivative exact since g(q) is linear in g.
+            model.gravity.linear = np.cross(axis, g0)
+            for i in range(self.m):
+                out[i, :, k] = pin.computeGeneralizedGravity(model, data, self.q[i])
+        self.cache["tilt"] = out
+        return out
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One candidate effect: its columns and what it needs.
+
+    Attributes
+    ----------
+    effect : str
+        Catalogue name.
+    joint : int or None
+        Joint (0-based) it acts on, None for an effect of the whole arm.
+    joints : tuple of int
+        Joints (0-based) whose torque it changes.
+    hyper : dict
+        Hyper-parameter values (tuned on the training data).
+    label : str
+        Human label ("stribeck on joint 3").
+    """
+
+    effect: str
+    joint: int | None
+    joints: tuple[int, ...]
+    hyper: dict[str, float] = field(default_factory=dict)
+    label: str = ""
+
+    @property
+    def scored(self) -> tuple[int, ...]:
+        """Joints (0-based) on which it is scored: a flexible transmission shakes the whole arm."""
+        if self.effect in ("elasticity", "backlash") and self.joint is not None:
+            return ()  # all joints
+        return self.joints
+
+    @property
+    def key(self) -> str:
+        """Effect and joint(s), e.g. ``stribeck@3`` or ``coupled_friction@5+6``."""
+        if self.joint is None and len(self.joints) == 0:
+            return self.effect
+        if self.joint is not None:
+            return f"{self.effect}@{self.joint + 1}"
+        return f"{self.effect}@" + "+".join(str(j + 1) for j in self.joints)
+
+
+def _on_joint(src: FeatureSource, j: int, cols: Sequence[NDArray[np.float64]]) -> NDArray[np.float64]:
+    out = np.zeros((src.m, src.n, len(cols)))
+    for k, c in enumerate(cols):
+        out[:, j, k] = c
+    return out
+
+
+def _warm(t: NDArray[np.float64], T: float) -> NDArray[np.float64]:
+    return 1.0 - np.exp(-np.maximum(t, 0.0) / T)
+
+
+Builder = Callable[[FeatureSource, Candidate], NDArray[np.float64]]
+
+
+def _offset(src, c):
+    return _on_joint(src, c.joint, [np.ones(src.m)])
+
+
+def _armature(src, c):
+    return _on_joint(src, c.joint, [src.ddq[:, c.joint]])
+
+
+def _stribeck(src, c):
+    v = src.dq[:, c.joint]
+    vs = c.hyper["vs"]
+    return _on_joint(src, c.joint, [src.sign(v) * np.exp(-((np.abs(v) / vs) ** 2))])
+
+
+def _load_friction(src, c):
+    j = c.joint
+    s = src.sign(src.dq[:, j])
+    a = np.abs(src.tau_pred[:, j])
+    drive = np.sign(src.dq[:, j] * src.tau_pred[:, j])
+    return _on_joint(src, j, [s * a, s * a * drive])
+
+
+def _temperature(src, c):
+    j = c.joint
+    h = _warm(src.t, c.hyper["T"])
+    return _on_joint(src, j, [h * src.sign(src.dq[:, j]), h * src.dq[:, j]])
+
+
+def _cogging(src, c):
+    j = c.joint
+    N = c.hyper["N"]
+    x = src.q[:, j]
+    return _on_joint(src, j, [f(k * N * x) for k in (1, 2) for f in (np.sin, np.cos)])
+
+
+def _shifted(
+    src: FeatureSource, j: int, delta: NDArray[np.float64], *, links: bool = False
+) -> NDArray[np.float64]:
+    """Change of the first-fit torque (M, n, 1) when the link angle of joint j lags the encoder by delta;
+    with ``links`` of the links' share only (the motor's friction and inertia stay at the encoder's states)."""
+    at, base = src.torque_at, src.tau_pred
+    if links and src.link_torque_at is not None and src.tau_link is not None:
+        at, base = src.link_torque_at, src.tau_link
+    if at is None:
+        raise ValueError("the exact transmission columns need FeatureSource.torque_at")
+    q, dq, ddq = src.q.copy(), src.dq.copy(), src.ddq.copy()
+    q[:, j] -= delta
+    dq[:, j] -= src.derivative(delta, 1)
+    ddq[:, j] -= src.derivative(delta, 2)
+    return (at(q, dq, ddq) - base)[:, :, None]
+
+
+def _spring_deflection(src: FeatureSource, j: int, tau, w: float, z: float) -> NDArray[np.float64]:
+    """Deflection (M,) of a spring of natural frequency w (rad/s), damping ratio z, loaded by tau (N m)."""
+    from scipy.signal import cont2discrete, lfilter
+
+    m = float(np.median(src.mass_column(j)[:, j]))
+    K = m * w * w
+    b, a, _ = cont2discrete(([w * w], [1.0, 2 * z * w, w * w]), 1.0 / src.fs, method="bilinear")
+    out = np.empty_like(tau)
+    for run in src.runs:
+        seg = tau[run] / K
+        out[run] = lfilter(b[0], a, seg - seg[0]) + seg[0]
+    return out
+
+
+def _elasticity(src, c):
+    j = c.joint
+    # The model's whole torque loads the spring here: its links' share alone (physically the load)
+    # lost a flexible shoulder (UR5 joint 2, resonance 10 Hz: 0.64 of its gap closed, then none).
+    tau = src.tau_pred[:, j]
+    # The motor inertia of a flexible joint acts on the encoder side like an armature: its column
+    # goes with the spring's when the model has no armature of its own.
+    motor = [src.ddq[:, j]] if c.hyper.get("motor") else []
+    if "exact" in c.hyper:
+        # Refit: the link is a mass on a spring driven from the encoder side, q_j = theta_j - delta with
+        # m delta'' + d delta' + K delta = tau_j (natural frequency w, damping ratio z, m = M_jj).
+        delta = _spring_deflection(src, j, tau, c.hyper["w"], c.hyper["z"])
+        out = _shifted(src, j, delta)
+        return np.concatenate([out, _on_joint(src, j, motor)], axis=2) if motor else out
+    # First order of q_j = theta_j - c tau_j: the whole arm feels -M(q)[:, j] c d2tau_j/dt2.
+    out = src.mass_column(j)[:, :, None] * src.derivative(tau, 2)[:, None, None]
+    return np.concatenate([out, _on_joint(src, j, motor)], axis=2) if motor else out
+
+
+def relay(x: NDArray[np.float64], h: float) -> NDArray[np.float64]:
+    """+-1 by the side x last crossed: above h, below -h (a relay with hysteresis 2 h)."""
+    s = np.where(x > h, 1.0, np.where(x < -h, -1.0, 0.0))
+    idx = np.where(s != 0, np.arange(s.size), 0)
+    idx = np.maximum.accumulate(idx)
+    out = s[idx]
+    first = np.flatnonzero(s)
+    out[: first[0] if first.size else s.size] = s[first[0]] if first.size else 0.0
+    return out
+
+
+def _backlash(src, c):
+    j = c.joint
+    tau = src.transmitted(j)
+    motor = [src.ddq[:, j]] if c.hyper.get("motor") else []
+    if "exact" in c.hyper:
+        # Refit: the teeth change sides once the transmitted torque has reversed beyond h (the impacts
+        # and the link's own swing make it hover about zero), d seconds later (the time the motor takes
+        # to cross the gap); the link lags the encoder by a on the side last pushed.
+        b = relay(tau, c.hyper["h"] * max(float(np.std(tau)), 1e-12))
+        if c.hyper.get("d", 0.0):
+            b = np.interp(src.t - c.hyper["d"], src.t, b)
+        out = _shifted(src, j, c.hyper["a"] * b, links=True)
+        return np.concatenate([out, _on_joint(src, j, motor)], axis=2) if motor else out
+    b = np.tanh(tau / c.hyper["eps"])
+    # The link lags by a tanh(tau / eps) + c tau (dead zone and the teeth's stiffness): to first order the
+    # whole arm feels -M(q)[:, j] times their second derivatives; the offset b shifts gravity on joint j.
+    Mj = src.mass_column(j)[:, :, None]
+    out = np.concatenate(
+        [Mj * src.derivative(b, 2)[:, None, None], Mj * src.derivative(tau, 2)[:, None, None]], axis=2
+    )
+    return np.concatenate([out, _on_joint(src, j, [b, *motor])], axis=2)
+
+
+def _delay(src, c):
+    j = c.joint
+    tau = src.tau_pred[:, j]
+    if "exact" in c.hyper:  # refit: tau(t - d) - tau(t)
+        return _on_joint(src, j, [np.interp(src.t - c.hyper["d"], src.t, tau) - tau])
+    return _on_joint(src, j, [src.derivative(tau, 1)])
+
+
+def _drive_gain(src, c):
+    j = c.joint
+    return _on_joint(src, j, [src.tau_pred[:, j]])
+
+
+def _base_tilt(src, c):
+    return src.gravity_tilt()
+
+
+def _coupled(src, c):
+    a, b = c.joints
+    w = src.dq[:, a] + c.hyper["sign"] * src.dq[:, b]
+    s = src.sign(w)
+    out = np.zeros((src.m, src.n, 2))
+    out[:, a, 0] = s
+    out[:, a, 1] = w
+    # The coupled motor's friction reaches joint b through the same coupling sign.
+    out[:, b, 0] = c.hyper["sign"] * s
+    out[:, b, 1] = c.hyper["sign"] * w
+    return out
+
+
+def _nonlinear_viscous(src, c):
+    v = src.dq[:, c.joint]
+    return _on_joint(src, c.joint, [v * np.abs(v), v**3])
+
+
+BUILDERS: dict[str, Builder] = {
+    "offset": _offset,
+    "armature": _armature,
+    "stribeck": _stribeck,
+    "load_friction": _load_friction,
+    "temperature": _temperature,
+    "cogging": _cogging,
+    "elasticity": _elasticity,
+    "backlash": _backlash,
+    "delay": _delay,
+    "drive_gain": _drive_gain,
+    "base_tilt": _base_tilt,
+    "coupled_friction": _coupled,
+    "nonlinear_viscous": _nonlinear_viscous,
+}
+
+
+def candidate_columns(src: FeatureSource, cand: Candidate) -> NDArray[np.float64]:
+    """Full-rate columns of a candidate: (M, n, k), zero on the joints it does not act on.
+
+    Parameters
+    ----------
+    src : FeatureSource
+        Signals of one dataset.
+    cand : Candidate
+        The candidate with its hyper-parameters.
+    """
+    return BUILDERS[cand.effect](src, cand)
+
+
+def stribeck_grid(src: FeatureSource, j: int) -> list[dict[str, float]]:
+    vmax = max(float(np.max(np.abs(src.dq[:, j]))), 1e-6)
+    return [{"vs": f * vmax} for f in (0.01, 0.02, 0.04, 0.08, 0.16)]
+
+
+def temperature_grid(src: FeatureSource, j: int) -> list[dict[str, float]]:
+    span = max(float(src.t[-1]), 1.0)
+    return [{"T": f * span} for f in (0.25, 1.0, 4.0)]
+
+
+def backlash_grid(src: FeatureSource, j: int) -> list[dict[str, float]]:
+    s = max(float(np.std(src.transmitted(j))), 1e-9)
+    return [{"eps": f * s} for f in (0.02, 0.05, 0.15)]
+
+
+def cogging_grid(src: FeatureSource, j: int) -> list[dict[str, float]]:
+    return [{"N": float(N)} for N in (50, 80, 100, 120, 160, 200)]
+
+
+# ---------------------------------------------------------------------------- identify's side
+EFFECT_GRIDS: dict[str, Callable[[FeatureSource, int], list[dict[str, float]]]] = {
+    "stribeck": stribeck_grid,
+    "temperature": temperature_grid,
+    "backlash": backlash_grid,
+    "cogging": cogging_grid,
+}
+"""Hyper-parameter grids (scaled from the training data) of the effects that have one."""
+
+TAU_EFFECTS = ("load_friction", "delay", "drive_gain", "elasticity", "backlash")
+"""Effects whose columns need the model's own torque (a first fit without the effects)."""
+
+TIME_EFFECTS = ("temperature", "delay", "elasticity", "backlash")
+"""Effects whose columns need time (derivatives or a warm-up along the run): predicted from a dataset."""
+
+_DELAYS_S = (0.0005, 0.001, 0.002, 0.004, 0.008, 0.016)  # grid of the delay's refit form (s)
+_WHOLE_ARM = ("base_tilt",)
+_PAIR = ("coupled_friction",)
+_COEF_NAMES = {
+    "offset": ("fo",),
+    "armature": ("ia",),
+    "stribeck": ("fs",),
+    "load_friction": ("mu", "mu_drive"),
+    "temperature": ("fc_T", "fv_T"),
+    "cogging": ("a1", "b1", "a2", "b2"),
+    "elasticity": ("c",),
+    "backlash": ("a_b", "c", "b"),
+    "delay": ("g",),
+    "drive_gain": ("g",),
+    "base_tilt": ("ax", "ay"),
+    "coupled_friction": ("fc", "fv"),
+    "nonlinear_viscous": ("fv2", "fv3"),
+}
+_ITEM = re.compile(r"^(?P<name>[a-z_]+)(@(?P<joints>[0-9+\-]+))?(:(?P<hyper>.+))?$")
+
+
+def coefficient_names(term: Candidate, width: int) -> tuple[str, ...]:
+    """Names of a term's coefficients (``coupled_friction@5+6.fc``), ``width`` of them."""
+    base = _COEF_NAMES.get(term.effect, ())
+    names = [base[k] if k < len(base) else f"c{k + 1}" for k in range(width)]
+    return tuple(f"{term.key}.{name}" for name in names)
+
+
+def _joint_list(text: str, n: int, item: str) -> list[int]:
+    """0-based joints of ``J``, ``J-K`` or ``J+K`` (1-based in the text)."""
+    try:
+        if "-" in text:
+            a, b = (int(v) for v in text.split("-"))
+            js = list(range(a, b + 1))
+        else:
+            js = [int(v) for v in text.split("+")]
+    except ValueError:
+        js = []
+    if not js or any(not 1 <= j <= n for j in js) or len(set(js)) != len(js):
+        raise UsageError(
+            f"the joints of the effect '{item}' are '{text}'; give joints in 1..{n} as J, J-K (a range) or "
+            "A+B (a coupled pair), e.g. stribeck@3 or coupled_friction@5+6"
+        )
+    return [j - 1 for j in js]
+
+
+def parse_effect_terms(spec: str | Sequence[str] | None, n: int) -> tuple[Candidate, ...]:
+    """Read ``NAME[@JOINTS][:KEY=VALUE;...],...`` into effect terms (hyper-parameters left out are tuned).
+
+    Parameters
+    ----------
+    spec : str or sequence of str or None
+        ``"coupled_friction@5+6,stribeck@3,offset"``: a per-joint effect on every joint when no joint is
+        given, on ``J`` or on each joint of ``J-K``; ``coupled_friction`` on a pair ``A+B`` (default the
+        last two joints); hyper-parameters such as ``stribeck@3:vs=0.05``, ``cogging@2:N=100``,
+        ``delay@1:d=0.002``, ``coupled_friction@5+6:sign=-1``.
+    n : int
+        Number of joints.
+
+    Returns
+    -------
+    tuple of Candidate
+        One term per (effect, joint or pair), in the order given.
+
+    Raises
+    ------
+    UsageError
+        Unknown effect (the message lists the catalogue), malformed joints or hyper-parameters, a term
+        given twice, or ``payload`` (re-identification absorbs it whole: there is nothing to add).
+    """
+    if spec is None:
+        return ()
+    items = [p.strip().replace(" ", "") for p in spec.split(",")] if isinstance(spec, str) else list(spec)
+    items = [p for p in items if p and p.lower() not in ("none", "off")]
+    out: list[Candidate] = []
+    for item in items:
+        match = _ITEM.match(str(item).lower())
+        if match is None:
+            raise UsageError(
+                f"the effect '{item}' is not of the form NAME[@JOINTS][:KEY=VALUE]; write e.g. "
+                "'coupled_friction@5+6', 'stribeck@3' or 'cogging@2:N=100'"
+            )
+        name = match["name"]
+        if name == "payload":
+            raise UsageError(
+                "the effect 'payload' is a rigid mass on the last link, which the base parameters take in whole; "
+                "identify again on data with the payload instead of adding it"
+            )
+        if name not in BUILDERS:
+            raise UsageError(
+                f"unknown effect '{name}'; the catalogue's effects with model terms are {', '.join(BUILDERS)}"
+            )
+        hyper: dict[str, float] = {}
+        for part in (match["hyper"] or "").split(";"):
+            if not part:
+                continue
+            key, _, value = part.partition("=")
+            try:
+                hyper[key] = float(value)
+            except ValueError:
+                raise UsageError(
+                    f"the hyper-parameter '{part}' of the effect '{item}' is not KEY=NUMBER; write e.g. "
+                    f"{name}:vs=0.05"
+                ) from None
+        if name == "delay" and hyper:
+            hyper["exact"] = 1.0
+        joints_text = match["joints"]
+        if name in _WHOLE_ARM:
+            if joints_text:
+                raise UsageError(f"the effect '{name}' acts on the whole arm; give it without @JOINTS")
+            terms = [Candidate(name, None, tuple(range(n)), hyper, "base tilt (gravity direction)")]
+        elif name in _PAIR:
+            pair = _joint_list(joints_text, n, item) if joints_text else [n - 2, n - 1]
+            if len(pair) != 2 or n < 2:
+                raise UsageError(
+                    f"the effect '{item}' couples two joints; give a pair such as coupled_friction@5+6"
+                )
+            terms = [
+                Candidate(
+                    name,
+                    None,
+                    (pair[0], pair[1]),
+                    hyper,
+                    f"coupled friction of joints {pair[0] + 1} and {pair[1] + 1}",
+                )
+            ]
+        else:
+            js = _joint_list(joints_text, n, item) if joints_text else list(range(n))
+            if joints_text and "+" in joints_text:
+                raise UsageError(
+                    f"the effect '{name}' acts on one joint at a time; give J or J-K, not '{joints_text}'"
+                )
+            terms = [Candidate(name, j, (j,), dict(hyper), f"{name} on joint {j + 1}") for j in js]
+        for term in terms:
+            if any(t.key == term.key for t in out):
+                raise UsageError(f"the effect '{term.key}' is given twice; give it once")
+            out.append(term)
+    return tuple(out)
+
+
+def effect_to_dict(term: Candidate) -> dict[str, Any]:
+    """A term as JSON: effect, joints (from 1), hyper-parameters."""
+    return {
+        "name": term.effect,
+        "key": term.key,
+        "joint": None if term.joint is None else term.joint + 1,
+        "joints": [j + 1 for j in term.joints],
+        "hyper": {k: float(v) for k, v in term.hyper.items()},
+        "label": term.label,
+    }
+
+
+def effect_from_dict(doc: dict[str, Any]) -> Candidate:
+    """The term written by :func:`effect_to_dict`."""
+    joint = doc.get("joint")
+    return Candidate(
+        str(doc["name"]),
+        None if joint is None else int(joint) - 1,
+        tuple(int(j) - 1 for j in doc["joints"]),
+        {str(k): float(v) for k, v in doc.get("hyper", {}).items()},
+        str(doc.get("label", "")),
+    )
+
+
+def term_variants(src: FeatureSource, term: Candidate) -> list[Candidate]:
+    """The hyper-parameter variants to tune a term among (the term itself when nothing is left to tune)."""
+    name = term.effect
+    if name == "coupled_friction" and "sign" not in term.hyper:
+        return [
+            Candidate(name, None, term.joints, {**term.hyper, "sign": s}, term.label) for s in (1.0, -1.0)
+        ]
+    if name == "delay" and "d" not in term.hyper:
+        return [
+            Candidate(name, term.joint, term.joints, {"exact": 1.0, "d": d}, term.label) for d in _DELAYS_S
+        ]
+    grid = EFFECT_GRIDS.get(name)
+    if grid is None or term.joint is None:
+        return [term]
+    variants = [g for g in grid(src, term.joint) if not set(g) <= set(term.hyper)]
+    if not variants or set(variants[0]) <= set(term.hyper):
+        return [term]
+    return [Candidate(name, term.joint, term.joints, {**g, **term.hyper}, term.label) for g in variants]
+
+
+def needs_time(terms: Sequence[Candidate]) -> bool:
+    """Whether some term needs time stamps (see :data:`TIME_EFFECTS`)."""
+    return any(t.effect in TIME_EFFECTS for t in terms)
+
+
+def needs_torque(terms: Sequence[Candidate]) -> bool:
+    """Whether some term needs the model's own torque (see :data:`TAU_EFFECTS`)."""
+    return any(t.effect in TAU_EFFECTS for t in terms)
+
+
+@dataclass(frozen=True, eq=False)
+class EffectColumns:
+    """Effect terms with their columns on one dataset, for :func:`dynid.identify.linear_system.build_system`.
+
+    Attributes
+    ----------
+    terms : tuple of Candidate
+        The terms (hyper-parameters resolved).
+    names : tuple of str
+        One name per coefficient (:func:`coefficient_names`).
+    values : ndarray, shape (M, n, k)
+        Their columns at full rate on the prepared grid, unfiltered (the system filters them like the torque).
+    """
+
+    terms: tuple[Candidate, ...]
+    names: tuple[str, ...]
+    values: NDArray[np.float64]
+
+
+def effect_values(src: FeatureSource, terms: Sequence[Candidate]) -> tuple[NDArray[np.float64], list[int]]:
+    """Full-rate columns of the terms side by side, (M, n, k), and the width of each term."""
+    blocks = [candidate_columns(src, t) for t in terms]
+    widths = [b.shape[2] for b in blocks]
+    if not blocks:
+        return np.zeros((src.m, src.n, 0)), widths
+    return np.concatenate(blocks, axis=2), widths
+
+
+def tune_terms(
+    src: FeatureSource,
+    terms: Sequence[Candidate],
+    residual: NDArray[np.float64],
+    treat: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+) -> tuple[Candidate, ...]:
+    """Pick each term's hyper-parameters among its variants: the one whose columns, fitted by least
+    squares to the first fit's residual, leave the least of it.
+
+    Parameters
+    ----------
+    src : FeatureSource
+        Training signals at full rate.
+    terms : sequence of Candidate
+        Terms, some without hyper-parameters.
+    residual : ndarray, shape (m, n)
+        Residual of the first fit at the kept rows (treated like the torque).
+    treat : callable
+        ``(M, n) -> (m, n)``: the torque's filter and the kept rows.
+    """
+    out = []
+    for term in terms:
+        variants = term_variants(src, term)
+        if len(variants) == 1:
+            out.append(variants[0])
+            continue
+        best, best_rss = variants[0], np.inf
+        for v in variants:
+            C = candidate_columns(src, v)
+            A = np.stack([treat(C[:, :, k]) for k in range(C.shape[2])], axis=2).reshape(-1, C.shape[2])
+            b = residual.reshape(-1)
+            coef, *_ = np.linalg.lstsq(A, b, rcond=1e-10)
+            rss = float(np.sum((b - A @ coef) ** 2))
+            if rss < best_rss:
+                best, best_rss = v, rss
+        out.append(best)
+    return tuple(out)
