@@ -19,6 +19,7 @@ __all__ = [
     "ModelFileError",
     "NotFittedError",
     "RobotModelError",
+    "RobotModelWarning",
     "ShapeError",
     "UsageError",
 ]
@@ -83,3 +84,7 @@ class DataWarning(DynidWarning):
 
 class IdentificationWarning(DynidWarning):
     """An identification finished but something deserves attention (e.g. IRLS did not converge)."""
+
+
+class RobotModelWarning(DynidWarning):
+    """A robot description that can be used but looks slightly off (e.g. a rounded inertia)."""

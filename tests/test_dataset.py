@@ -235,7 +235,7 @@ def test_npz_keeps_meta_and_run_boundaries(rng: np.random.Generator, tmp_path: P
 
 
 def test_npz_accepts_stacked_arrays(rng: np.random.Generator, tmp_path: Path) -> None:
-    t, q, tau = np.arange(8.0), rng.normal(size=(8, 2)), rng.normal(size=(8, 2))
+    t, q, tau = 0.01 * np.arange(8.0), rng.normal(size=(8, 2)), rng.normal(size=(8, 2))
     np.savez(tmp_path / "stacked.npz", t=t, q=q, tau=tau)
     ds = load_dataset(tmp_path / "stacked.npz")
     np.testing.assert_array_equal(ds.q, q)

@@ -27,7 +27,7 @@ from dynid.sim.effects import (
     parse_effects,
     robot_scales,
 )
-from dynid.symbolic.robot import RobotModel, standard_from_com
+from dynid.symbolic.robot import RobotModel, check_simulable, standard_from_com
 
 __all__ = ["Transmission", "Truth", "build_truth", "perturb_params"]
 
@@ -234,7 +234,10 @@ def build_truth(
     ------
     UsageError
         Unknown effect or friction, bad size, joint selector outside the robot.
+    RobotModelError
+        A joint that carries no mass, inertia or armature (:func:`dynid.symbolic.robot.check_simulable`).
     """
+    check_simulable(robot)
     requests = parse_effects(effects)
     if isinstance(friction, str) and friction not in FRICTION_KINDS:
         raise UsageError(

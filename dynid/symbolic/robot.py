@@ -18,6 +18,9 @@ import os
 import sys
 import tempfile
 import tomllib
+import warnings
+import xml.etree.ElementTree as ET
+from collections import Counter
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from functools import cached_property
@@ -25,13 +28,16 @@ from pathlib import Path
 
 import numpy as np
 
-from dynid.exceptions import RobotModelError, ShapeError
+from dynid.exceptions import RobotModelError, RobotModelWarning, ShapeError
 
 __all__ = [
     "BUILTIN_ROBOTS",
     "DEFAULT_DDQ_MAX",
+    "INERTIA_TOLERANCE",
     "PARAM_NAMES",
     "RobotModel",
+    "check_inertias",
+    "check_simulable",
     "load_robot",
 ]
 
@@ -40,6 +46,11 @@ PARAM_NAMES = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
 
 DEFAULT_DDQ_MAX = 10.0
 """Acceleration limit (rad/s^2 or m/s^2) used when a model states none (URDF has no such field)."""
+
+INERTIA_TOLERANCE = 0.01
+"""Largest violation of the triangle inequality a loaded description may have, as a fraction of the trace
+of the link's inertia: beyond it the description is refused, below it (rounded inertias of published
+URDFs) :func:`check_inertias` warns."""
 
 # Built-in robots: URDF inside the installed example-robot-data package, joints to lock, tool frame,
 # acceleration limits (rad/s^2).  Panda: Franka's datasheet limits; UR: none published, the default.
@@ -403,7 +414,14 @@ def _from_pin_model(model, *, name: str, source: str, tool: str | None, ddq_max)
     n = len(joints)
     # Tool frame: the named frame, else the last frame in the model.
     frame_id = None
-    if tool is not None and model.existFrame(tool):
+    if tool is not None and not model.existFrame(tool):
+        kinds = (pin.FrameType.BODY, pin.FrameType.OP_FRAME)
+        names = [f.name for f in model.frames if f.type in kinds and f.name != "universe"]
+        shown = ", ".join(names[-16:]) + (f" (and {len(names) - 16} more)" if len(names) > 16 else "")
+        raise RobotModelError(
+            f"the model '{source}' has no frame '{tool}'; give --tool one of its frames: {shown}."
+        )
+    if tool is not None:
         frame_id = model.getFrameId(tool)
     elif tool is None and len(model.frames) > 1:
         frame_id = len(model.frames) - 1
@@ -474,6 +492,7 @@ def _load_urdf(path: Path, *, name: str, source: str, lock=(), tool=None, ddq_ma
         raise RobotModelError(
             f"the URDF file '{path}' does not exist; give the path of an existing .urdf file."
         )
+    _refuse_mimic_joints(path, lock)
     try:
         with _captured_stderr() as said:
             model = pin.buildModelFromUrdf(str(path))
@@ -489,6 +508,147 @@ def _load_urdf(path: Path, *, name: str, source: str, lock=(), tool=None, ddq_ma
     if model.nv == 0:
         raise RobotModelError(f"the URDF file '{path}' has no movable joint; give an arm with at least one.")
     return _from_pin_model(model, name=name, source=source, tool=tool, ddq_max=ddq_max)
+
+
+def _refuse_mimic_joints(path: Path, lock=()) -> None:
+    """Refuse a URDF whose movable joints include a mimic joint (dynid does not model them)."""
+    try:
+        root = ET.parse(path).getroot()
+    except (ET.ParseError, OSError):
+        return  # the URDF parser names the problem
+    for joint in root.iter("joint"):
+        mimic = joint.find("mimic")
+        name = joint.get("name", "?")
+        if mimic is None or joint.get("type") == "fixed" or name in lock:
+            continue
+        raise RobotModelError(
+            f"joint '{name}' of the URDF file '{path}' mimics joint '{mimic.get('joint', '?')}', but dynid "
+            "models independent joints only; make the mimic joint fixed, or remove its <mimic> tag to identify "
+            "it as a joint of its own."
+        )
+
+
+def _principal_moments(v: np.ndarray) -> np.ndarray:
+    """Principal moments (kg m^2) about the centre of mass of a link from its 10 standard parameters."""
+    m = float(v[0])
+    c = v[1:4] / m if m > 0 else np.zeros(3)
+    inertia = np.array([[v[4], v[5], v[7]], [v[5], v[6], v[8]], [v[7], v[8], v[9]]], dtype=float)
+    skew = np.array([[0.0, -c[2], c[1]], [c[2], 0.0, -c[0]], [-c[1], c[0], 0.0]])
+    return np.linalg.eigvalsh(inertia + m * skew @ skew)
+
+
+def check_inertias(model: RobotModel) -> RobotModel:
+    """Check that every link of a loaded description is a physical body.
+
+    The rule, the same for URDF files, modified-DH tables and built-in robots: a mass is positive, or
+    zero with zero first moment (an empty link); the inertia about the centre of mass is positive
+    semi-definite (a point mass or a thin rod, idealised, is accepted); each principal moment is at most
+    the sum of the other two (the triangle inequality).  A violation of the triangle inequality by at most
+    :data:`INERTIA_TOLERANCE` of the trace (published URDFs round their inertias) gives a warning; anything
+    else is refused.  Identified or perturbed parameters (:meth:`RobotModel.with_params`) are not checked.
+
+    Parameters
+    ----------
+    model : RobotModel
+        A model as loaded.
+
+    Returns
+    -------
+    RobotModel
+        ``model``, so that calls chain.
+
+    Raises
+    ------
+    RobotModelError
+        Negative mass, first moment without mass, inertia not positive semi-definite, or the triangle
+        inequality violated beyond the tolerance.
+
+    Warns
+    -----
+    RobotModelWarning
+        The triangle inequality violated within the tolerance.
+    """
+    for j, v in enumerate(np.asarray(model.params, dtype=float).reshape(-1, 10), start=1):
+        where = f"the link of joint {j} ('{model.joints[j - 1].name}') of the robot '{model.name}'"
+        if not v[0] >= 0:
+            raise RobotModelError(
+                f"{where} has mass {v[0]:g} kg; a mass must be positive (or zero for an empty link): fix it."
+            )
+        if v[0] == 0 and np.any(v[1:4] != 0):
+            raise RobotModelError(
+                f"{where} has zero mass but first moment {(np.round(v[1:4], 6) + 0.0).tolist()} kg m; a body "
+                "needs a positive mass (or zero mass and zero first moment): fix its mass."
+            )
+        moments = _principal_moments(v)
+        trace = float(moments.sum())
+        scale = max(float(np.abs(moments).max()), 1e-300)
+        if moments.min() < -1e-9 * scale:
+            raise RobotModelError(
+                f"{where} has principal moments of inertia {np.round(moments, 9).tolist()} kg m^2 about its "
+                "centre of mass; an inertia has none negative (it is positive semi-definite): fix Ixx..Iyz."
+            )
+        excess = moments - (trace - moments)
+        k = int(np.argmax(excess))
+        if excess[k] <= 1e-9 * scale:
+            continue
+        others = np.delete(moments, k)
+        said = (
+            f"{where} has principal moments of inertia {np.round(moments, 9).tolist()} kg m^2 about its centre "
+            f"of mass, and {moments[k]:.6g} exceeds the sum of the other two ({others.sum():.6g})"
+        )
+        if excess[k] > INERTIA_TOLERANCE * trace:
+            raise RobotModelError(
+                f"{said}, which no body can have (the triangle inequality); fix Ixx, Iyy, Izz so that each is "
+                "at most the sum of the other two."
+            )
+        warnings.warn(
+            f"{said} by {excess[k] / trace:.2%} of the trace, within the {INERTIA_TOLERANCE:.0%} allowed for "
+            "rounded inertias; used as given.",
+            RobotModelWarning,
+            stacklevel=3,
+        )
+    return model
+
+
+def check_simulable(model: RobotModel) -> RobotModel:
+    """Check that every joint moves something, so that the robot can be simulated.
+
+    A joint carries nothing when every link from it to the tip (its subtree) has zero mass and zero
+    inertia and the joint has no armature: its row of the mass matrix is zero, its torque is zero whatever
+    the motion, and a simulated controller cannot track it.  Such a description is fine for designing an
+    excitation and for identification (they use the regressor only), so only the simulator refuses it.
+
+    Parameters
+    ----------
+    model : RobotModel
+        The robot to simulate.
+
+    Returns
+    -------
+    RobotModel
+        ``model``, so that calls chain.
+
+    Raises
+    ------
+    RobotModelError
+        When a joint carries nothing; the message names the first.
+    """
+    params = np.asarray(model.params, dtype=float).reshape(-1, 10)
+    empty = [not np.any(params[j]) for j in range(model.n)]
+    carries = [False] * model.n
+    for j in reversed(range(model.n)):
+        carries[j] = carries[j] or not empty[j] or model.armature[j] != 0
+        parent = model.joints[j].parent - 1
+        if parent >= 0 and carries[j]:
+            carries[parent] = True
+    if all(carries):
+        return model
+    j = carries.index(False)
+    raise RobotModelError(
+        f"joint {j + 1} ('{model.joints[j].name}') of the robot '{model.name}' carries no mass, inertia or "
+        "armature, so its torque is zero whatever the motion and it cannot be simulated; give its link "
+        "(or a link beyond it) a mass and inertia, or the joint an armature."
+    )
 
 
 # ---------------------------------------------------------------------------- modified DH
@@ -537,7 +697,38 @@ def _column(table: dict, section: str, key: str, n: int | None, path: Path, defa
             f"column '{section}.{key}' of the table '{path}' has {value.size} values; the table has {n} joints, "
             f"give one value per joint."
         )
+    if not np.all(np.isfinite(value)):
+        bad = value.reshape(-1)[~np.isfinite(value.reshape(-1))][0]
+        raise RobotModelError(
+            f"column '{section}.{key}' of the table '{path}' holds {bad}; give finite numbers (one per joint)."
+        )
     return value
+
+
+def _joint_count(table: dict) -> int:
+    """Joint count of a modified-DH table: the length most of its required columns share.
+
+    Taking it from one column would blame a short ``alpha`` on the next column read.
+    """
+    lengths = [
+        len(value)
+        for section, keys in (("joints", _DH_COLUMNS), ("links", _LINK_COLUMNS))
+        for key in keys
+        if isinstance(value := table.get(section, {}).get(key), list)
+    ]
+    return Counter(lengths).most_common(1)[0][0] if lengths else 0
+
+
+def _table_floats(path: Path, label: str, value, size: int) -> np.ndarray:
+    """A fixed-size list of numbers from a table (gravity, tool fields), or a one-sentence refusal."""
+    try:
+        out = np.array(value, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        out = np.zeros(0)
+    if out.shape != (size,) or not np.all(np.isfinite(out)):
+        what = "a number" if size == 1 else f"a list of {size} numbers"
+        raise RobotModelError(f"'{label}' in the table '{path}' is {value!r}; give {what}.")
+    return out
 
 
 def _load_mdh(path: Path, *, name: str) -> RobotModel:
@@ -547,15 +738,21 @@ def _load_mdh(path: Path, *, name: str) -> RobotModel:
         table = tomllib.loads(path.read_text())
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise RobotModelError(f"the table '{path}' is not valid TOML ({exc}); fix its syntax.") from None
+    for section in ("joints", "links"):
+        if section in table and not isinstance(table[section], dict):
+            raise RobotModelError(
+                f"'{section}' in the table '{path}' is a value, not a table; write it as a [{section}] section "
+                "with one list per column."
+            )
     if "joints" not in table or "alpha" not in table.get("joints", {}):
         raise RobotModelError(
             f"the table '{path}' has no column 'joints.alpha'; a modified-DH table needs [joints] alpha, a, d, "
             f"theta and [links] {', '.join(_LINK_COLUMNS)} (one value per joint)."
         )
-    n = len(table["joints"]["alpha"])
+    n = _joint_count(table)
     dh = {k: _column(table, "joints", k, n, path) for k in _DH_COLUMNS}
     kinds = table["joints"].get("type", ["R"] * n)
-    if len(kinds) != n or any(k not in ("R", "P") for k in kinds):
+    if not isinstance(kinds, list) or len(kinds) != n or any(k not in ("R", "P") for k in kinds):
         raise RobotModelError(
             f"column 'joints.type' of the table '{path}' must hold 'R' or 'P' for each of its {n} joints."
         )
@@ -565,7 +762,7 @@ def _load_mdh(path: Path, *, name: str) -> RobotModel:
     q_max = _column(table, "joints", "q_max", n, path, default=math.pi)
     dq_max = _column(table, "joints", "dq_max", n, path, default=math.pi)
     ddq_max = _column(table, "joints", "ddq_max", n, path, default=DEFAULT_DDQ_MAX)
-    gravity = np.asarray(table.get("gravity", [0.0, 0.0, -9.81]), dtype=float)
+    gravity = _table_floats(path, "gravity", table.get("gravity", [0.0, 0.0, -9.81]), 3)
     joints, params = [], []
     for i in range(n):
         # Revolute: RotZ(q) commutes with TransZ(d); prismatic: q adds to the offset d along z.
@@ -594,11 +791,10 @@ def _load_mdh(path: Path, *, name: str) -> RobotModel:
             )
         )
     tool = table.get("tool", {})
+    if not isinstance(tool, dict):
+        raise RobotModelError(f"'tool' in the table '{path}' is a value; write it as a [tool] section.")
     t_rot, t_pos = mdh_placement(
-        float(tool.get("alpha", 0.0)),
-        float(tool.get("a", 0.0)),
-        float(tool.get("d", 0.0)),
-        float(tool.get("theta", 0.0)),
+        *(float(_table_floats(path, f"tool.{k}", tool.get(k, 0.0), 1)[0]) for k in _DH_COLUMNS)
     )
     return RobotModel(
         name=str(table.get("name", name)),
@@ -673,12 +869,19 @@ def load_robot(
     q_min, q_max, dq_max, ddq_max : float or sequence of float, optional
         Override the model's joint limits (one value for all joints, or one per joint).
     tool : str, optional
-        Name of the URDF frame used as the tool frame (default: the robot's flange / last frame).
+        Name of the URDF frame used as the tool frame (default: the robot's flange / last frame); a name
+        the model does not have is refused, listing its frames.
 
     Raises
     ------
     RobotModelError
-        Unknown name, missing or malformed file, unsupported joint, missing table column.
+        Unknown name, missing or malformed file, unsupported or mimic joint, missing or short table column,
+        unknown tool frame, a link that is not a physical body (:func:`check_inertias`).
+
+    Warns
+    -----
+    RobotModelWarning
+        A link's inertia violates the triangle inequality within :data:`INERTIA_TOLERANCE`.
     """
     if isinstance(robot, RobotModel):
         model = robot
@@ -689,18 +892,25 @@ def load_robot(
         if key in BUILTIN_ROBOTS and not path.exists():
             info = BUILTIN_ROBOTS[key]
             urdf = example_robot_data_dir() / info["urdf"]
-            model = _load_urdf(
-                urdf,
-                name=key,
-                source=key,
-                lock=info["lock"],
-                tool=tool or info["tool"],
-                ddq_max=info["ddq_max"],
+            model = check_inertias(
+                _load_urdf(
+                    urdf,
+                    name=key,
+                    source=key,
+                    lock=info["lock"],
+                    tool=tool or info["tool"],
+                    ddq_max=info["ddq_max"],
+                )
             )
         elif path.suffix.lower() == ".urdf":
-            model = _load_urdf(path, name=path.stem, source=str(path), tool=tool)
+            model = check_inertias(_load_urdf(path, name=path.stem, source=str(path), tool=tool))
         elif path.suffix.lower() == ".toml":
-            model = _load_mdh(path, name=path.stem)
+            model = check_inertias(_load_mdh(path, name=path.stem))
+            if tool is not None and tool != model.tool_name:
+                raise RobotModelError(
+                    f"the table '{path}' has one tool frame, '{model.tool_name}', not '{tool}'; leave out "
+                    "--tool, or name the frame in the table's [tool] section (name = ...)."
+                )
         else:
             raise RobotModelError(
                 f"unknown robot '{text}'; give a built-in name ({', '.join(BUILTIN_ROBOTS)}), a .urdf file or a "
