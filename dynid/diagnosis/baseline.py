@@ -30,15 +30,9 @@ from dynid.diagnosis.candidates import Candidate, FeatureSource, candidate_colum
 from dynid.diagnosis.fitting import WeightedFit, losses, mse, predict
 from dynid.diagnosis.settings import DiagnosisSettings
 from dynid.exceptions import DataError, IdentificationError, ShapeError, UsageError
+from dynid.identify.columns import ColumnSet, column_set, compiled_base_regressor
 from dynid.identify.dataset import Dataset
-from dynid.identify.linear_system import (
-    ColumnSet,
-    Prepared,
-    Preprocessing,
-    column_set,
-    compiled_base_regressor,
-    prepare,
-)
+from dynid.identify.preparation import Prepared, Preprocessing, prepare
 
 __all__ = [
     "Baseline",

@@ -67,7 +67,7 @@ from dynid.diagnosis.selection import Selection, select
 from dynid.diagnosis.settings import DiagnosisSettings
 from dynid.exceptions import DataError
 from dynid.identify.dataset import Dataset
-from dynid.identify.linear_system import Prepared
+from dynid.identify.preparation import Prepared
 from dynid.validation.metrics import NoiseFloor
 from dynid.validation.noise import measure_noise
 

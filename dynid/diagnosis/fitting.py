@@ -18,7 +18,17 @@ __all__ = ["WeightedFit", "losses", "mse", "predict"]
 
 
 class WeightedFit:
-    """Weighted LS of the baseline columns on training data, with extra candidate columns projected."""
+    """Weighted LS of the baseline columns on training data, with extra candidate columns projected.
+
+    Parameters
+    ----------
+    X : ndarray, shape (m, n, k)
+        Baseline columns (filtered) per row and joint.
+    y : ndarray, shape (m, n)
+        Filtered torque (N m).
+    w : ndarray, shape (m, n) or broadcastable
+        Weight per row and joint (1 / N m).
+    """
 
     def __init__(self, X: NDArray[np.float64], y: NDArray[np.float64], w: NDArray[np.float64]) -> None:
         m, n, k = X.shape

@@ -17,7 +17,7 @@ from scipy import stats
 
 from dynid.diagnosis import stats as st
 from dynid.diagnosis.fitting import WeightedFit
-from dynid.identify.linear_system import ColumnSet, compiled_base_regressor
+from dynid.identify.columns import ColumnSet, compiled_base_regressor
 
 __all__ = ["parameter_change_test"]
 

@@ -23,7 +23,10 @@ from dynid.diagnosis.candidates import Candidate
 from dynid.diagnosis.fitting import WeightedFit
 from dynid.diagnosis.screening import Context, score
 
-__all__ = ["fitted_delay", "refine", "refine_leaders"]
+__all__ = ["KEPT", "fitted_delay", "refine", "refine_leaders"]
+
+KEPT = "screen columns (the refit did not lower the held-out loss)"
+"""Why a refit candidate keeps its screen columns."""
 
 _NONLINEAR = ("elasticity", "backlash", "delay")
 _LEADERS = 4
@@ -52,14 +55,13 @@ def refine_leaders(ctx, fit, acc_tr, acc_ho, scored, r_cur, mse_cur, rnd):
     leaders = [i for i in order if scored[i][1].candidate.effect in _NONLINEAR][:_LEADERS]
     out = list(scored)
     for i in leaders:
-        gi, rc, C_tr, _ = scored[i]
+        gi, rc, C_tr, C_ho = scored[i]
         cand, C_tr2, C_ho2, info = refine(ctx, fit, rc.candidate, C_tr)
         rc2 = score(ctx, fit, acc_tr, acc_ho, C_tr2, C_ho2, cand, r_cur, mse_cur, rnd)
         if rc2.gain > rc.gain:
-            rc2.refit = info
-            out[i] = (gi, rc2, C_tr2, C_ho2)
+            out[i] = (gi, replace(rc2, refit=info), C_tr2, C_ho2)
         else:
-            rc.refit = {**info, "kept": "screen columns (the refit did not lower the held-out loss)"}
+            out[i] = (gi, replace(rc, refit={**info, "kept": KEPT}), C_tr, C_ho)
     return out
 
 

@@ -21,7 +21,7 @@ from dynid.validation.metrics import NoiseFloor
 __all__ = ["Diagnosis", "RankedCandidate", "verdict_text"]
 
 
-@dataclass
+@dataclass(frozen=True, eq=False)
 class RankedCandidate:
     """A scored candidate: the best variant of one effect on one joint (or joint pair).
 

@@ -159,14 +159,28 @@ def _nested(C_small: NDArray[np.float64], C_big: NDArray[np.float64], tol: float
     return bool(np.linalg.norm(B - A @ coef) <= tol * max(float(np.linalg.norm(B)), 1e-300))
 
 
-def confounding(ctx: Context, fit: WeightedFit, scored, confound_deg: float) -> None:
-    """Principal angles between the leading candidates once the baseline is projected out."""
-    top = [s for s in scored[:8] if s[1].gain > 0]
-    proj = [(s[1], fit.projected(s[2])) for s in top]
-    for i, (ri, Pi) in enumerate(proj):
+def confounding(fit: WeightedFit, scored: list, confound_deg: float) -> list:
+    """The scored candidates with, for the leading ones, their principal angle to the nearest other once
+    the baseline is projected out, and the candidates they are not separable from (angle below
+    ``confound_deg``, gain at least half their own).
+
+    Parameters
+    ----------
+    fit : WeightedFit
+        The current fit (its columns are projected out).
+    scored : list of (int, RankedCandidate, ndarray, ndarray)
+        Group index, score, training and held-out columns; best first.
+    confound_deg : float
+        Angle (degrees) below which two candidates are not separable.
+    """
+    top = [i for i, s in enumerate(scored[:8]) if s[1].gain > 0]
+    proj = [(scored[i][1], fit.projected(scored[i][2])) for i in top]
+    out = list(scored)
+    for i, (ri, Pi) in zip(top, proj, strict=True):
         best = None
-        for k, (rk, Pk) in enumerate(proj):
-            if k == i or (
+        confounded = list(ri.confounded_with)
+        for rk, Pk in proj:
+            if rk is ri or (
                 rk.candidate.effect == ri.candidate.effect and rk.candidate.joints == ri.candidate.joints
             ):
                 continue
@@ -174,8 +188,10 @@ def confounding(ctx: Context, fit: WeightedFit, scored, confound_deg: float) -> 
             if best is None or ang < best:
                 best = ang
             if ang < confound_deg and rk.gain >= 0.5 * ri.gain:
-                ri.confounded_with.append(rk.candidate.key)
-        ri.angle_deg = best
+                confounded.append(rk.candidate.key)
+        gi, _, C_tr, C_ho = out[i]
+        out[i] = (gi, replace(ri, confounded_with=confounded, angle_deg=best), C_tr, C_ho)
+    return out
 
 
 def confound_note(r: RankedCandidate) -> str:

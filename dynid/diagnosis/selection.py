@@ -10,7 +10,7 @@ stop when none is acceptable or ``max_effects`` are accepted.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -19,7 +19,7 @@ from dynid.diagnosis import stats as st
 from dynid.diagnosis.baseline import Baseline, HeldOutBaseline
 from dynid.diagnosis.candidates import Candidate
 from dynid.diagnosis.fitting import WeightedFit, losses, mse, predict
-from dynid.diagnosis.refinement import fitted_delay, refine, refine_leaders
+from dynid.diagnosis.refinement import KEPT, fitted_delay, refine, refine_leaders
 from dynid.diagnosis.result import RankedCandidate
 from dynid.diagnosis.screening import Context, confounding, parsimonious, score, tune
 from dynid.diagnosis.settings import DiagnosisSettings
@@ -118,13 +118,19 @@ def select(
         if settings.refit and rnd < max_effects:
             scored = refine_leaders(ctx, current_fit, acc_tr, acc_ho, scored, r_cur, mse_cur, rnd)
         p_adj = st.holm([s[1].p_value for s in scored])
-        for (_, rc, _, _), pa in zip(scored, p_adj, strict=True):
-            rc.p_holm = float(pa)
-            rc.significant = bool(pa < alpha and rc.gain >= min_gain)
+        scored = [
+            (
+                gi,
+                replace(rc, p_holm=float(pa), significant=bool(pa < alpha and rc.gain >= min_gain)),
+                C_tr,
+                C_ho,
+            )
+            for (gi, rc, C_tr, C_ho), pa in zip(scored, p_adj, strict=True)
+        ]
         scored.sort(key=lambda s: -s[1].gain)
         if rnd == 0:
+            scored = confounding(current_fit, scored, settings.confound_deg)
             ranking0 = [s[1] for s in scored]
-            confounding(ctx, current_fit, scored, settings.confound_deg)
         if rnd >= max_effects:
             break
         # A candidate must close at least min_closure of the gap on its joints, and half of it where
@@ -161,19 +167,33 @@ def select(
         # the neighbour scores nearly as well on its own joint alone.
         ok.sort(key=lambda s: -s[1].gain_all)
         best = parsimonious(ok, alpha, ctx.block, min_gain)
-        gi, rc, C_tr, C_ho = best
-        if settings.refit and not rc.refit:
-            cand, C_tr2, C_ho2, info = refine(ctx, current_fit, rc.candidate, C_tr)
+        gi, chosen, C_tr, C_ho = best
+        rc, replaced = chosen, False
+        if settings.refit and not chosen.refit:
+            cand, C_tr2, C_ho2, info = refine(ctx, current_fit, chosen.candidate, C_tr)
             rc2 = score(ctx, current_fit, acc_tr, acc_ho, C_tr2, C_ho2, cand, r_cur, mse_cur, rnd)
-            if rc2.gain >= rc.gain:
-                rc2.p_holm, rc2.significant = rc.p_holm, rc.significant
-                rc2.refit = info
-                rc2.confounded_with, rc2.angle_deg = rc.confounded_with, rc.angle_deg
-                rc, C_tr, C_ho = rc2, C_tr2, C_ho2
+            if rc2.gain >= chosen.gain:
+                rc = replace(
+                    rc2,
+                    p_holm=chosen.p_holm,
+                    significant=chosen.significant,
+                    refit=info,
+                    confounded_with=chosen.confounded_with,
+                    angle_deg=chosen.angle_deg,
+                )
+                C_tr, C_ho, replaced = C_tr2, C_ho2, True
             else:
-                rc.refit = {**info, "kept": "screen columns (the refit did not lower the held-out loss)"}
-        rc.accepted = True
+                rc = replace(chosen, refit={**info, "kept": KEPT})
+        rc = replace(rc, accepted=True)
         accepted.append(rc)
+        # The ranking shows it accepted: as chosen (with its refit note) unless a refit replaced it, and
+        # any entry of the same effect and joint(s).
+        ranking0 = [
+            rc
+            if r0 is chosen and not replaced
+            else (replace(r0, accepted=True) if r0.candidate.key == rc.candidate.key else r0)
+            for r0 in ranking0
+        ]
         acc_tr = np.concatenate([acc_tr, C_tr], axis=2)
         acc_ho = np.concatenate([acc_ho, C_ho], axis=2)
         xa, ba, _ = fit.solve(acc_tr)
@@ -181,9 +201,6 @@ def select(
         L_cur = losses(r_cur, ctx.sigma, ctx.mask)
         mse_cur = mse(r_cur, ctx.mask)
         current_fit = WeightedFit(np.concatenate([tr.X0, acc_tr], axis=2), tr.y, W)
-        for r0 in ranking0:
-            if r0.candidate.key == rc.candidate.key:
-                r0.accepted = True
     return Selection(
         accepted=accepted,
         ranking=ranking0,
