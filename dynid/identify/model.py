@@ -43,6 +43,7 @@ import io
 import json
 import os
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -56,6 +57,19 @@ from dynid.exceptions import DynidError, ModelFileError, UsageError
 from dynid.identify.columns import ColumnSet, column_set, linear_torque
 from dynid.identify.consistent import ConsistentLS, pseudo_inertia
 from dynid.identify.dataset import Dataset
+from dynid.identify.effect_terms import (
+    Candidate,
+    EffectColumns,
+    FeatureSource,
+    coefficient_names,
+    effect_from_dict,
+    effect_to_dict,
+    effect_values,
+    needs_time,
+    needs_torque,
+    parse_effect_terms,
+    tune_terms,
+)
 from dynid.identify.estimators import (
     ESTIMATORS,
     IdentificationWarning,
@@ -82,7 +96,8 @@ __all__ = [
 METHODS = (*ESTIMATORS, "consistent")
 """Layer-1 methods: ``ols``, ``wls``, ``gls``, ``irls``, ``consistent``."""
 FORMAT = "dynid-model"
-VERSION = 1
+VERSION = 2
+"""Model file version: 2 adds effect terms and a coupled transmission; version-1 files still load."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -120,6 +135,9 @@ class IdentifiedModel:
     layers_filtered : bool
         Whether friction and correction are filtered like the torque in :meth:`predict` on a dataset
         (True for models identified by this version; False: added unfiltered at the kept samples).
+    effect_reference : ndarray, shape (p0,), or None
+        Parameters of the first fit without effect terms (base columns and extras of ``columns``),
+        whose torque the effects of :data:`dynid.identify.effect_terms.TAU_EFFECTS` are built from.
     """
 
     robot: Any
@@ -136,6 +154,7 @@ class IdentifiedModel:
     rms_layers: dict[str, list[float]]
     info: dict[str, Any] = field(default_factory=dict)
     layers_filtered: bool = False
+    effect_reference: NDArray[np.float64] | None = None
 
     @property
     def std(self) -> NDArray[np.float64]:
@@ -208,6 +227,60 @@ class IdentifiedModel:
                 stacklevel=3,
             )
 
+    @property
+    def effects(self) -> tuple[Candidate, ...]:
+        """The effect terms of the model (:mod:`dynid.identify.effect_terms`)."""
+        return tuple(self.columns.effects)
+
+    def effect_columns(self, q, dq, ddq, *, t=None, runs=None, fs=None) -> NDArray[np.float64] | None:
+        """Columns (m, n, k) of the model's effect terms at these states; None without effect terms.
+
+        Parameters
+        ----------
+        q, dq, ddq : ndarray, shape (m, n)
+            States at a uniform rate.
+        t : ndarray, shape (m,), optional
+            Their time stamps (s); needed by the effects of
+            :data:`dynid.identify.effect_terms.TIME_EFFECTS`.
+        runs : list of slice, optional
+            Runs within which to differentiate (default one run).
+        fs : float, optional
+            Sampling rate (Hz); default from ``t``.
+        """
+        terms = self.effects
+        if not terms:
+            return None
+        q, dq, ddq = (np.atleast_2d(np.asarray(v, dtype=np.float64)) for v in (q, dq, ddq))
+        m = len(q)
+        if t is None:
+            if needs_time(terms):
+                slow = [
+                    tm.key for tm in terms if tm.effect in ("temperature", "delay", "elasticity", "backlash")
+                ]
+                raise UsageError(
+                    f"the effect terms {', '.join(slow)} need time stamps; predict from a Dataset (model.predict(ds)) "
+                    "instead of (q, dq, ddq) arrays"
+                )
+            t = np.arange(m, dtype=np.float64)
+        t = np.asarray(t, dtype=np.float64)
+        if fs is None:
+            fs = 1.0 / float(np.median(np.diff(t))) if m > 1 else 1.0
+        tau_ref = np.zeros_like(q)
+        if needs_torque(terms):
+            base = column_set(self.robot, friction=self.columns.friction, armature=self.columns.armature)
+            tau_ref = linear_torque(base, self.effect_reference, q, dq, ddq)
+        src = FeatureSource(
+            t=t - t[0],
+            q=q,
+            dq=dq,
+            ddq=ddq,
+            tau_pred=tau_ref,
+            robot=self.robot,
+            fs=float(fs),
+            runs=list(runs) if runs is not None else [slice(0, m)],
+        )
+        return effect_values(src, terms)[0]
+
     def predict_parts(self, ds: Dataset) -> dict[str, NDArray[np.float64]]:
         """The prediction of a dataset split by layer, each treated as :meth:`predict` treats it.
 
@@ -226,7 +299,16 @@ class IdentifiedModel:
         prep = self.prepare(ds)
         rows = prep.rows
         self._check_range(prep.q[rows], prep.dq[rows])
-        link = linear_torque(self.columns, self.params, prep.q, prep.dq, prep.ddq, mask=self.filtered_mask)
+        values = self.effect_columns(prep.q, prep.dq, prep.ddq, t=prep.t, runs=prep.runs, fs=prep.fs)
+        link = linear_torque(
+            self.columns,
+            self.params,
+            prep.q,
+            prep.dq,
+            prep.ddq,
+            mask=self.filtered_mask,
+            effect_values=values,
+        )
         if self.layers_filtered:
             fric = prep.filter(self._friction_torque(prep.dq))[rows]
             corr = prep.filter(self._correction(prep.q, prep.dq))[rows]
@@ -255,10 +337,32 @@ class IdentifiedModel:
             return parts["link"] + parts["friction"] + parts["gmm"]
         if dq is None or ddq is None:
             raise UsageError("predict takes (q, dq, ddq) arrays or one Dataset; dq and ddq are missing")
-        link = linear_torque(self.columns, self.params, q, dq, ddq, mask=self.filtered_mask)
+        values = self.effect_columns(q, dq, ddq)
+        link = linear_torque(
+            self.columns, self.params, q, dq, ddq, mask=self.filtered_mask, effect_values=values
+        )
         return link + self._direct(np.atleast_2d(np.asarray(q, float)), np.atleast_2d(np.asarray(dq, float)))
 
     # ------------------------------------------------------------------ figures
+    def _effect_figures(self) -> list[dict[str, Any]]:
+        """Each effect term with its hyper-parameters, coefficients and their standard deviations."""
+        cols = self.columns
+        if not cols.n_effect:
+            return []
+        idx = np.flatnonzero(cols.effect_mask)
+        std = self.std
+        out = []
+        for i, term in enumerate(cols.effects):
+            mine = idx[cols.effect_owner == i]
+            out.append(
+                {
+                    **effect_to_dict(term),
+                    "coefficients": {cols.names[k].rsplit(".", 1)[1]: float(self.params[k]) for k in mine},
+                    "std": {cols.names[k].rsplit(".", 1)[1]: float(std[k]) for k in mine},
+                }
+            )
+        return out
+
     def figures(self) -> dict[str, Any]:
         """The JSON-ready figures of the model (the model file without its bookkeeping)."""
         cols = self.columns
@@ -270,9 +374,13 @@ class IdentifiedModel:
                 "key": self.robot.key,
                 "n": self.robot.n,
                 "joint_names": list(self.robot.joint_names),
+                "transmission": None
+                if getattr(self.robot, "transmission", None) is None
+                else np.asarray(self.robot.transmission).tolist(),
             },
             "method": self.method,
             "layer1": {"friction": cols.friction, "armature": cols.armature},
+            "effects": self._effect_figures(),
             "preprocessing": self.preprocessing,
             "parameters": [
                 {
@@ -342,6 +450,10 @@ class ThreeLayerModel:
     rounds : int
         Rounds in which the layers are refitted together (:mod:`dynid.identify.refine`; default 2).
         0: the paper's sequence, each layer fitted once on what the previous one left.
+    effects : str or sequence, optional
+        Effects of the catalogue added as identified terms, ``"coupled_friction@5+6,stribeck@3"``
+        (:func:`dynid.identify.effect_terms.parse_effect_terms`), refitted with the link parameters; their
+        hyper-parameters, when not given, are tuned on the training data.
     physical : bool
         Keep armature, Coulomb and viscous coefficients non-negative (default; bounded-variable least
         squares on the same weighted system).  False: the unconstrained fit.  ``info["bounds"]`` names
@@ -369,6 +481,7 @@ class ThreeLayerModel:
         random_state: int = 0,
         rounds: int = 2,
         physical: bool = True,
+        effects: str | Sequence[Any] | None = None,
     ) -> None:
         self.robot = robot
         self.method = method
@@ -381,6 +494,7 @@ class ThreeLayerModel:
         self.random_state = random_state
         self.rounds = rounds
         self.physical = physical
+        self.effects = effects
 
     def __repr__(self) -> str:
         return (
@@ -420,8 +534,17 @@ class ThreeLayerModel:
         self._check()
         robot = self.robot
         layer1_friction = self.friction != "none"
+        terms = self._effect_terms(layer1_friction)
+        effect_columns, effect_reference = None, None
+        if terms:
+            effect_columns, effect_reference = self._effect_columns(data, terms, layer1_friction)
         system = build_system(
-            robot, data, preprocessing=self.preprocessing, friction=layer1_friction, armature=self.armature
+            robot,
+            data,
+            preprocessing=self.preprocessing,
+            friction=layer1_friction,
+            armature=self.armature,
+            effects=effect_columns,
         )
         # the layers are refitted together unless layer 1 already is the whole model (linear friction
         # or none, no correction) or the paper's sequence is asked for
@@ -483,8 +606,68 @@ class ThreeLayerModel:
             rms_layers=rms_layers,
             info=info,
             layers_filtered=True,
+            effect_reference=effect_reference,
         )
         return self
+
+    def _effect_terms(self, layer1_friction: bool) -> tuple[Candidate, ...]:
+        """The effect terms asked for, checked against what the model identifies anyway."""
+        spec = self.effects
+        if spec is None or (isinstance(spec, str) and not spec.strip()):
+            return ()
+        if not isinstance(spec, str) and all(isinstance(t, Candidate) for t in spec):
+            terms = tuple(spec)
+        else:
+            terms = parse_effect_terms(spec, self.robot.n)
+        names = {t.effect for t in terms}
+        if "offset" in names and layer1_friction:
+            raise UsageError(
+                "the effect 'offset' is identified already as the offset fo_j of the linear friction; drop it from "
+                "the effects (or identify with friction 'none')"
+            )
+        if "armature" in names and self.armature:
+            raise UsageError(
+                "the effect 'armature' is identified already (armature ia_j); drop it from the effects (or "
+                "identify without the armature)"
+            )
+        if self.method == "consistent":
+            raise UsageError(
+                "the method 'consistent' cannot take effect terms (they are no physical parameter of the links); "
+                "use irls, or add the effects to a consistent model's refit with 'dynid diagnose --out'"
+            )
+        return terms
+
+    def _effect_columns(self, data: Dataset, terms, layer1_friction: bool):
+        """Tune the terms on a first fit without them and build their columns on the prepared grid."""
+        robot = self.robot
+        system0 = build_system(
+            robot, data, preprocessing=self.preprocessing, friction=layer1_friction, armature=self.armature
+        )
+        first = ESTIMATORS["ols"](
+            robot=robot, friction=layer1_friction, armature=self.armature, preprocessing=self.preprocessing
+        ).fit(system0)
+        x_ref = np.asarray(first.params_, dtype=np.float64)
+        prep = system0.prepared
+        tau_ref = linear_torque(system0.columns, x_ref, prep.q, prep.dq, prep.ddq)
+        src = FeatureSource(
+            t=prep.t - prep.t[0],
+            q=prep.q,
+            dq=prep.dq,
+            ddq=prep.ddq,
+            tau_pred=tau_ref,
+            robot=robot,
+            fs=float(prep.fs),
+            runs=list(prep.runs),
+        )
+        with single_blas_thread():
+            resid = system0.tau() - system0.predict(x_ref)
+        system0.release()
+        terms = tune_terms(src, terms, resid, lambda v: prep.filter(v)[prep.rows])
+        values, widths = effect_values(src, terms)
+        names = tuple(
+            name for term, w in zip(terms, widths, strict=True) for name in coefficient_names(term, w)
+        )
+        return EffectColumns(terms=tuple(terms), names=names, values=values), x_ref
 
     def _linear_layer(self, cols: ColumnSet, x: NDArray[np.float64]) -> FrictionLayer:
         xe = dict(zip(cols.names, x, strict=True))
@@ -622,6 +805,7 @@ def identify(
     random_state: int = 0,
     rounds: int = 2,
     physical: bool = True,
+    effects: str | Sequence[Any] | None = None,
 ) -> IdentifiedModel:
     """Identify a robot's dynamic model from data in three layers (see :class:`ThreeLayerModel`).
 
@@ -651,6 +835,9 @@ def identify(
         Rounds in which the layers are refitted together (0: the paper's sequence).
     physical : bool
         Non-negative armature, Coulomb and viscous coefficients (default); False: unconstrained.
+    effects : str or sequence, optional
+        Effects of the catalogue added as identified terms (``"coupled_friction@5+6"``; see
+        :class:`ThreeLayerModel`).
 
     Returns
     -------
@@ -669,6 +856,7 @@ def identify(
             random_state=random_state,
             rounds=rounds,
             physical=physical,
+            effects=effects,
         )
         .fit(data)
         .model_
@@ -700,6 +888,10 @@ def save_model(model: IdentifiedModel, path: str | os.PathLike[str]) -> tuple[Pa
     arrays: dict[str, NDArray[Any]] = {"params": model.params, "cov": model.cov}
     if model.gmr is not None:
         arrays.update(model.gmr.to_arrays("gmr"))
+    if model.columns.n_effect:
+        arrays["effect_pattern"] = model.columns.pattern[:, model.columns.effect_mask]
+        if model.effect_reference is not None:
+            arrays["effect_reference"] = np.asarray(model.effect_reference, dtype=np.float64)
     buf = io.BytesIO()
     np.savez(buf, **arrays)
     blob = buf.getvalue()
@@ -769,6 +961,13 @@ def load_model(path: str | os.PathLike[str], robot=None) -> IdentifiedModel:
                 f"{name} was identified for the robot '{info_robot.get('name')}' from '{info_robot.get('source')}', "
                 f"which cannot be loaded here ({err}); pass that robot to load_model(path, robot=...)"
             ) from None
+    if info_robot.get("transmission") is not None:
+        try:
+            robot = robot.with_transmission(info_robot["transmission"])
+        except DynidError as err:
+            raise ModelFileError(
+                f"{name} records a transmission that does not fit its robot ({err})"
+            ) from None
     if robot.key != info_robot.get("key") or robot.n != info_robot.get("n"):
         raise ModelFileError(
             f"{name} was identified for the robot '{info_robot.get('name')}' ({info_robot.get('n')} joints, key "
@@ -791,6 +990,18 @@ def load_model(path: str | os.PathLike[str], robot=None) -> IdentifiedModel:
             arrays = {k: npz[k] for k in npz.files}
         layer1 = doc["layer1"]
         cols = column_set(robot, friction=bool(layer1["friction"]), armature=bool(layer1["armature"]))
+        effect_docs = doc.get("effects") or []
+        effect_reference = None
+        if effect_docs:
+            terms = tuple(effect_from_dict(e) for e in effect_docs)
+            eff_names = tuple(
+                f"{t.key}.{coef}"
+                for t, e in zip(terms, effect_docs, strict=True)
+                for coef in e["coefficients"]
+            )
+            cols = cols.with_effects(terms, eff_names, np.asarray(arrays["effect_pattern"], dtype=bool))
+            if "effect_reference" in arrays:
+                effect_reference = np.asarray(arrays["effect_reference"], dtype=np.float64)
         names = [p["name"] for p in doc["parameters"]]
         if names != list(cols.names):
             raise ModelFileError(
@@ -833,6 +1044,7 @@ def load_model(path: str | os.PathLike[str], robot=None) -> IdentifiedModel:
             rms_layers=dict(doc["rms_layers"]),
             info=info,
             layers_filtered=bool(doc.get("layers_filtered", False)),
+            effect_reference=effect_reference,
         )
     except ModelFileError:
         raise

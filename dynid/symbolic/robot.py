@@ -39,6 +39,7 @@ __all__ = [
     "check_inertias",
     "check_simulable",
     "load_robot",
+    "load_transmission",
 ]
 
 PARAM_NAMES = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
@@ -145,6 +146,11 @@ class RobotModel:
         Tool frame: its placement in the frame of joint ``tool_parent`` (1-based).
     q_min, q_max, dq_max, ddq_max : ndarray, shape (n,)
         Joint limits.
+    transmission : ndarray, shape (n, n), or None
+        Coupled transmission: the motor of joint i turns, in joint units, by ``(R q)_i`` (unit
+        diagonal; e.g. the TX40's wrist, where motor 6 also turns with joint 5: ``R[5, 4] = 1``).  Its
+        armature and friction then act on ``R q`` (:mod:`dynid.identify.columns`).  None: every motor
+        drives its own joint.  Not part of :attr:`key` (the rigid body is the same).
     """
 
     name: str
@@ -161,6 +167,7 @@ class RobotModel:
     q_max: np.ndarray
     dq_max: np.ndarray
     ddq_max: np.ndarray
+    transmission: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = len(self.joints)
@@ -168,6 +175,9 @@ class RobotModel:
             raise RobotModelError(
                 f"the robot '{self.name}' has no movable joint; give an arm with at least one."
             )
+        if self.transmission is not None:
+            R = _check_transmission(self.transmission, n, f"the robot '{self.name}'")
+            object.__setattr__(self, "transmission", None if np.array_equal(R, np.eye(n)) else R)
         for label, size in (
             ("params", 10 * n),
             ("armature", n),
@@ -290,6 +300,10 @@ class RobotModel:
                 )
             changes[label] = arr.copy()
         return replace(self, **changes)
+
+    def with_transmission(self, transmission) -> RobotModel:
+        """Return a copy with a coupled transmission ``R`` (n, n; see :attr:`transmission`), or None."""
+        return replace(self, transmission=None if transmission is None else np.array(transmission, dtype=float))
 
     def with_params(self, params: np.ndarray | None = None, armature: np.ndarray | None = None) -> RobotModel:
         """Return a copy with other standard parameters and/or armature (e.g. a perturbed truth)."""
@@ -705,6 +719,84 @@ def _column(table: dict, section: str, key: str, n: int | None, path: Path, defa
     return value
 
 
+def _check_transmission(value, n: int, where: str) -> np.ndarray:
+    """The matrix R (n, n) of a coupled transmission, checked: finite, unit diagonal."""
+    try:
+        R = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        R = np.zeros(0)
+    if R.shape != (n, n) or not np.all(np.isfinite(R)):
+        raise RobotModelError(
+            f"the transmission of {where} is {R.shape if R.size else 'not a matrix of numbers'}; give an "
+            f"({n}, {n}) matrix of finite numbers (motor angles in joint units per joint angle)."
+        )
+    if not np.allclose(np.diag(R), 1.0):
+        raise RobotModelError(
+            f"the transmission of {where} has diagonal {np.diag(R).tolist()}; each motor turns with its own "
+            "joint at ratio 1 in joint units: give a unit diagonal (fold the gear ratio into the coupling)."
+        )
+    R.setflags(write=False)
+    return R
+
+
+def _transmission_table(section, n: int, where: str) -> np.ndarray:
+    """R from a ``[transmission]`` table: ``matrix = [[...], ...]`` or ``coupled = [[a, b, r], ...]``
+    (motor b also turns by r times joint a, joints numbered from 1)."""
+    if not isinstance(section, dict) or not ({"matrix", "coupled"} & set(section)):
+        raise RobotModelError(
+            f"the [transmission] table of {where} has neither 'matrix' nor 'coupled'; write e.g. "
+            "coupled = [[5, 6, 1.0]] (motor 6 also turns with joint 5) or an n x n matrix."
+        )
+    if "matrix" in section:
+        return _check_transmission(section["matrix"], n, where)
+    R = np.eye(n)
+    for entry in section["coupled"] if isinstance(section["coupled"], list) else [None]:
+        ok = isinstance(entry, list) and len(entry) == 3
+        if ok:
+            a, b, r = entry
+            ok = all(isinstance(v, int) and 1 <= v <= n for v in (a, b)) and a != b
+            ok = ok and isinstance(r, int | float) and math.isfinite(r)
+        if not ok:
+            raise RobotModelError(
+                f"the entry {entry!r} of 'transmission.coupled' in {where} is not [a, b, r] with joints a != b "
+                f"in 1..{n} and a finite ratio r; write e.g. coupled = [[5, 6, 1.0]]."
+            )
+        R[b - 1, a - 1] = float(r)
+    return _check_transmission(R, n, where)
+
+
+def load_transmission(path: str | os.PathLike[str], n: int) -> np.ndarray:
+    """Read a coupled transmission from a TOML file holding a ``[transmission]`` table.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The file (``[transmission]`` with ``coupled = [[a, b, r], ...]``: motor b also turns by r times
+        joint a, joints from 1; or ``matrix``: the n x n matrix ``R`` with ``u = R q``).
+    n : int
+        Number of joints of the robot.
+
+    Returns
+    -------
+    ndarray, shape (n, n)
+
+    Raises
+    ------
+    RobotModelError
+        Missing or malformed file or table.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise RobotModelError(
+            f"the transmission file '{path}' does not exist; give a .toml file with a [transmission] table."
+        )
+    try:
+        table = tomllib.loads(path.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise RobotModelError(f"the transmission file '{path}' is not valid TOML ({exc}); fix its syntax.") from None
+    return _transmission_table(table.get("transmission"), n, f"'{path}'")
+
+
 def _joint_count(table: dict) -> int:
     """Joint count of a modified-DH table: the length most of its required columns share.
 
@@ -763,6 +855,9 @@ def _load_mdh(path: Path, *, name: str) -> RobotModel:
     dq_max = _column(table, "joints", "dq_max", n, path, default=math.pi)
     ddq_max = _column(table, "joints", "ddq_max", n, path, default=DEFAULT_DDQ_MAX)
     gravity = _table_floats(path, "gravity", table.get("gravity", [0.0, 0.0, -9.81]), 3)
+    transmission = (
+        _transmission_table(table["transmission"], n, f"the table '{path}'") if "transmission" in table else None
+    )
     joints, params = [], []
     for i in range(n):
         # Revolute: RotZ(q) commutes with TransZ(d); prismatic: q adds to the offset d along z.
@@ -811,6 +906,7 @@ def _load_mdh(path: Path, *, name: str) -> RobotModel:
         q_max=q_max,
         dq_max=dq_max,
         ddq_max=ddq_max,
+        transmission=transmission,
     )
 
 
@@ -857,6 +953,7 @@ def load_robot(
     dq_max=None,
     ddq_max=None,
     tool: str | None = None,
+    transmission: str | os.PathLike[str] | None = None,
 ) -> RobotModel:
     """Load a robot from a built-in name, a URDF path or a modified-DH TOML table.
 
@@ -871,6 +968,9 @@ def load_robot(
     tool : str, optional
         Name of the URDF frame used as the tool frame (default: the robot's flange / last frame); a name
         the model does not have is refused, listing its frames.
+    transmission : str or path-like, optional
+        A TOML file with a ``[transmission]`` table (:func:`load_transmission`): the coupled
+        transmission beside a URDF (a table robot may declare it in its own file).
 
     Raises
     ------
@@ -918,4 +1018,6 @@ def load_robot(
             )
     if any(v is not None for v in (q_min, q_max, dq_max, ddq_max)):
         model = model.with_limits(q_min=q_min, q_max=q_max, dq_max=dq_max, ddq_max=ddq_max)
+    if transmission is not None:
+        model = model.with_transmission(load_transmission(transmission, model.n))
     return model
