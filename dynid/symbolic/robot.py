@@ -929,11 +929,13 @@ def standard_from_com(mass: float, com: np.ndarray, inertia_com: np.ndarray) -> 
     """
     c = np.asarray(com, dtype=float)
     skew = np.array([[0.0, -c[2], c[1]], [c[2], 0.0, -c[0]], [-c[1], c[0], 0.0]])
-    inertia = np.asarray(inertia_com, dtype=float) - mass * skew @ skew
+    with np.errstate(over="ignore", invalid="ignore"):  # absurd sizes give inf, refused by RobotModel
+        inertia = np.asarray(inertia_com, dtype=float) - mass * skew @ skew
+        first = mass * c
     return np.array(
         [
             mass,
-            *(mass * c),
+            *first,
             inertia[0, 0],
             inertia[0, 1],
             inertia[1, 1],
