@@ -542,6 +542,11 @@ def _refuse_mimic_joints(path: Path, lock=()) -> None:
         )
 
 
+def _numbers(values) -> str:
+    """A short list of numbers for a message: ``[0.05, 0.06, 0.2]`` (6 significant digits)."""
+    return "[" + ", ".join(f"{float(v) + 0.0:.6g}" for v in np.ravel(values)) + "]"
+
+
 def _principal_moments(v: np.ndarray) -> np.ndarray:
     """Principal moments (kg m^2) about the centre of mass of a link from its 10 standard parameters."""
     m = float(v[0])
@@ -590,7 +595,7 @@ def check_inertias(model: RobotModel) -> RobotModel:
             )
         if v[0] == 0 and np.any(v[1:4] != 0):
             raise RobotModelError(
-                f"{where} has zero mass but first moment {(np.round(v[1:4], 6) + 0.0).tolist()} kg m; a body "
+                f"{where} has zero mass but first moment {_numbers(v[1:4])} kg m; a body "
                 "needs a positive mass (or zero mass and zero first moment): fix its mass."
             )
         moments = _principal_moments(v)
@@ -598,7 +603,7 @@ def check_inertias(model: RobotModel) -> RobotModel:
         scale = max(float(np.abs(moments).max()), 1e-300)
         if moments.min() < -1e-9 * scale:
             raise RobotModelError(
-                f"{where} has principal moments of inertia {np.round(moments, 9).tolist()} kg m^2 about its "
+                f"{where} has principal moments of inertia {_numbers(moments)} kg m^2 about its "
                 "centre of mass; an inertia has none negative (it is positive semi-definite): fix Ixx..Iyz."
             )
         excess = moments - (trace - moments)
@@ -607,7 +612,7 @@ def check_inertias(model: RobotModel) -> RobotModel:
             continue
         others = np.delete(moments, k)
         said = (
-            f"{where} has principal moments of inertia {np.round(moments, 9).tolist()} kg m^2 about its centre "
+            f"{where} has principal moments of inertia {_numbers(moments)} kg m^2 about its centre "
             f"of mass, and {moments[k]:.6g} exceeds the sum of the other two ({others.sum():.6g})"
         )
         if excess[k] > INERTIA_TOLERANCE * trace:
