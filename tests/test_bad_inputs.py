@@ -115,6 +115,8 @@ def work(base: Path, tmp_path: Path) -> Path:
     for p in base.iterdir():
         if p.is_file():
             shutil.copy2(p, tmp_path / p.name)
+        elif p.is_dir():  # a model saved as a folder
+            shutil.copytree(p, tmp_path / p.name)
     shutil.copy2(base / "M.json", tmp_path / "OUT.json")
     model_npz = next(base.glob("M*.npz"), None)
     if model_npz is not None:  # a model saved as a pair: the output pair exists too
@@ -916,8 +918,9 @@ def test_property_mutated_model_file_loads_or_is_refused(base: Path, tmp_path_fa
 
     folder = tmp_path_factory.mktemp("model")
     for p in base.glob("M*"):
-        shutil.copy2(p, folder / p.name)
-    target = folder / data.draw(st.sampled_from(sorted(p.name for p in folder.iterdir())))
+        (shutil.copytree if p.is_dir() else shutil.copy2)(p, folder / p.name)
+    files = sorted(str(p.relative_to(folder)) for p in folder.rglob("*") if p.is_file())
+    target = folder / data.draw(st.sampled_from(files))
     raw = target.read_bytes()
     op = data.draw(st.sampled_from(["truncate", "flip", "delete_key", "number"]))
     if op == "truncate":
