@@ -7,16 +7,21 @@ Each subcommand lives in its own module under :mod:`dynid.commands` and defines
 * ``run(args) -> int``: the work, returning the exit code.
 
 Modules are imported only when their command runs, so ``dynid --help`` starts fast.  A user's
-mistake (any :class:`dynid.exceptions.DynidError`) ends with one sentence on stderr and exit code 2,
-never a traceback.
+mistake (any :class:`dynid.exceptions.DynidError`, a file the system refuses, an option argparse
+refuses) ends with one line on stderr and exit code 2, never a traceback or a usage block.  A value
+that starts with a minus (``--q-min -1,-1,-1``) is taken as the option's value.  A termination signal
+(SIGTERM, SIGHUP) interrupts the command like Ctrl-C, so every file being written is removed, not left
+half written.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import re
+import signal
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 
 __all__ = ["main"]
 
@@ -33,10 +38,40 @@ COMMANDS = {
 }
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line: the message and where the help is."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        message = message.rstrip(".")
+        self.exit(2, f"{self.prog}: error: {message}; see '{self.prog} --help'\n")
+
+
+# A value such as -1,-1,-1 or -.5,2 or -1e-3: argparse would read it as an option.
+_NEGATIVE = re.compile(r"^-(\d|\.\d)[\d.,eE+\-]*$")
+
+
+def _join_negative_values(argv: Sequence[str]) -> Iterator[str]:
+    """``--opt -1,-1`` -> ``--opt=-1,-1``: dynid has no positional arguments, so such a token is a value."""
+    argv = list(argv)
+    k = 0
+    while k < len(argv):
+        token = argv[k]
+        if token.startswith("--") and "=" not in token and k + 1 < len(argv) and _NEGATIVE.match(argv[k + 1]):
+            yield f"{token}={argv[k + 1]}"
+            k += 2
+            continue
+        yield token
+        k += 1
+
+
+def _terminate(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
 def build_parser() -> argparse.ArgumentParser:
     from dynid import __version__
 
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="dynid",
         description="Identify the dynamic model of a robot arm and diagnose what it still gets wrong.",
     )
@@ -46,7 +81,7 @@ def build_parser() -> argparse.ArgumentParser:
         mod = importlib.import_module(f"dynid.commands.{module}")
         p = sub.add_parser(name, help=mod.HELP, description=mod.HELP)
         mod.add_arguments(p)
-        p.set_defaults(_module=mod)
+        p.set_defaults(_module=mod, _parser=p)
     return parser
 
 
@@ -55,18 +90,38 @@ def main(argv: Sequence[str] | None = None) -> int:
     from dynid.exceptions import DynidError
 
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(list(_join_negative_values(sys.argv[1:] if argv is None else argv)))
+    if extra:
+        getattr(args, "_parser", parser).error(f"unrecognized arguments: {' '.join(extra)}")
     if not getattr(args, "command", None):
         parser.print_help()
         return 2
+    previous = {}
+    try:
+        for sig in (signal.SIGTERM, signal.SIGHUP):
+            previous[sig] = signal.signal(sig, _terminate)
+    except ValueError:  # not the main thread: signals stay as they are
+        pass
     try:
         return int(args._module.run(args) or 0)
     except DynidError as exc:
         print(f"dynid {args.command}: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"dynid {args.command}: interrupted", file=sys.stderr)
+    except OSError as exc:  # a file the system refuses after the checks (a race, a full disk)
+        where = f" '{exc.filename}'" if exc.filename else ""
+        print(
+            f"dynid {args.command}: error: cannot use{where}: {exc.strerror or exc}; check the path, its "
+            "permissions and the free space, then run the command again",
+            file=sys.stderr,
+        )
+        return 2
+    except KeyboardInterrupt as exc:
+        reason = f" by {exc.args[0]}" if exc.args else ""
+        print(f"dynid {args.command}: interrupted{reason}; no file was left half written", file=sys.stderr)
         return 130
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -251,8 +251,14 @@ def _run_fails(argv, capsys) -> str:
     [
         (["--report", "{tmp}/missing/R.html"], r"the folder '.*missing' of the report does not exist"),
         (["--report", "{tmp}/R.txt"], r"has the extension '.txt'; give a file name ending in .html"),
-        (["--predictions", "{tmp}/missing/P.csv"], r"the folder of --predictions '.*P.csv' does not exist"),
-        (["--json", "{tmp}/missing/F.json"], r"the folder of --json '.*F.json' does not exist"),
+        (
+            ["--predictions", "{tmp}/missing/P.csv"],
+            r"the folder '.*missing' does not exist, so --predictions '.*P.csv' cannot be written",
+        ),
+        (
+            ["--json", "{tmp}/missing/F.json"],
+            r"the folder '.*missing' does not exist, so --json '.*F.json' cannot be written",
+        ),
         (["--period", "-1"], r"--period is -1.0; give the period"),
     ],
 )

@@ -4,12 +4,28 @@ from __future__ import annotations
 
 import argparse
 import os
+import tempfile
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from dynid.exceptions import RobotModelError, UsageError
 
-__all__ = ["add_json_argument", "add_robot_arguments", "robot_from_args", "write_figures"]
+__all__ = [
+    "Output",
+    "add_degrees_argument",
+    "add_json_argument",
+    "add_robot_arguments",
+    "check_data_fits_model",
+    "check_outputs",
+    "model_files",
+    "output",
+    "read_dataset",
+    "robot_file",
+    "robot_from_args",
+    "write_figures",
+]
 
 
 def add_robot_arguments(parser: argparse.ArgumentParser, *, default: str | None = None) -> None:
@@ -28,6 +44,99 @@ def add_robot_arguments(parser: argparse.ArgumentParser, *, default: str | None 
             help=f"override the model's {name.replace('-', ' ')} limit ({unit}): one value for all joints or one per joint",
         )
     parser.add_argument("--tool", help="URDF frame used as the tool frame (default: the robot's flange)")
+
+
+def add_degrees_argument(parser: argparse.ArgumentParser) -> None:
+    """``--degrees``: the dataset's angles are in degrees (converted to rad when read)."""
+    parser.add_argument(
+        "--degrees",
+        action="store_true",
+        help="the dataset's angles (and angular rates) are in degrees: convert them to rad when reading",
+    )
+
+
+def read_dataset(path: str | os.PathLike[str], n_joints: int | None = None, *, robot_name: str | None = None,
+                 degrees: bool = False):
+    """Read a dataset file for a command, with ``--degrees`` passed to the reader.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The dataset file.
+    n_joints : int, optional
+        Joint count the data must have.
+    robot_name : str, optional
+        Robot name for messages.
+    degrees : bool
+        Whether the file's angles are in degrees.
+
+    Returns
+    -------
+    Dataset
+    """
+    import inspect
+
+    from dynid.identify.dataset import load_dataset
+
+    kwargs: dict[str, Any] = {}
+    if robot_name is not None:
+        kwargs["robot_name"] = robot_name
+    if "degrees" in inspect.signature(load_dataset).parameters:
+        kwargs["degrees"] = degrees
+    elif degrees:
+        raise UsageError("--degrees is not available with this dataset reader; give the angles in rad.")
+    return load_dataset(path, n_joints, **kwargs)
+
+
+def check_data_fits_model(model: Any, data: Any, *, model_path: Any, data_option: str) -> None:
+    """Refuse data that cannot come from the robot a model was identified for.
+
+    The rule: no joint's angles may leave the model robot's limits by more than half the joint's
+    range (a joint without finite limits is not checked; another joint count is left to the
+    evaluation, which names both counts).  Data of another robot, or angles in degrees, fail it; a
+    recording that strays a little past the limits does not.
+
+    Parameters
+    ----------
+    model : IdentifiedModel
+        The model, with the robot it was identified for.
+    data : Dataset
+        The data it is to be evaluated on.
+    model_path : str or path-like
+        The model file, for the message.
+    data_option : str
+        The option that named the data (``data``, ``heldout``), for the message.
+
+    Raises
+    ------
+    UsageError
+        One sentence naming the joint, the range found and the limits.
+    """
+    import numpy as np
+
+    robot = model.robot
+    q = np.asarray(data.q, dtype=float)
+    if q.ndim != 2 or q.shape[1] != robot.n or q.shape[0] == 0:
+        return  # another joint count: the evaluation itself refuses it, naming both counts
+    q_min, q_max = np.asarray(robot.q_min, dtype=float), np.asarray(robot.q_max, dtype=float)
+    low, high = np.nanmin(q, axis=0), np.nanmax(q, axis=0)
+    for j in range(robot.n):
+        if not (np.isfinite(q_min[j]) and np.isfinite(q_max[j])):
+            continue
+        margin = 0.5 * (q_max[j] - q_min[j])
+        if low[j] < q_min[j] - margin or high[j] > q_max[j] + margin:
+            raise UsageError(
+                f"--{data_option} moves joint {j + 1} over [{low[j]:.4g}, {high[j]:.4g}], more than half its range "
+                f"outside the limits [{q_min[j]:.4g}, {q_max[j]:.4g}] of '{robot.name}', the robot {model_path} "
+                "was identified for; give data recorded on that robot with angles in rad (--degrees converts "
+                "degrees), or the model identified on the robot that recorded them."
+            )
+
+
+def robot_file(args: argparse.Namespace) -> str | None:
+    """The file ``--robot`` names (a URDF or a table), or None for a built-in name."""
+    robot = getattr(args, "robot", None)
+    return robot if robot is not None and Path(robot).is_file() else None
 
 
 def add_json_argument(parser: argparse.ArgumentParser) -> None:
@@ -83,3 +192,178 @@ def robot_from_args(args: argparse.Namespace):
         ddq_max=_floats("ddq-max", args.ddq_max),
         tool=args.tool,
     )
+
+
+# ---------------------------------------------------------------------------- outputs
+@dataclass(frozen=True)
+class Output:
+    """One output of a command, as :func:`check_outputs` checks it.
+
+    Parameters
+    ----------
+    option : str
+        The option naming it, without dashes (``out``, ``json``, ...).
+    path : Path
+        The file (or folder) given.
+    suffixes : tuple of str
+        Extensions accepted (lower case, with the dot); empty accepts any.
+    folder : bool
+        Whether the output is a folder.
+    replace : bool
+        Whether that folder is replaced as a whole (it must then hold no input).
+    also : tuple of Path
+        Other files it writes beside ``path`` (a model's ``.npz``, a dataset's ``.truth.json``).
+    hint : str
+        What the file is, added to a wrong extension's message (e.g. ``the model is JSON``).
+    """
+
+    option: str
+    path: Path
+    suffixes: tuple[str, ...] = ()
+    folder: bool = False
+    replace: bool = False
+    also: tuple[Path, ...] = ()
+    hint: str = ""
+
+    @property
+    def writes(self) -> tuple[Path, ...]:
+        return (self.path, *self.also)
+
+
+def output(
+    option: str,
+    path: str | os.PathLike[str] | None,
+    suffixes: Sequence[str] = (),
+    *,
+    folder: bool = False,
+    replace: bool = False,
+    also: Sequence[str | os.PathLike[str]] = (),
+    hint: str = "",
+) -> Output | None:
+    """An :class:`Output` for :func:`check_outputs`, or None when the option was not given."""
+    if path is None:
+        return None
+    return Output(
+        option,
+        Path(path),
+        tuple(s.lower() for s in suffixes),
+        folder,
+        replace,
+        tuple(Path(a) for a in also),
+        hint,
+    )
+
+
+def model_files(path: str | os.PathLike[str]) -> tuple[Path, Path]:
+    """The two files of a model: ``M.json`` and its arrays ``M.npz``."""
+    path = Path(path)
+    return path, path.with_suffix(".npz")
+
+
+def _real(path: Path) -> str:
+    return os.path.normcase(os.path.realpath(path))
+
+
+def _inside(path: Path, folder: Path) -> bool:
+    inner, outer = _real(path), _real(folder)
+    return inner == outer or inner.startswith(outer.rstrip(os.sep) + os.sep)
+
+
+def _probe(folder: Path, option: str, target: Path) -> None:
+    """Create and remove a temporary file in ``folder``: a place that cannot be written is named now."""
+    try:
+        fd, name = tempfile.mkstemp(dir=folder, prefix=".dynid-probe.", suffix=".tmp")
+    except OSError as err:
+        raise UsageError(
+            f"cannot write --{option} '{target}': the folder '{folder}' is not writable ({err.strerror or err}); "
+            "write elsewhere or make the folder writable."
+        ) from None
+    os.close(fd)
+    Path(name).unlink(missing_ok=True)
+
+
+def _check_one(out: Output) -> None:
+    path, option = out.path, out.option
+    if out.folder:
+        if path.exists() and not path.is_dir():
+            raise UsageError(f"--{option} '{path}' is a file; give a folder.")
+    else:
+        if out.suffixes and path.suffix.lower() not in out.suffixes:
+            what = f" ({out.hint})" if out.hint else ""
+            raise UsageError(
+                f"--{option} '{path}' has the extension '{path.suffix}'; give a file name ending in "
+                f"{' or '.join(out.suffixes)}{what}."
+            )
+        for written in out.writes:
+            if written.is_dir():
+                name = "is a folder" if written == path else f"writes '{written}', which is a folder"
+                raise UsageError(f"--{option} '{path}' {name}; give a file name.")
+    parent = path.parent
+    if not parent.is_dir():
+        raise UsageError(
+            f"the folder '{parent}' does not exist, so --{option} '{path}' cannot be written; create it or "
+            "write elsewhere."
+        )
+    _probe(path if out.folder and path.is_dir() else parent, option, path)
+
+
+def check_outputs(
+    outputs: Sequence[Output | None],
+    inputs: Mapping[str, str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | None] | None = None,
+) -> None:
+    """Check every output of a command before any work starts; the one output-path check of dynid.
+
+    An output is refused when its extension is not one it may have, when a folder is given for a file
+    (or a file for a folder), when its folder does not exist or cannot be written (a temporary file is
+    created there and removed), when it would overwrite an input of the same command (or, for a folder
+    that is replaced, hold one), and when two outputs would write the same file.
+
+    Parameters
+    ----------
+    outputs : sequence of Output or None
+        The command's outputs (None: an option not given).
+    inputs : mapping, optional
+        Option name (without dashes) -> the file(s) it reads; a model input names both its files.
+
+    Raises
+    ------
+    UsageError
+        One sentence: what is wrong with which option, and the fix.
+    """
+    given = [o for o in outputs if o is not None]
+    files: list[tuple[str, Path]] = []
+    for option, value in (inputs or {}).items():
+        if value is None:
+            continue
+        values = [value] if isinstance(value, str | os.PathLike) else list(value)
+        for item in values:
+            files.extend((option, Path(p)) for p in (model_files(item) if option in _MODEL_INPUTS else (item,)))
+    for out in given:
+        _check_one(out)
+        for option, source in files:
+            if out.folder and out.replace and _inside(source, out.path):
+                raise UsageError(
+                    f"--{out.option} '{out.path}' is replaced as a whole, and it holds the --{option} file "
+                    f"'{source}'; give another folder."
+                )
+            for written in out.writes:
+                if _real(written) == _real(source):
+                    also = "" if written == out.path else f" (it writes '{written}' too)"
+                    raise UsageError(
+                        f"--{out.option} '{out.path}' would overwrite the --{option} file '{source}'{also}; "
+                        "give the output another name."
+                    )
+    seen: dict[str, Output] = {}
+    for out in given:
+        for written in out.writes:
+            key = _real(written)
+            other = seen.get(key)
+            if other is not None and other is not out:
+                raise UsageError(
+                    f"--{other.option} '{other.path}' and --{out.option} '{out.path}' would both write "
+                    f"'{written}'; give them different names."
+                )
+            seen[key] = out
+
+
+_MODEL_INPUTS = ("model", "compare")

@@ -10,7 +10,7 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from dynid.commands.common import add_json_argument
+from dynid.commands.common import add_json_argument, check_outputs, output
 from dynid.exceptions import UsageError
 
 if TYPE_CHECKING:
@@ -36,6 +36,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_json_argument(parser)
 
 
+# The demo's own files in --out (dynid.demo.run_demo), which --json must not take the name of.
+_DEMO_FILES = (
+    "excitation.json",
+    "identification.csv",
+    "identification.csv.truth.json",
+    "validation.csv",
+    "validation.csv.truth.json",
+    "model.json",
+    "model.npz",
+    "model_ols.json",
+    "model_ols.npz",
+    "model_irls.json",
+    "model_irls.npz",
+    "report.html",
+    "diagnosis.html",
+)
+
+
 def _check_out(path: str) -> Path:
     out = Path(path)
     if out.exists() and not out.is_dir():
@@ -55,9 +73,12 @@ def run(args: argparse.Namespace) -> int:
     from dynid.demo import run_demo
 
     out = _check_out(args.out)
+    check_outputs([output("out", out, folder=True), output("json", args.json, (".json",))])
     json_path = None if args.json is None else Path(args.json)
-    if json_path is not None and not json_path.parent.is_dir():
-        raise UsageError(f"the folder of --json '{json_path}' does not exist; create it or write elsewhere.")
+    if json_path is not None and json_path.parent.resolve() == out.resolve() and json_path.name in _DEMO_FILES:
+        raise UsageError(
+            f"--json '{json_path}' is one of the files the demo writes in --out '{out}'; give another name."
+        )
     result = run_demo(out, quick=args.quick, seed=args.seed, progress=_show)
     _print_summary(result)
     if json_path is not None:

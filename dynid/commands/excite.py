@@ -5,7 +5,15 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from dynid.commands.common import add_json_argument, add_robot_arguments, robot_from_args, write_figures
+from dynid.commands.common import (
+    add_json_argument,
+    add_robot_arguments,
+    check_outputs,
+    output,
+    robot_file,
+    robot_from_args,
+    write_figures,
+)
 from dynid.exceptions import UsageError
 
 __all__ = ["HELP", "add_arguments", "output_paths", "run"]
@@ -70,17 +78,6 @@ def _floats(option: str, text: str | None, count: int | None = None) -> list[flo
     return values
 
 
-def _check_folder(option: str, path: str | None) -> Path | None:
-    if path is None:
-        return None
-    out = Path(path)
-    if not out.parent.exists():
-        raise UsageError(f"the folder of --{option} '{out}' does not exist; create it or write elsewhere.")
-    if out.is_dir():
-        raise UsageError(f"--{option} '{out}' is a folder; give a file name.")
-    return out
-
-
 def output_paths(out: Path, count: int) -> list[Path]:
     """``T.json`` for the first trajectory, ``T-2.json``, ``T-3.json``, ... for the others."""
     return [out] + [out.with_name(f"{out.stem}-{k}{out.suffix}") for k in range(2, count + 1)]
@@ -90,15 +87,29 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from dynid.optim.approach import check_pose, executable_trajectory
-    from dynid.optim.excitation import CartesianLimits, ExcitationProblem, design_excitation
+    from dynid.optim.excitation import CartesianLimits, ExcitationProblem, check_harmonics, design_excitation
 
-    out = _check_folder("out", args.out)
-    csv = _check_folder("csv", args.csv)
-    _check_folder("json", args.json)
-    if out.suffix.lower() != ".json":
-        raise UsageError(f"--out '{out}' must end in .json (the Fourier coefficients); the CSV goes to --csv.")
+    out = Path(args.out)
+    csv = None if args.csv is None else Path(args.csv)
+    if args.trajectories < 1:
+        raise UsageError(f"--trajectories is {args.trajectories}; give at least 1.")
+    check_outputs(
+        [
+            output(
+                "out",
+                out,
+                (".json",),
+                also=output_paths(out, args.trajectories)[1:],
+                hint="the Fourier coefficients; the CSV goes to --csv",
+            ),
+            output("csv", csv, (".csv",)),
+            output("json", args.json, (".json",)),
+        ],
+        {"robot": robot_file(args)},
+    )
     if not (args.rate > 0):
         raise UsageError(f"--rate is {args.rate}; give the controller rate in Hz, e.g. 500.")
+    check_harmonics(args.harmonics, args.base_freq, rate=args.rate)
     robot = robot_from_args(args)
     home = _floats("home", args.home, robot.n)
     home = check_pose(robot, home) if home is not None else None  # before the long design

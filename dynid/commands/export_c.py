@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from dynid.commands.common import add_robot_arguments, robot_from_args
+from dynid.commands.common import add_robot_arguments, check_outputs, output, robot_file, robot_from_args
 
 __all__ = ["HELP", "add_arguments", "run"]
 
@@ -25,6 +25,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from dynid.symbolic.export import DEFAULT_EXPORT, export_c
 
+    check_outputs([output("out", args.out, folder=True, replace=True)], {"robot": robot_file(args)})
     robot = robot_from_args(args)
     functions = (
         DEFAULT_EXPORT if args.functions is None else tuple(f.strip() for f in args.functions.split(","))

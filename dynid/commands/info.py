@@ -4,7 +4,15 @@ from __future__ import annotations
 
 import argparse
 
-from dynid.commands.common import add_json_argument, add_robot_arguments, robot_from_args, write_figures
+from dynid.commands.common import (
+    add_json_argument,
+    add_robot_arguments,
+    check_outputs,
+    output,
+    robot_file,
+    robot_from_args,
+    write_figures,
+)
 
 __all__ = ["HELP", "add_arguments", "run"]
 
@@ -20,6 +28,7 @@ def run(args: argparse.Namespace) -> int:
     from dynid.symbolic.base import base_parameters
     from dynid.symbolic.functions import robot_functions
 
+    check_outputs([output("json", args.json, (".json",))], {"robot": robot_file(args)})
     robot = robot_from_args(args)
     base = base_parameters(robot_functions(robot))
     print(

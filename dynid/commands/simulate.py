@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from dynid.commands.common import add_robot_arguments, robot_from_args
+from dynid.commands.common import add_robot_arguments, check_outputs, output, robot_file, robot_from_args
 
 __all__ = ["HELP", "add_arguments", "run"]
 
@@ -82,8 +82,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from dynid.optim.trajectory import load_trajectory
     from dynid.sim.effects import parse_effects
-    from dynid.sim.simulator import NoiseModel, check_output_path, simulate, write_simulation
+    from dynid.sim.simulator import NoiseModel, check_output_path, simulate, truth_path, write_simulation
 
+    check_outputs(
+        [output("out", args.out, (".csv", ".npz"), also=[truth_path(args.out)], hint="the dataset")],
+        {"trajectory": args.trajectory, "robot": robot_file(args)},
+    )
     effects = parse_effects(args.effects)
     noise = NoiseModel.parse(args.noise)
     out = check_output_path(args.out)

@@ -5,7 +5,16 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from dynid.commands.common import add_json_argument, write_figures
+from dynid.commands.common import (
+    add_degrees_argument,
+    add_json_argument,
+    check_data_fits_model,
+    check_outputs,
+    output,
+    read_dataset,
+    robot_file,
+    write_figures,
+)
 from dynid.exceptions import UsageError
 
 __all__ = ["HELP", "add_arguments", "run"]
@@ -23,6 +32,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="V.csv",
         help="held-out dataset (.csv or .npz), not the identification data",
     )
+    add_degrees_argument(parser)
     parser.add_argument(
         "--compare",
         nargs="+",
@@ -48,24 +58,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--robot",
-        help="robot to load the models with (default: the one recorded in each model file)",
+        help="robot to load the models with (default: the one recorded in each model file); it must be the "
+        "robot the models were identified for",
     )
     add_json_argument(parser)
-
-
-def _output(option: str, path: str | None, suffixes: tuple[str, ...]) -> Path | None:
-    if path is None:
-        return None
-    out = Path(path)
-    if out.suffix.lower() not in suffixes:
-        raise UsageError(
-            f"--{option} '{out}' has the extension '{out.suffix}'; give a file name ending in {' or '.join(suffixes)}."
-        )
-    if not out.parent.is_dir():
-        raise UsageError(f"the folder of --{option} '{out}' does not exist; create it or write elsewhere.")
-    if out.is_dir():
-        raise UsageError(f"--{option} '{out}' is a folder; give a file name.")
-    return out
 
 
 def _row(values, fmt: str = "{:>10.4g}") -> str:
@@ -74,15 +70,22 @@ def _row(values, fmt: str = "{:>10.4g}") -> str:
 
 def run(args: argparse.Namespace) -> int:
     from dynid._io import to_jsonable
-    from dynid.identify.dataset import load_dataset
     from dynid.identify.model import load_model
     from dynid.validation.report import check_report_path, render_report
     from dynid.validation.validate import compare, validate, write_predictions
 
     # Every output is checked before any work, and written only once everything is computed.
     report_path = None if args.report is None else check_report_path(args.report)
-    predictions_path = _output("predictions", args.predictions, (".csv",))
-    json_path = _output("json", args.json, (".json",))
+    check_outputs(
+        [
+            output("report", args.report, (".html", ".htm", ".pdf")),
+            output("predictions", args.predictions, (".csv",)),
+            output("json", args.json, (".json",)),
+        ],
+        {"model": args.model, "compare": args.compare, "data": args.data, "robot": robot_file(args)},
+    )
+    predictions_path = None if args.predictions is None else Path(args.predictions)
+    json_path = None if args.json is None else Path(args.json)
     if args.period is not None and not args.period > 0:
         raise UsageError(f"--period is {args.period}; give the period of the motion in seconds (> 0).")
 
@@ -93,7 +96,9 @@ def run(args: argparse.Namespace) -> int:
         robot = load_robot(args.robot)
     files = [args.model, *args.compare]
     models = [load_model(path, robot=robot) for path in files]
-    data = load_dataset(args.data)
+    data = read_dataset(args.data, degrees=args.degrees)
+    for path, model in zip(files, models, strict=True):
+        check_data_fits_model(model, data, model_path=path, data_option="data")
     stems = [Path(f).stem for f in files]
     labels = [s if stems.count(s) == 1 else str(f) for s, f in zip(stems, files, strict=True)]
     results = [

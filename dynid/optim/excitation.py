@@ -107,13 +107,77 @@ from dynid.symbolic.robot import RobotModel
 
 __all__ = [
     "CRITERIA",
+    "MAX_HARMONICS",
     "CartesianLimits",
     "ExcitationError",
     "ExcitationProblem",
     "ExcitationResult",
     "StageRecord",
+    "check_harmonics",
     "design_excitation",
 ]
+
+MAX_HARMONICS = 15
+"""Most harmonics per joint (the paper uses 5); the optimisation's size grows with their count."""
+
+_MIN_AMPLITUDE = 1e-3
+"""Smallest amplitude (rad) worth a harmonic: the acceleration limit must allow at least this much."""
+
+
+def check_harmonics(
+    harmonics: int, base_freq: float, *, rate: float | None = None, robot: RobotModel | None = None
+) -> None:
+    """Refuse more harmonics than the rate, the limits and a sane size allow.
+
+    The rule: at most :data:`MAX_HARMONICS`; the highest harmonic ``N * base_freq`` below the Nyquist
+    frequency ``rate / 2`` of the controller; and, with a robot, the acceleration limit must let the
+    highest harmonic move its fastest joint by at least 1 mrad (``max ddq_max / (2 pi N ff)^2``).
+
+    Parameters
+    ----------
+    harmonics : int
+        Harmonics N per joint.
+    base_freq : float
+        Base frequency ff (Hz).
+    rate : float, optional
+        Controller (sampling) rate (Hz).
+    robot : RobotModel, optional
+        The robot, for its acceleration limits.
+
+    Raises
+    ------
+    UsageError
+        The bound, the rule behind it and the fix.
+    """
+    if not (math.isfinite(base_freq) and base_freq > 0):
+        return  # ExcitationProblem names a bad base frequency
+    bounds = [(MAX_HARMONICS, f"dynid designs at most {MAX_HARMONICS} harmonics (the paper uses 5)")]
+    if rate is not None and math.isfinite(rate) and rate > 0:
+        bounds.append(
+            (
+                math.ceil(rate / 2 / base_freq) - 1,
+                f"harmonic N at {base_freq:g} Hz must stay below the Nyquist frequency {rate / 2:g} Hz of the "
+                f"{rate:g} Hz rate",
+            )
+        )
+    if robot is not None:
+        ddq = float(np.max(robot.ddq_max))
+        if math.isfinite(ddq) and ddq > 0:
+            bound = math.floor(math.sqrt(ddq / _MIN_AMPLITUDE) / (2 * math.pi * base_freq))
+            bounds.append(
+                (
+                    bound,
+                    f"the acceleration limit {ddq:g} rad/s^2 of '{robot.name}' leaves a harmonic above {bound} at "
+                    f"{base_freq:g} Hz less than 1 mrad of motion",
+                )
+            )
+    limit, reason = min(bounds, key=lambda b: b[0])
+    if harmonics > limit:
+        raise UsageError(
+            f"harmonics is {harmonics}; give at most {max(limit, 0)} ({reason}), or lower the base frequency."
+            if limit >= 2
+            else f"harmonics is {harmonics}, and no number of at least 2 fits ({reason}); lower the base frequency."
+        )
 
 CRITERIA = ("seed", "cond", "logdet")
 """Names of the excitation criteria."""
@@ -263,6 +327,7 @@ class ExcitationProblem:
             )
         if not (math.isfinite(self.base_freq) and self.base_freq > 0):
             raise UsageError(f"base_freq is {self.base_freq}; give a positive frequency in Hz, e.g. 0.1.")
+        check_harmonics(int(self.harmonics), self.base_freq, robot=self.robot)
         grid = max(40, 12 * int(self.harmonics)) if self.grid is None else self.grid
         if int(grid) != grid or grid < 2:
             raise UsageError(f"grid is {self.grid}; give at least 2 samples per period (default max(40, 12 N)).")
