@@ -4,9 +4,17 @@ shrinks the gap."""
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from dynid.commands.common import add_json_argument, write_figures
+from dynid.commands.common import (
+    add_degrees_argument,
+    add_json_argument,
+    check_data_fits_model,
+    check_outputs,
+    output,
+    read_dataset,
+    robot_file,
+    write_figures,
+)
 
 __all__ = ["HELP", "add_arguments", "run"]
 
@@ -25,6 +33,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         required=True,
         metavar="V.csv",
         help="held-out data of the same robot (best: several periods of a periodic excitation)",
+    )
+    add_degrees_argument(parser)
+    parser.add_argument(
+        "--robot",
+        help="robot to load the model with (default: the one recorded in the model file); it must be the robot "
+        "the model was identified for",
     )
     parser.add_argument("--report", metavar="R.html", help="write a self-contained HTML report")
     parser.add_argument(
@@ -47,21 +61,29 @@ def run(args: argparse.Namespace) -> int:
     from dynid.diagnosis.core import diagnose
     from dynid.diagnosis.report import write_diagnosis_report
     from dynid.exceptions import UsageError
-    from dynid.identify.dataset import load_dataset
     from dynid.identify.model import load_model
     from dynid.validation.html_page import check_report_path
 
     report = check_report_path(args.report, pdf=False) if args.report else None
-    if args.json is not None and not Path(args.json).parent.is_dir():
-        raise UsageError(f"the folder of --json '{args.json}' does not exist; create it or write elsewhere.")
+    check_outputs(
+        [output("report", args.report, (".html", ".htm")), output("json", args.json, (".json",))],
+        {"model": args.model, "data": args.data, "heldout": args.heldout, "robot": robot_file(args)},
+    )
     effects = EFFECT_NAMES
     if args.effects:
         effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
     if not 0 < args.alpha < 1:
         raise UsageError(f"--alpha is {args.alpha}; give a probability between 0 and 1, e.g. 0.05.")
-    model = load_model(args.model)
-    train = load_dataset(args.data)
-    heldout = load_dataset(args.heldout)
+    robot = None
+    if args.robot is not None:
+        from dynid.symbolic.robot import load_robot
+
+        robot = load_robot(args.robot)
+    model = load_model(args.model, robot=robot)
+    train = read_dataset(args.data, degrees=args.degrees)
+    heldout = read_dataset(args.heldout, degrees=args.degrees)
+    check_data_fits_model(model, train, model_path=args.model, data_option="data")
+    check_data_fits_model(model, heldout, model_path=args.model, data_option="heldout")
     result = diagnose(
         model,
         train,

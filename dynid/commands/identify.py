@@ -4,7 +4,18 @@ from __future__ import annotations
 
 import argparse
 
-from dynid.commands.common import add_json_argument, add_robot_arguments, robot_from_args, write_figures
+from dynid.commands.common import (
+    add_degrees_argument,
+    add_json_argument,
+    add_robot_arguments,
+    check_outputs,
+    model_files,
+    output,
+    read_dataset,
+    robot_file,
+    robot_from_args,
+    write_figures,
+)
 
 __all__ = ["HELP", "add_arguments", "run"]
 
@@ -41,6 +52,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--data", required=True, metavar="D.csv", help="dataset (.csv or .npz: t, q_i, tau_i [, dq_i, ddq_i])"
     )
+    add_degrees_argument(parser)
     parser.add_argument(
         "--method",
         default="irls",
@@ -99,13 +111,25 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from dynid.identify.dataset import load_dataset
     from dynid.identify.model import identify, save_model
     from dynid.identify.preparation import Preprocessing
 
+    check_outputs(
+        [
+            output(
+                "out",
+                args.out,
+                (".json",),
+                also=model_files(args.out)[1:],
+                hint="the model is JSON; its arrays go beside it as .npz",
+            ),
+            output("json", args.json, (".json",)),
+        ],
+        {"data": args.data, "robot": robot_file(args)},
+    )
     robot = robot_from_args(args)
     start = time.perf_counter()
-    data = load_dataset(args.data, robot.n, robot_name=robot.name)
+    data = read_dataset(args.data, robot.n, robot_name=robot.name, degrees=args.degrees)
     model = identify(
         robot,
         data,

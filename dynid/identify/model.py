@@ -30,10 +30,12 @@ the layers were filtered, ``layers_filtered`` false, add layers 2 and 3 unfilter
 
 Model file: ``M.json`` holds everything a person reads (robot, parameters with their standard
 deviations, preprocessing, friction coefficients, condition number, RMS per layer) and the name and
-SHA-256 of ``M.npz``, which holds the arrays (covariance, mixture).  Both are written to temporary
-files and renamed into place, the arrays first, so a reader never sees a half-written model: an
-interrupted write leaves the old pair, or a JSON whose checksum tells that its arrays are not the
-ones it was written with.
+SHA-256 of ``M.npz``, which holds the arrays (covariance, mixture).  The JSON is the pair's manifest:
+both files are written in full to temporary files first, then renamed into place, the arrays first and
+the JSON last, so the pair is valid exactly when the JSON's checksum names the arrays beside it.  An
+interrupted write (Ctrl-C, SIGTERM, an error) removes its temporary files and leaves the old pair; a
+process killed outright between the two renames leaves a pair that :func:`load_model` refuses in one
+sentence (never a model with another model's arrays).
 """
 
 from __future__ import annotations
@@ -959,7 +961,8 @@ def load_model(path: str | os.PathLike[str], robot=None) -> IdentifiedModel:
         except DynidError as err:
             raise ModelFileError(
                 f"{name} was identified for the robot '{info_robot.get('name')}' from '{info_robot.get('source')}', "
-                f"which cannot be loaded here ({err}); pass that robot to load_model(path, robot=...)"
+                f"which cannot be loaded here ({err}); give the robot it was identified for (on the command line: "
+                "--robot, a built-in name, URDF or table)"
             ) from None
     if info_robot.get("transmission") is not None:
         try:
@@ -982,8 +985,8 @@ def load_model(path: str | os.PathLike[str], robot=None) -> IdentifiedModel:
         ) from None
     if hashlib.sha256(blob).hexdigest() != doc.get("arrays_sha256"):
         raise ModelFileError(
-            f"{arrays_path.name} is not the arrays file {name} was written with (checksum differs); copy the pair "
-            "together or identify again"
+            f"{arrays_path.name} is not the arrays file {name} was written with (checksum differs): the pair was "
+            "copied apart or its writing was interrupted; copy the two files together or identify again"
         )
     try:
         with np.load(io.BytesIO(blob), allow_pickle=False) as npz:
