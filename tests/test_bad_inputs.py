@@ -534,6 +534,17 @@ BAD_ROBOTS: list[tuple[str, Callable[[Path], str], str]] = [
     ("types_value", lambda f: _toml(f, 'type  = ["R", "R", "P"]', 'type  = "RRP"'), r"must hold 'R' or 'P'"),
     ("bad_toml", lambda f: _toml(f, "[links]", "[links"), r"is not valid TOML"),
     (
+        "alpha_in_degrees",
+        lambda f: _toml(f, "alpha = [0.0, -1.5708, 1.5708]", "alpha = [0.0, -90.0, 90.0]"),
+        r"column 'joints\.alpha' of the table '.*bad\.toml' holds -90 for joint 2, beyond the 6\.28319 rad of any "
+        r"arm; give radians \(the angles look like degrees\)",
+    ),
+    (
+        "length_in_millimetres",
+        lambda f: _toml(f, "a     = [0.0, 0.05, 0.3]", "a     = [0.0, 50.0, 300.0]"),
+        r"column 'joints\.a' .* holds 300 for joint 3, beyond the 100 m of any arm; give it in m",
+    ),
+    (
         "nan_theta",
         lambda f: _toml(f, "theta = [0.0", "theta = [nan"),
         r"column 'joints\.theta' of the table '.*bad\.toml' holds nan; give finite numbers",

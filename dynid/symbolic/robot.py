@@ -303,7 +303,9 @@ class RobotModel:
 
     def with_transmission(self, transmission) -> RobotModel:
         """Return a copy with a coupled transmission ``R`` (n, n; see :attr:`transmission`), or None."""
-        return replace(self, transmission=None if transmission is None else np.array(transmission, dtype=float))
+        return replace(
+            self, transmission=None if transmission is None else np.array(transmission, dtype=float)
+        )
 
     def with_params(self, params: np.ndarray | None = None, armature: np.ndarray | None = None) -> RobotModel:
         """Return a copy with other standard parameters and/or armature (e.g. a perturbed truth)."""
@@ -798,8 +800,34 @@ def load_transmission(path: str | os.PathLike[str], n: int) -> np.ndarray:
     try:
         table = tomllib.loads(path.read_text())
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise RobotModelError(f"the transmission file '{path}' is not valid TOML ({exc}); fix its syntax.") from None
+        raise RobotModelError(
+            f"the transmission file '{path}' is not valid TOML ({exc}); fix its syntax."
+        ) from None
     return _transmission_table(table.get("transmission"), n, f"'{path}'")
+
+
+# Largest magnitude a modified-DH table may hold per column kind: angles (rad; larger ones are degrees),
+# lengths (m), masses (kg), inertias (kg m^2).  No robot arm comes near the last three.
+_TABLE_SIZES = {"angle": 2 * math.pi, "length": 100.0, "mass": 1e5, "inertia": 1e6}
+_TABLE_KIND = {"alpha": "angle", "theta": "angle", "a": "length", "d": "length", "m": "mass"}
+
+
+def _check_table_sizes(path: Path, columns: dict[str, np.ndarray]) -> None:
+    """Refuse table values no arm can have (angles above 2 pi rad are taken for degrees)."""
+    for label, values in columns.items():
+        key = label.split(".", 1)[1]
+        kind = _TABLE_KIND.get(key, "length" if key.startswith("c") else "inertia")
+        limit = _TABLE_SIZES[kind]
+        big = np.abs(values) > limit
+        if not big.any():
+            continue
+        j = int(np.argmax(big))
+        unit = {"angle": "rad", "length": "m", "mass": "kg", "inertia": "kg m^2"}[kind]
+        fix = "give radians (the angles look like degrees)" if kind == "angle" else f"give it in {unit}"
+        raise RobotModelError(
+            f"column '{label}' of the table '{path}' holds {values[j]:g} for joint {j + 1}, beyond the "
+            f"{limit:g} {unit} of any arm; {fix}."
+        )
 
 
 def _joint_count(table: dict) -> int:
@@ -854,6 +882,9 @@ def _load_mdh(path: Path, *, name: str) -> RobotModel:
             f"column 'joints.type' of the table '{path}' must hold 'R' or 'P' for each of its {n} joints."
         )
     link = {k: _column(table, "links", k, n, path) for k in _LINK_COLUMNS}
+    _check_table_sizes(
+        path, {**{f"joints.{k}": v for k, v in dh.items()}, **{f"links.{k}": v for k, v in link.items()}}
+    )
     armature = _column(table, "links", "armature", n, path, default=0.0)
     q_min = _column(table, "joints", "q_min", n, path, default=-math.pi)
     q_max = _column(table, "joints", "q_max", n, path, default=math.pi)
@@ -861,7 +892,9 @@ def _load_mdh(path: Path, *, name: str) -> RobotModel:
     ddq_max = _column(table, "joints", "ddq_max", n, path, default=DEFAULT_DDQ_MAX)
     gravity = _table_floats(path, "gravity", table.get("gravity", [0.0, 0.0, -9.81]), 3)
     transmission = (
-        _transmission_table(table["transmission"], n, f"the table '{path}'") if "transmission" in table else None
+        _transmission_table(table["transmission"], n, f"the table '{path}'")
+        if "transmission" in table
+        else None
     )
     joints, params = [], []
     for i in range(n):
