@@ -178,6 +178,10 @@ def main() -> None:
         f"default model: training RMS link+friction {np.round(fig['rms_layers']['friction'], 3).tolist()}, "
         f"full {np.round(fig['rms_layers']['gmm'], 3).tolist()}"
     )
+    check = fig.get("physical_check")
+    if check:
+        print(f"physical check: {check['kept']}; ratios {np.round(check['ratio'], 2).tolist()}")
+    print(f"bounds held at 0: {fig.get('bounds', {}).get('active')}")
     for note in fig.get("notes", []):
         print(f"  note: {note}")
     print(f"\nheld-out RMS (N m); reference: {ref_label}")

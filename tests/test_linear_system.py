@@ -17,7 +17,7 @@ from dynid.identify.estimators import OLS
 from dynid.identify.friction import FrictionLayer, SeedFriction
 from dynid.identify.gmr import GMRCorrection
 from dynid.identify.linear_system import LinearSystem, WeightedSolution, build_system
-from dynid.identify.preparation import Preprocessing, prepare
+from dynid.identify.preparation import AUTO_CUTOFF_HZ, Preprocessing, prepare
 from dynid.sim.synthetic import random_fourier, synthetic_dataset
 
 
@@ -203,18 +203,21 @@ def test_preprocessing_defaults(ur5) -> None:
         "trim_s": 0.0,
         "parallel": True,
     }
-    # angles only: 20 Hz on torque and states, 5 / cutoff trimmed at both ends
+    # angles only: the cut-off from the data (noise-free angles carry signal far up: the largest,
+    # a fifth of the sampling rate), on torque and states, 5 / cutoff trimmed at both ends
     only_q = _dataset(ur5, 1000.0, derivatives=False)
     settings = default.resolve(only_q)
-    assert settings["cutoff_hz"] == settings["state_cutoff_hz"] == 20.0
-    assert settings["trim_s"] == pytest.approx(0.25, rel=1e-12)
+    cutoff = settings["cutoff_hz"]
+    assert AUTO_CUTOFF_HZ <= cutoff <= 200.0 and settings["state_cutoff_hz"] == cutoff
+    assert settings["trim_s"] == pytest.approx(5.0 / cutoff, rel=1e-12)
     # at most a fifth of the sampling rate
     assert default.resolve(_dataset(ur5, 50.0, derivatives=False))["cutoff_hz"] == pytest.approx(10.0)
     # the resolved settings describe the preprocessing again
     assert Preprocessing.from_settings(settings).resolve(only_q) == settings
     prepared = prepare(only_q)
-    assert prepared.settings["cutoff_hz"] == 20.0 and prepared.parallel_filter
-    trimmed = int(np.ceil(0.25 * 1000 - 1e-9))
+    assert prepared.settings["cutoff_hz"] == cutoff and prepared.parallel_filter
+    assert prepared.settings["cutoff_rule"].startswith("from the data: q carries signal up to")
+    trimmed = int(np.ceil(5.0 / cutoff * 1000 - 1e-9))
     np.testing.assert_array_equal(prepared.rows, np.arange(trimmed, len(only_q.t) - trimmed))
     assert prepared.reference == "filtered and trimmed"
 

@@ -101,6 +101,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="consistent method: pull toward the URDF bodies (default 0)",
     )
     parser.add_argument(
+        "--unconstrained",
+        action="store_true",
+        help="let armature, Coulomb and viscous coefficients go negative (default: kept >= 0, the summary "
+        "names those held at 0)",
+    )
+    parser.add_argument(
         "--out", required=True, metavar="M.json", help="model file to write (arrays go to M.npz beside it)"
     )
     add_json_argument(parser)
@@ -140,6 +146,7 @@ def run(args: argparse.Namespace) -> int:
         reference_weight=args.reference_weight,
         rounds=args.rounds,
         gmm_mode=args.gmm_mode,
+        physical=not args.unconstrained,
     )
     json_path, arrays_path = save_model(model, args.out)
     elapsed = time.perf_counter() - start
@@ -155,9 +162,22 @@ def run(args: argparse.Namespace) -> int:
         pct = "-" if row["std_percent"] is None else f"{row['std_percent']:.3g}"
         print(f"{row['name']:<8} {row['value']:>13.6g} {pct:>9}  {row['expression']}")
     layers = figures["rms_layers"]
-    for label in ("link", "friction", "gmm"):
-        print(f"rms after {label:<8} (N m): " + " ".join(f"{v:.4g}" for v in layers[label]))
+    for key, label in (
+        ("link", "link"),
+        ("friction", "link + friction (physical layers)"),
+        ("gmm", "full model"),
+    ):
+        print(f"rms {label:<34} (N m): " + " ".join(f"{v:.4g}" for v in layers[key]))
     print(f"friction: {figures['friction']['model']} ({figures['friction']['source']})")
+    bounds = figures.get("bounds", {})
+    if bounds.get("physical"):
+        active = bounds.get("active", [])
+        print(
+            "bounds: armature, Coulomb, viscous >= 0; "
+            + (f"held at 0: {', '.join(active)}" if active else "none active")
+        )
+    else:
+        print("bounds: none (--unconstrained)")
     rounds = figures.get("refinement", {}).get("rounds", 0)
     print(
         f"layers fitted together in {rounds} round{'s' if rounds != 1 else ''}"

@@ -20,12 +20,23 @@ from scipy.signal import sosfiltfilt
 
 from dynid.exceptions import DataError, DataWarning
 from dynid.identify.dataset import Dataset
-from dynid.identify.preprocess import butter_sos, kept_rows, lowpass, preprocess
+from dynid.identify.preprocess import (
+    butter_sos,
+    central_difference,
+    choose_cutoff,
+    kept_rows,
+    lowpass,
+    preprocess,
+    resample,
+)
 
 __all__ = ["AUTO_CUTOFF_HZ", "Prepared", "Preprocessing", "prepare", "still_joints"]
 
 AUTO_CUTOFF_HZ = 20.0
-"""Cut-off (Hz) that ``cutoff="auto"`` uses on data without measured velocities and accelerations."""
+"""Lowest cut-off (Hz) that ``cutoff="auto"`` chooses on data without measured velocities (the
+earlier fixed default, kept as a floor so that simulated data keep their preprocessing)."""
+DQ_AGREEMENT = 0.05
+"""Relative RMS difference below which a measured ``dq`` counts as agreeing with the derivative of ``q``."""
 
 
 @dataclass(frozen=True)
@@ -37,7 +48,10 @@ class Preprocessing:
     cutoff : float or None or "auto"
         Cut-off (Hz) of the zero-phase Butterworth low-pass applied to the torque and, with
         ``parallel``, to every regressor column.  None: no filter.  ``"auto"`` (default): None when the
-        dataset has measured ``dq`` and ``ddq``, else 20 Hz (at most a fifth of the sampling rate).
+        dataset has measured ``dq`` and ``ddq``; else chosen from the recording by
+        :func:`dynid.identify.preprocess.choose_cutoff` (the motion's and the torque's signal band),
+        at most a fifth of the sampling rate and, without a measured ``dq``, at least
+        :data:`AUTO_CUTOFF_HZ`.  The prepared settings record the rule (``cutoff_rule``).
     state_cutoff : float or None or "auto"
         Cut-off (Hz) of the low-pass on ``q`` (and measured ``dq``, ``ddq``) before differentiation.
         ``"auto"`` (default): the same as ``cutoff``.
@@ -53,6 +67,10 @@ class Preprocessing:
     parallel : bool
         Parallel filtering (default): the regressor is built from the states and filtered like the
         torque.  False: the paper's way, regressor from filtered states and torque filtered apart.
+    velocity : {"auto", "measured", "differentiate"}
+        A measured ``dq``: used if it agrees with the derivative of the filtered ``q`` (relative RMS
+        difference below :data:`DQ_AGREEMENT`; ``"auto"``, default), always, or never.  The prepared
+        settings say which (``dq``, ``dq_evidence``).
     """
 
     cutoff: float | Literal["auto"] | None = "auto"
@@ -61,6 +79,7 @@ class Preprocessing:
     decimate: int = 1
     trim: float | None = None
     parallel: bool = True
+    velocity: Literal["auto", "measured", "differentiate"] = "auto"
 
     def resolve(self, ds: Dataset) -> dict[str, Any]:
         """Concrete settings for a dataset (no ``"auto"`` left): a JSON-ready dict.
@@ -70,10 +89,27 @@ class Preprocessing:
         ds : Dataset
             The data the settings apply to (its sampling rate and signals decide ``"auto"``).
         """
+        return self._resolve(ds)[0]
+
+    def _resolve(self, ds: Dataset) -> tuple[dict[str, Any], str]:
+        """The settings of :meth:`resolve` and one sentence on how the cut-off was chosen."""
         fs = 1.0 / ds.dt
         cutoff = self.cutoff
+        rule = "given"
         if cutoff == "auto":
-            cutoff = None if (ds.dq is not None and ds.ddq is not None) else min(AUTO_CUTOFF_HZ, fs / 5.0)
+            if ds.dq is not None and ds.ddq is not None:
+                cutoff, rule = None, "none: dq and ddq are measured"
+            else:
+                upper = fs / 5.0
+                if isinstance(self.decimate, int | np.integer) and self.decimate > 1:
+                    upper = min(upper, 0.8 * fs / (2 * self.decimate))
+                uniform = ds if ds.is_uniform else resample(ds)
+                chosen, details = choose_cutoff(uniform, upper=upper)
+                floor = min(AUTO_CUTOFF_HZ, upper) if ds.dq is None else 0.0
+                cutoff = float(max(chosen, floor))
+                rule = details["rule"] + (
+                    f"; raised to {floor:g} Hz (the floor without a measured dq)" if chosen < floor else ""
+                )
         state_cutoff = cutoff if self.state_cutoff == "auto" else self.state_cutoff
         for label, value in (("cutoff", cutoff), ("state_cutoff", state_cutoff)):
             if value is not None and not (isinstance(value, int | float) and 0 < value < fs / 2):
@@ -92,6 +128,8 @@ class Preprocessing:
         trim = (5.0 / lowest if lowest is not None else 0.0) if self.trim is None else float(self.trim)
         if not (math.isfinite(trim) and trim >= 0):
             raise DataError(f"trim is {trim!r}; give a non-negative time in seconds")
+        if self.velocity not in ("auto", "measured", "differentiate"):
+            raise DataError(f"velocity is {self.velocity!r}; give 'auto', 'measured' or 'differentiate'")
         return {
             "cutoff_hz": None if cutoff is None else float(cutoff),
             "state_cutoff_hz": None if state_cutoff is None else float(state_cutoff),
@@ -99,7 +137,7 @@ class Preprocessing:
             "decimate": int(self.decimate),
             "trim_s": trim,
             "parallel": bool(self.parallel),
-        }
+        }, rule
 
     @classmethod
     def from_settings(cls, settings: dict[str, Any]) -> Preprocessing:
@@ -117,6 +155,8 @@ class Preprocessing:
             decimate=int(settings["decimate"]),
             trim=float(settings["trim_s"]),
             parallel=bool(settings["parallel"]),
+            # files written before the choice: a measured dq was always used
+            velocity=_velocity_choice(settings),
         )
 
 
@@ -257,9 +297,13 @@ def prepare(
         )
     if n_joints is not None:
         ds.check_joints(n_joints)
-    settings = (preprocessing or Preprocessing()).resolve(ds)
+    pre = preprocessing or Preprocessing()
+    settings, rule = pre._resolve(ds)
     parallel = settings["parallel"] and settings["cutoff_hz"] is not None
     state_cutoff = settings["state_cutoff_hz"] if parallel else settings["cutoff_hz"]
+    velocity, evidence = pre.velocity, None
+    if ds.dq is not None and velocity == "auto":
+        velocity, evidence = _velocity_evidence(ds, state_cutoff, settings["order"])
     states = preprocess(
         ds,
         cutoff=state_cutoff,
@@ -267,6 +311,7 @@ def prepare(
         decimate=1,
         trim=0.0,
         filter_torque=not parallel,
+        velocity="differentiate" if velocity == "differentiate" else "measured",
     )
     trim_samples = int(np.ceil(settings["trim_s"] * (1.0 / states.dt) - 1e-9))
     rows = kept_rows(states.runs, decimate=settings["decimate"], trim_samples=trim_samples)
@@ -291,8 +336,52 @@ def prepare(
         runs=states.runs,
         rows=rows,
         fs=1.0 / states.dt,
-        settings={**settings, "dq": states.meta["preprocess"]["dq"], "ddq": states.meta["preprocess"]["ddq"]},
+        settings={
+            **settings,
+            "dq": states.meta["preprocess"]["dq"],
+            "ddq": states.meta["preprocess"]["ddq"],
+            "cutoff_rule": rule,
+            **({} if evidence is None else {"dq_evidence": evidence}),
+        },
         reference=reference,
+    )
+
+
+def _velocity_choice(settings: dict[str, Any]) -> Literal["auto", "measured", "differentiate"]:
+    """How a model file's preparation treated a measured dq, to treat new data the same way."""
+    if "dq_evidence" not in settings:  # no measured dq was weighed (or an older file): as before
+        return "measured"
+    return "measured" if str(settings.get("dq", "")).startswith("measured") else "differentiate"
+
+
+def _velocity_evidence(ds: Dataset, cutoff: float | None, order: int) -> tuple[str, str]:
+    """Use a measured dq or differentiate q: ("measured" | "differentiate", the evidence in a sentence).
+
+    Both through the same filter, the measured dq is compared with the central difference of q; if
+    they differ by less than :data:`DQ_AGREEMENT` of the RMS speed the measured one is used (it has no
+    differentiation noise), else q is differentiated (a lagged, scaled or biased velocity would bias
+    the friction and the Coriolis columns).
+    """
+    uniform = ds if ds.is_uniform else resample(ds)
+    fs = 1.0 / uniform.dt
+    q, dq = uniform.q, uniform.dq
+    if cutoff is not None:
+        q = lowpass(q, fs=fs, cutoff=cutoff, order=order, runs=uniform.runs)
+        dq = lowpass(dq, fs=fs, cutoff=cutoff, order=order, runs=uniform.runs)
+    dq_q = central_difference(q, uniform.dt, derivative=1, runs=uniform.runs)
+    edge = max(1, int(0.05 * len(q)))
+    inner = slice(edge, len(q) - edge)
+    scale = float(np.sqrt(np.mean(dq_q[inner] ** 2)))
+    if scale <= 0:
+        return "measured", "the joints do not move: measured dq kept"
+    diff = float(np.sqrt(np.mean((dq[inner] - dq_q[inner]) ** 2))) / scale
+    if diff < DQ_AGREEMENT:
+        return "measured", (
+            f"measured dq used: it agrees with the derivative of q within {100 * diff:.2g} % of the RMS speed"
+        )
+    return "differentiate", (
+        f"derivative of q used: the measured dq differs from it by {100 * diff:.2g} % of the RMS speed "
+        f"(more than {100 * DQ_AGREEMENT:g} %)"
     )
 
 
