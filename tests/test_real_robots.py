@@ -90,3 +90,60 @@ def test_tx40_diagnosis_points_at_the_coupled_wrist_and_is_provisional(shared_da
         assert "a longer held-out run would decide" in printed.getvalue()
     assert doc["noise_floor"]["method"] == "spectrum"
     assert (tmp_path / "tx40_diagnosis.html").is_file()
+
+
+@pytest.fixture(scope="module")
+def panda_defaults(shared_data):
+    """Gaz et al.'s split (train t < 15 s), dynid's defaults, OLS + linear friction and the published model,
+    scored as ``benchmarks/real_robots_benchmark.py`` scores them (raw torque, 10 Hz, 0.25 s trimmed)."""
+    import warnings
+
+    from dynid.identify.adapters import load_recording, recording_model_path
+    from dynid.identify.model import identify
+    from dynid.identify.preparation import Preprocessing, prepare
+    from dynid.identify.preprocess import lowpass
+    from dynid.symbolic import load_robot
+
+    bench = runpy.run_path(str(REPO / "benchmarks" / "real_robots_benchmark.py"), run_name="dynid_benchmark")
+    full = load_recording("panda_gaz2019", shared_data)
+    urdf = str(recording_model_path("panda_gaz2019", shared_data))
+    robot = load_robot(urdf)
+    split = full.t[0] + 15.0
+    train = full.select_rows(np.flatnonzero(full.t < split))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = identify(robot, train)
+        ols = identify(robot, train, method="ols", friction="linear", gmm="off", physical=False)
+    raw = prepare(full, Preprocessing(cutoff=None, trim=0.0))
+    idx = np.flatnonzero(raw.t >= split)
+    fs = 1.0 / np.median(np.diff(raw.t))
+    th = raw.t[idx]
+    keep = (th >= th[0] + 0.25) & (th <= th[-1] - 0.25)
+
+    def score(t, tau):
+        tau = np.column_stack([np.interp(raw.t, t, tau[:, j]) for j in range(tau.shape[1])])
+        err = lowpass(tau[idx] - raw.tau[idx], fs=fs, cutoff=10.0, order=4)[keep]
+        return np.sqrt(np.mean(err**2, axis=0))
+
+    t, phys, whole = bench["model_parts"](model, full)
+    t_ols, _, ols_whole = bench["model_parts"](ols, full)
+    rms = {
+        "phys": score(t, phys),
+        "full": score(t, whole),
+        "ols": score(t_ols, ols_whole),
+        "ref": score(*bench["gaz_reference"](urdf, full)),
+    }
+    return model, rms
+
+
+def test_panda_defaults_beat_the_published_model_with_physical_layers_that_stand_alone(panda_defaults):
+    model, rms = panda_defaults
+    assert np.all(rms["full"] < rms["ref"]), rms  # Gaz et al.'s URDF + Table I friction, all 7 joints
+    assert np.all(rms["phys"] <= 1.1 * rms["ols"]), rms  # link + friction alone: a good model by itself
+    assert np.all(rms["full"] <= 1.02 * rms["phys"]), rms  # the correction never makes it worse
+    kinds = np.asarray(model.columns.kinds)
+    assert np.all(model.params[np.isin(kinds, ("armature", "coulomb", "viscous"))] >= 0)
+    assert model.info["bounds"]["physical"] and "ia3" in model.info["bounds"]["active"]
+    pre = model.preprocessing
+    assert pre["cutoff_rule"].startswith("from the data") and 5.0 < pre["cutoff_hz"] < 20.0
+    assert pre["dq_evidence"].startswith("measured dq used") and pre["dq"].startswith("measured")
