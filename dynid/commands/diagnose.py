@@ -10,6 +10,7 @@ from dynid.commands.common import (
     add_json_argument,
     check_data_fits_model,
     check_outputs,
+    model_files,
     output,
     read_dataset,
     robot_file,
@@ -53,6 +54,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--alpha", type=float, default=0.05, help="family-wise error rate of the tests (default 0.05)"
     )
     parser.add_argument("--max-effects", type=int, default=3, help="most effects accepted (default 3)")
+    parser.add_argument(
+        "--out",
+        metavar="M2.json",
+        help="write the model refitted on --data with the accepted effects added as model terms, and show "
+        "both models' held-out error",
+    )
     add_json_argument(parser)
 
 
@@ -66,7 +73,17 @@ def run(args: argparse.Namespace) -> int:
 
     report = check_report_path(args.report, pdf=False) if args.report else None
     check_outputs(
-        [output("report", args.report, (".html", ".htm")), output("json", args.json, (".json",))],
+        [
+            output("report", args.report, (".html", ".htm")),
+            output("json", args.json, (".json",)),
+            output(
+                "out",
+                args.out,
+                (".json",),
+                also=model_files(args.out)[1:] if args.out else (),
+                hint="the model is JSON; its arrays go beside it as .npz",
+            ),
+        ],
         {"model": args.model, "data": args.data, "heldout": args.heldout, "robot": robot_file(args)},
     )
     effects = EFFECT_NAMES
@@ -100,7 +117,17 @@ def run(args: argparse.Namespace) -> int:
     for j in range(model.robot.n):
         c = dec["closure"][j]
         print(f"{j + 1:>5}  {result.excess['ratio'][j]:6.2f}  {'-' if c != c else f'{c:6.2f}'}")
-    write_figures(args.json, result.to_dict())
+    figures = result.to_dict()
+    context = {}
+    if args.out:
+        refit = _write_refit(model, train, heldout, result, args.out)
+        figures["refit"] = refit
+        if refit.get("written"):
+            context["refitted model"] = (
+                f"{args.out} with {', '.join(refit['effects'])}: held-out RMS (N m) before "
+                f"{_fmt(refit['rms_before'])}, after {_fmt(refit['rms_after'])}"
+            )
+    write_figures(args.json, figures)
     if report is not None:
         write_diagnosis_report(
             result,
@@ -110,7 +137,51 @@ def run(args: argparse.Namespace) -> int:
                 "training data": args.data,
                 "held-out data": args.heldout,
                 "robot": model.robot.name,
+                **context,
             },
         )
         print(f"report written to {report}")
     return 0
+
+
+def _fmt(values) -> str:
+    return "[" + " ".join("-" if v is None else f"{v:.3g}" for v in values) + "]"
+
+
+def _write_refit(model, train, heldout, result, out: str) -> dict:
+    """Refit the model with the accepted effects, write it, print both models' held-out RMS per joint."""
+    import numpy as np
+
+    from dynid.diagnosis.model_refit import refit_with_effects
+    from dynid.identify.model import save_model
+    from dynid.validation.validate import validate
+
+    accepted = [r.candidate for r in result.accepted]
+    if not accepted:
+        print(f"--out: no effect was accepted; {out} is not written (the model stays as it is)")
+        return {"written": False, "effects": []}
+    refitted, notes = refit_with_effects(model, train, accepted)
+    for note in notes:
+        print(f"  refit note: {note}")
+    if refitted is model:
+        print(f"--out: every accepted effect is part of the model already; {out} is not written")
+        return {"written": False, "effects": [], "notes": notes}
+    json_path, arrays_path = save_model(refitted, out)
+    before = validate(model, heldout)
+    after = validate(refitted, heldout)
+    rb, ra = (np.sqrt(np.mean((v.tau - v.tau_pred) ** 2, axis=0)) for v in (before, after))
+    keys = [t.key for t in refitted.effects]
+    print(f"refitted with {', '.join(keys)}: wrote {json_path} and {arrays_path}")
+    print("held-out RMS (N m)  joint  before   after   ratio")
+    for j in range(len(rb)):
+        print(
+            f"{'':<19} {j + 1:>5}  {rb[j]:6.3g}  {ra[j]:6.3g}  {ra[j] / rb[j] if rb[j] > 0 else float('nan'):6.2f}"
+        )
+    return {
+        "written": True,
+        "path": str(json_path),
+        "effects": keys,
+        "notes": notes,
+        "rms_before": rb.tolist(),
+        "rms_after": ra.tolist(),
+    }

@@ -107,6 +107,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "names those held at 0)",
     )
     parser.add_argument(
+        "--effects",
+        metavar="NAME[@JOINTS],...",
+        help="effects of the catalogue identified as model terms with the link parameters, e.g. "
+        "coupled_friction@5+6,stribeck@3 (hyper-parameters tuned on the data unless given: cogging@2:N=100)",
+    )
+    parser.add_argument(
+        "--transmission",
+        metavar="FILE.toml",
+        help="a coupled transmission beside a URDF: a TOML file with [transmission] coupled = [[a, b, r]] "
+        "(motor b also turns by r times joint a) or matrix = [[...]]; its motors' armature and friction "
+        "are identified on the motor side",
+    )
+    parser.add_argument(
         "--out", required=True, metavar="M.json", help="model file to write (arrays go to M.npz beside it)"
     )
     add_json_argument(parser)
@@ -131,9 +144,13 @@ def run(args: argparse.Namespace) -> int:
             ),
             output("json", args.json, (".json",)),
         ],
-        {"data": args.data, "robot": robot_file(args)},
+        {"data": args.data, "robot": robot_file(args), "transmission": args.transmission},
     )
     robot = robot_from_args(args)
+    if args.transmission:
+        from dynid.symbolic.robot import load_transmission
+
+        robot = robot.with_transmission(load_transmission(args.transmission, robot.n))
     start = time.perf_counter()
     data = read_dataset(args.data, robot.n, robot_name=robot.name, degrees=args.degrees)
     model = identify(
@@ -147,6 +164,7 @@ def run(args: argparse.Namespace) -> int:
         rounds=args.rounds,
         gmm_mode=args.gmm_mode,
         physical=not args.unconstrained,
+        effects=args.effects,
     )
     json_path, arrays_path = save_model(model, args.out)
     elapsed = time.perf_counter() - start
@@ -169,6 +187,12 @@ def run(args: argparse.Namespace) -> int:
     ):
         print(f"rms {label:<34} (N m): " + " ".join(f"{v:.4g}" for v in layers[key]))
     print(f"friction: {figures['friction']['model']} ({figures['friction']['source']})")
+    if figures["robot"].get("transmission") is not None:
+        print("transmission: coupled (motor-side armature and friction of the coupled motors)")
+    for effect in figures.get("effects", []):
+        hyper = ", ".join(f"{k} {v:.4g}" for k, v in effect["hyper"].items() if k != "exact")
+        coefs = ", ".join(f"{k} {v:.4g} +- {effect['std'][k]:.2g}" for k, v in effect["coefficients"].items())
+        print(f"effect {effect['key']}{' (' + hyper + ')' if hyper else ''}: {coefs}")
     bounds = figures.get("bounds", {})
     if bounds.get("physical"):
         active = bounds.get("active", [])

@@ -44,6 +44,7 @@ __all__ = [
     "load_tx40",
     "recording_folder",
     "recording_model_path",
+    "recording_robot",
     "tx40_coupling_matrices",
     "tx40_transmission",
 ]
@@ -329,6 +330,8 @@ class Recording:
         Joint count.
     description : str
         One line for listings.
+    transmission : callable, optional
+        ``() -> R``: the robot's coupled transmission (:attr:`RobotModel.transmission`), if it has one.
     """
 
     name: str
@@ -336,6 +339,7 @@ class Recording:
     model: Path
     n_joints: int
     description: str
+    transmission: Callable[[], NDArray[np.float64]] | None = None
 
     def __call__(self, root: str | os.PathLike[str] | None = None) -> Dataset:
         """Load the recording.
@@ -381,6 +385,7 @@ ADAPTERS: dict[str, Recording] = {
         model=_TX40_MODEL,
         n_joints=6,
         description="Staubli TX40, 6 DOF, 5 kHz, motor-side data converted through a coupled wrist",
+        transmission=tx40_transmission,
     ),
 }
 
@@ -426,3 +431,29 @@ def recording_model_path(name: str, root: str | os.PathLike[str] | None = None) 
     Path
     """
     return _recording(name).model_path(root)
+
+
+def recording_robot(name: str, root: str | os.PathLike[str] | None = None, *, coupled: bool = True):
+    """The robot of a recording: its URDF, with its coupled transmission declared when it has one.
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`ADAPTERS`.
+    root : str or path-like, optional
+        Folder holding the recordings; default :func:`find_shared_data`.
+    coupled : bool
+        Declare the recording's coupled transmission (the TX40's wrist: motor 6's armature and friction
+        identified on both wrist joints); False gives the URDF alone.
+
+    Returns
+    -------
+    RobotModel
+    """
+    from dynid.symbolic.robot import load_robot
+
+    rec = _recording(name)
+    robot = load_robot(rec.model_path(root))
+    if coupled and rec.transmission is not None:
+        robot = robot.with_transmission(rec.transmission())
+    return robot

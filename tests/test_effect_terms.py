@@ -1,0 +1,174 @@
+"""Effects of the catalogue as identified model terms: recovered, written to the model file, refitted from a diagnosis."""
+
+from __future__ import annotations
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+
+from dynid.cli import main
+from dynid.exceptions import UsageError
+from dynid.identify import effect_terms
+from dynid.identify.dataset import save_dataset
+from dynid.identify.effect_terms import Candidate, parse_effect_terms
+from dynid.identify.model import identify, load_model, save_model
+from dynid.sim import effects as sim_effects
+from dynid.sim.cases import case_excitation
+from dynid.sim.simulator import simulate
+from dynid.sim.truth import build_truth
+from dynid.validation.validate import validate
+
+
+def _heldout_rms(model, data):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        v = validate(model, data)
+    return np.sqrt(np.mean((v.tau - v.tau_pred) ** 2, axis=0))
+
+
+@pytest.fixture(scope="module")
+def coupled(ur5):
+    """A UR5 whose wrist motor adds friction on dq5 + dq6 to joints 5 and 6 (the simulator's coupled_friction)."""
+    truth = build_truth(ur5, effects="coupled_friction:4", friction="linear", truth_seed=5)
+    train = simulate(ur5, case_excitation(ur5, 31, base_freq=0.5), duration=8.0, truth=truth, seed=31)
+    held = simulate(ur5, case_excitation(ur5, 32, base_freq=0.5), duration=6.0, truth=truth, seed=32)
+    (effect,) = truth.effects
+    assert effect.joints == (4, 5)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        plain = identify(ur5, train.to_dataset(), method="ols", friction="linear", gmm="off")
+    return effect, train.to_dataset(), held.to_dataset(), plain
+
+
+def test_identify_and_the_diagnosis_share_the_catalogue() -> None:
+    assert set(effect_terms.BUILDERS) | {"payload"} == set(sim_effects.EFFECT_NAMES)
+
+
+def test_a_coupled_friction_term_is_recovered(ur5, coupled) -> None:
+    effect, train, held, plain = coupled
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = identify(
+            ur5, train, method="ols", friction="linear", gmm="off", effects="coupled_friction@5+6"
+        )
+    (fig,) = model.figures()["effects"]
+    assert fig["key"] == "coupled_friction@5+6" and fig["hyper"]["sign"] == 1.0  # w = dq5 + dq6, tuned
+    fc, std = fig["coefficients"]["fc"], fig["std"]["fc"]
+    assert abs(fc - effect.coulomb) < 3 * std, (fc, std, effect.coulomb)
+    assert abs(fc - effect.coulomb) < 0.2 * effect.coulomb
+    assert 0 < std < 0.2 * effect.coulomb
+    # on held-out data the term takes the coupled friction out of joints 5 and 6
+    with_term, without = _heldout_rms(model, held), _heldout_rms(plain, held)
+    assert np.all(with_term[4:] < without[4:]), (with_term, without)
+    assert with_term[5] < 0.6 * without[5]
+
+
+def test_a_wrong_coupling_is_not_recovered(ur5, coupled) -> None:
+    effect, train, held, _ = coupled
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        wrong = identify(
+            ur5, train, method="ols", friction="linear", gmm="off", effects="coupled_friction@5+6:sign=-1"
+        )
+    (fig,) = wrong.figures()["effects"]
+    assert abs(fig["coefficients"]["fc"] - effect.coulomb) > 0.5 * effect.coulomb
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        right = identify(
+            ur5, train, method="ols", friction="linear", gmm="off", effects="coupled_friction@5+6"
+        )
+    assert _heldout_rms(wrong, held)[5] > 1.4 * _heldout_rms(right, held)[5]
+
+
+def test_the_model_file_keeps_the_terms_and_older_files_load(ur5, coupled, tmp_path) -> None:
+    _, train, held, plain = coupled
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = identify(
+            ur5, train, method="ols", friction="linear", gmm="off", effects="coupled_friction@5+6"
+        )
+    save_model(model, tmp_path / "M.json")
+    doc = json.loads((tmp_path / "M.json").read_text())
+    assert doc["version"] == 2 and doc["effects"][0]["key"] == "coupled_friction@5+6"
+    again = load_model(tmp_path / "M.json", robot=ur5)
+    assert again.effects == model.effects
+    np.testing.assert_allclose(again.predict(held), model.predict(held), atol=1e-10)
+    # a version-1 file (no effects, no transmission) still loads and predicts as before
+    save_model(plain, tmp_path / "V1.json")
+    old = json.loads((tmp_path / "V1.json").read_text())
+    old["version"] = 1
+    del old["effects"]
+    del old["robot"]["transmission"]
+    (tmp_path / "V1.json").write_text(json.dumps(old))
+    v1 = load_model(tmp_path / "V1.json", robot=ur5)
+    assert v1.effects == ()
+    np.testing.assert_allclose(v1.predict(held), plain.predict(held), atol=1e-10)
+
+
+@pytest.mark.parametrize(
+    ("spec", "match"),
+    [
+        ("frobnication@2", "unknown effect 'frobnication'; the catalogue's effects with model terms are"),
+        ("payload", "the base parameters take in whole"),
+        ("coupled_friction@5", "couples two joints; give a pair such as coupled_friction@5\\+6"),
+        ("stribeck@9", "give joints in 1..6"),
+        ("stribeck@2,stribeck@2", "'stribeck@2' is given twice"),
+        ("cogging@2:N", "is not KEY=NUMBER"),
+    ],
+)
+def test_a_malformed_effect_is_refused(spec, match) -> None:
+    with pytest.raises(UsageError, match=match):
+        parse_effect_terms(spec, 6)
+
+
+def test_terms_the_model_identifies_anyway_are_refused(ur5, coupled) -> None:
+    _, train, _, _ = coupled
+    with pytest.raises(UsageError, match="identified already as the offset fo_j of the linear friction"):
+        identify(ur5, train, method="ols", friction="linear", gmm="off", effects="offset@2")
+
+
+def test_a_term_that_needs_time_is_predicted_from_a_dataset(ur5, coupled) -> None:
+    _, train, held, _ = coupled
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = identify(ur5, train, method="ols", friction="linear", gmm="off", effects="delay@2:d=0.002")
+    assert model.effects == (Candidate("delay", 1, (1,), {"d": 0.002, "exact": 1.0}, "delay on joint 2"),)
+    assert np.all(np.isfinite(model.predict(held)))
+    with pytest.raises(UsageError, match="need time stamps; predict from a Dataset"):
+        model.predict(held.q, held.q, held.q)
+
+
+def test_diagnose_out_writes_the_refitted_model(ur5, coupled, tmp_path, capsys) -> None:
+    _, train, held, plain = coupled
+    save_dataset(train, tmp_path / "D.csv")
+    save_dataset(held, tmp_path / "V.csv")
+    save_model(plain, tmp_path / "M.json")
+    code = main(
+        [
+            "diagnose",
+            "--model",
+            str(tmp_path / "M.json"),
+            "--data",
+            str(tmp_path / "D.csv"),
+            "--heldout",
+            str(tmp_path / "V.csv"),
+            "--effects",
+            "coupled_friction,stribeck,nonlinear_viscous",
+            "--out",
+            str(tmp_path / "M2.json"),
+            "--json",
+            str(tmp_path / "G.json"),
+        ]
+    )
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "refitted with coupled_friction@5+6" in out
+    refit = json.loads((tmp_path / "G.json").read_text())["refit"]
+    assert refit["written"] and refit["effects"] == ["coupled_friction@5+6"]
+    m2 = load_model(tmp_path / "M2.json", robot=ur5)
+    assert [t.key for t in m2.effects] == ["coupled_friction@5+6"]
+    before, after = _heldout_rms(plain, held), _heldout_rms(m2, held)
+    np.testing.assert_allclose(after, refit["rms_after"], rtol=1e-6)
+    assert after[5] < 0.6 * before[5] and np.mean(after) < np.mean(before), (before, after)
