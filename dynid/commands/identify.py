@@ -173,6 +173,11 @@ def run(args: argparse.Namespace) -> int:
         f"{robot.name}: {model.method} on {figures['n_samples']} samples ({figures['reference']}), "
         f"cond {model.cond:.4g}, {elapsed:.1f} s"
     )
+    pre = figures["preprocessing"]
+    cut = "none" if pre.get("cutoff_hz") is None else f"{pre['cutoff_hz']:.3g} Hz"
+    print(f"cut-off {cut}: {pre.get('cutoff_rule', 'given')}")
+    if pre.get("dq_evidence"):
+        print(f"velocity: {pre['dq_evidence']}")
     for note in figures["notes"]:
         print(f"  note: {note}")
     print(f"{'name':<8} {'value':>13} {'std %':>9}  expression")
