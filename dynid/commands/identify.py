@@ -73,7 +73,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default="auto",
         type=_cutoff,
         metavar="HZ",
-        help="low-pass cut-off for torque and regressor (default auto: none if the data have dq and ddq, else 20 Hz)",
+        help="low-pass cut-off for torque and regressor (default auto: none if the data have dq and ddq, else "
+        "chosen from the spectra of q and torque, at least 20 Hz without dq; the summary says how)",
     )
     parser.add_argument(
         "--decimate", default=1, type=int, metavar="N", help="keep one sample in N after filtering"
