@@ -256,7 +256,7 @@ CASES = {
     ),
     "excite-harmonics-1000": (
         ["excite", "--robot", "ur5", "--harmonics", "1000", "--out", "{d}/N.json"],
-        [r"harmonics is 1000; give at most 15", "base frequency"],
+        [r"harmonics is 1000; give at most 10", "base frequency"],
     ),
     "excite-harmonics-nyquist": (
         ["excite", "--robot", "ur5", "--harmonics", "12", "--base-freq", "1", "--rate", "20", "--out", "{d}/N.json"],
@@ -366,6 +366,20 @@ def test_an_unwritable_place_is_named_before_any_work(argv, folder, capsys):
     finally:
         _writable(ro)
     assert not list(ro.iterdir())
+
+
+def test_a_link_to_the_input_is_the_input(folder, tmp_path, capsys):
+    """A hard link or a symbolic link to the data is refused as an output like the data itself."""
+    os.link(folder / "V.csv", tmp_path / "hard.csv")
+    (tmp_path / "soft.csv").symlink_to(folder / "V.csv")
+    for name in ("hard.csv", "soft.csv"):
+        run_refused(
+            ["validate", "--model", str(folder / "M.json"), "--data", str(folder / "V.csv"), "--predictions",
+             str(tmp_path / name)],
+            folder,
+            capsys,
+            rf"--predictions '.*{name}' would overwrite the --data file '.*V.csv'",
+        )  # fmt: skip
 
 
 def test_negative_values_are_option_values(capsys):

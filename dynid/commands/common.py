@@ -264,6 +264,16 @@ def _real(path: Path) -> str:
     return os.path.normcase(os.path.realpath(path))
 
 
+def _same(a: Path, b: Path) -> bool:
+    """Whether two paths name one file (a symbolic or hard link included)."""
+    if _real(a) == _real(b):
+        return True
+    try:
+        return a.exists() and b.exists() and os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
 def _inside(path: Path, folder: Path) -> bool:
     inner, outer = _real(path), _real(folder)
     return inner == outer or inner.startswith(outer.rstrip(os.sep) + os.sep)
@@ -347,7 +357,7 @@ def check_outputs(
                     f"'{source}'; give another folder."
                 )
             for written in out.writes:
-                if _real(written) == _real(source):
+                if _same(written, source):
                     also = "" if written == out.path else f" (it writes '{written}' too)"
                     raise UsageError(
                         f"--{out.option} '{out.path}' would overwrite the --{option} file '{source}'{also}; "
