@@ -113,7 +113,7 @@ def test_noise_floor_of_a_raw_torque_is_its_white_level(rng):
 
 
 def test_a_floor_that_cannot_be_measured_is_reported_as_such(full, heldout):
-    short = heldout.select_rows(np.arange(3000))  # 3 s: under one period, too short for the spectrum
+    short = heldout.select_rows(np.arange(2000))  # 2 s: under one period, too short for the spectrum
     result = validate(full, short)
     figures = result.figures()
     assert result.noise.method == "unmeasured"

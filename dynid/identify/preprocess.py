@@ -26,6 +26,7 @@ memory needed stays close to the size of the result.
 
 from __future__ import annotations
 
+import itertools
 import warnings
 from collections.abc import Sequence
 from typing import Any, Literal
@@ -40,6 +41,9 @@ from dynid.identify.dataset import Dataset, DataWarning
 
 __all__ = [
     "BANDWIDTH_FACTOR",
+    "GAP_SECONDS",
+    "GAP_STEPS",
+    "MIN_PIECE_SAMPLES",
     "SIGNAL_DB",
     "butter_sos",
     "central_difference",
@@ -226,8 +230,29 @@ def resample_uniform(
     return t_new, np.asarray(y_new, dtype=np.float64)
 
 
+GAP_STEPS = 10.0
+"""A step between stamps longer than this many median steps (and than :data:`GAP_SECONDS`) is a gap."""
+GAP_SECONDS = 0.1
+"""Shortest gap (s): shorter holes (a late sample of a real-time log) are interpolated across."""
+MIN_PIECE_SAMPLES = 64
+"""Fewest samples of a piece between gaps that :func:`resample` keeps (shorter ones are dropped, with a
+warning): no filter or derivative can use fewer."""
+
+
+def _split_at_gaps(t: NDArray[np.float64], step: float) -> list[slice]:
+    """Row ranges of ``t`` between gaps (steps longer than :data:`GAP_STEPS` steps and :data:`GAP_SECONDS`)."""
+    jumps = np.flatnonzero(np.diff(t) > max(GAP_STEPS * step, GAP_SECONDS)) + 1
+    bounds = [0, *jumps.tolist(), len(t)]
+    return [slice(a, b) for a, b in itertools.pairwise(bounds)]
+
+
 def resample(ds: Dataset, *, dt: float | None = None, method: ResampleMethod = "linear") -> Dataset:
     """Resample a dataset onto a uniform grid, run by run.
+
+    A gap in the stamps (a step longer than :data:`GAP_STEPS` median steps and :data:`GAP_SECONDS`)
+    is never interpolated across: the run is split there into separate runs, so that filters and
+    derivatives do not cross it, and the samples after it keep their time.  Pieces between gaps with
+    fewer than :data:`MIN_PIECE_SAMPLES` samples are dropped.  Both come with a :class:`DataWarning`.
 
     Parameters
     ----------
@@ -242,21 +267,63 @@ def resample(ds: Dataset, *, dt: float | None = None, method: ResampleMethod = "
     -------
     Dataset
         Uniform data: one grid ``t[0] + dt * k`` over all runs (each run starts one step after the previous
-        ends), ``meta["resampled"]`` records ``dt``, ``method`` and the rows before.
+        ends; a piece after a gap starts at its own first stamp), ``meta["resampled"]`` records ``dt``,
+        ``method``, the rows before and the gaps (start time and length, s).
+
+    Raises
+    ------
+    DataError
+        When no piece between gaps is long enough to keep.
     """
     step = ds.dt if dt is None else float(dt)
     signals = [name for name in ("q", "tau", "dq", "ddq") if getattr(ds, name) is not None]
     stacked = np.concatenate([getattr(ds, name) for name in signals], axis=1)
-    pieces, starts, offset = [], [], 0
+    pieces, times, starts, offset = [], [], [], 0
+    gaps: list[list[float]] = []
+    dropped = 0
     for run in ds.runs:
-        _, y_new = resample_uniform(ds.t[run], stacked[run], dt=step, method=method)
-        pieces.append(y_new)
-        starts.append(offset)
-        offset += len(y_new)
+        t_run = ds.t[run]
+        t_start = ds.t[0] + step * offset  # where the run starts on the one grid
+        for piece in _split_at_gaps(t_run, step):
+            if piece.start > 0:
+                before, after = float(t_run[piece.start - 1]), float(t_run[piece.start])
+                gaps.append([before, after - before])
+            if piece.stop - piece.start < MIN_PIECE_SAMPLES:
+                dropped += piece.stop - piece.start
+                continue
+            _, y_new = resample_uniform(t_run[piece], stacked[run][piece], dt=step, method=method)
+            first = t_start + (t_run[piece.start] - t_run[0])
+            if times and first <= times[-1][-1]:
+                first = times[-1][-1] + step
+            pieces.append(y_new)
+            times.append(first + step * np.arange(len(y_new)))
+            starts.append(offset)
+            offset += len(y_new)
+    if gaps:
+        where = ", ".join(f"{length:.3g} s at t = {t0:.6g} s" for t0, length in gaps[:3])
+        warnings.warn(
+            f"the time stamps jump {len(gaps)} time{'s' if len(gaps) > 1 else ''} ({where}"
+            f"{', ...' if len(gaps) > 3 else ''}); the data are split there into separate runs, not "
+            "interpolated across the gap"
+            + (
+                f", and {dropped} samples in pieces shorter than {MIN_PIECE_SAMPLES} samples are dropped"
+                if dropped
+                else ""
+            ),
+            DataWarning,
+            stacklevel=2,
+        )
+    if not pieces:
+        raise DataError(
+            f"the data hold no stretch of at least {MIN_PIECE_SAMPLES} samples between gaps in the time "
+            "stamps; record without gaps"
+        )
     y_all = np.concatenate(pieces)
-    t_all = ds.t[0] + step * np.arange(len(y_all))
+    t_all = np.concatenate(times)
     meta = {key: value for key, value in ds.meta.items() if key != "run_starts"}
     meta["resampled"] = {"dt": step, "method": method, "rows_before": ds.m}
+    if gaps:
+        meta["resampled"]["gaps"] = gaps
     if len(starts) > 1:
         meta["run_starts"] = starts
     split = np.split(y_all, np.cumsum([ds.n] * (len(signals) - 1)), axis=1)

@@ -24,8 +24,9 @@ from dynid.validation.metrics import NoiseFloor, noise_floor
 
 __all__ = ["MIN_SPECTRAL_SAMPLES", "detect_period", "filter_noise_gain", "measure_noise"]
 
-MIN_SPECTRAL_SAMPLES = 4096
-"""Fewest samples of one run for the spectral noise floor (when the data do not repeat a period)."""
+MIN_SPECTRAL_SAMPLES = 2048
+"""Fewest samples of one run for the spectral noise floor (when the data do not repeat a period): three
+half-overlapping Welch segments of 1024 samples, so that a 37 s recording at 100 Hz is measured."""
 
 
 def detect_period(t: NDArray[np.float64], q: NDArray[np.float64], *, min_period: float = 0.5) -> float | None:
