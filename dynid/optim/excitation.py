@@ -152,7 +152,7 @@ def check_harmonics(
     """
     if not (math.isfinite(base_freq) and base_freq > 0):
         return  # ExcitationProblem names a bad base frequency
-    bounds = [(MAX_HARMONICS, f"dynid designs at most {MAX_HARMONICS} harmonics (the paper uses 5)")]
+    bounds = [(MAX_HARMONICS, "the most dynid designs; the paper uses 5")]
     if rate is not None and math.isfinite(rate) and rate > 0:
         bounds.append(
             (
@@ -174,11 +174,10 @@ def check_harmonics(
             )
     limit, reason = min(bounds, key=lambda b: b[0])
     if harmonics > limit:
-        raise UsageError(
-            f"harmonics is {harmonics}; give at most {max(limit, 0)} ({reason}), or lower the base frequency."
-            if limit >= 2
-            else f"harmonics is {harmonics}, and no number of at least 2 fits ({reason}); lower the base frequency."
-        )
+        if limit >= 2:
+            lower = "" if limit == MAX_HARMONICS else ", or lower the base frequency"
+            raise UsageError(f"harmonics is {harmonics}; give at most {limit} ({reason}){lower}.")
+        raise UsageError(f"harmonics is {harmonics}, and no number of at least 2 fits ({reason}); lower the base frequency.")
 
 CRITERIA = ("seed", "cond", "logdet")
 """Names of the excitation criteria."""
