@@ -500,3 +500,25 @@ def test_sigterm_interrupts_a_command_without_leaving_files(folder, tmp_path):
     assert "Traceback" not in err
     assert err.strip().splitlines()[-1].endswith("interrupted by SIGTERM; no file was left half written")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["D.csv"]
+
+
+def test_degrees_reach_the_dataset_reader(folder, tmp_path, capsys):
+    """Angles in degrees: refused with the fix that names --degrees, and read as rad with it."""
+    lines = (folder / "V.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    angular = [k for k, name in enumerate(header) if name.split("_")[0] in ("q", "dq", "ddq")]
+    rows = []
+    for line in lines[1:]:
+        values = line.split(",")
+        for k in angular:
+            values[k] = repr(float(np.degrees(float(values[k]))))
+        rows.append(",".join(values))
+    (tmp_path / "Vdeg.csv").write_text("\n".join([lines[0], *rows]) + "\n")
+    argv = ["validate", "--model", str(folder / "M.json"), "--data", str(tmp_path / "Vdeg.csv")]
+    run_refused([*argv, "--json", str(tmp_path / "F.json")], tmp_path, capsys, r"--degrees")
+    assert main([*argv, "--degrees", "--json", str(tmp_path / "F.json")]) == 0
+    assert main(["validate", "--model", str(folder / "M.json"), "--data", str(folder / "V.csv"), "--json",
+                 str(tmp_path / "R.json")]) == 0  # fmt: skip
+    in_degrees = json.loads((tmp_path / "F.json").read_text())["rms"]
+    in_rad = json.loads((tmp_path / "R.json").read_text())["rms"]
+    np.testing.assert_allclose(in_degrees, in_rad, rtol=1e-6)
