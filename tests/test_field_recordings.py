@@ -256,3 +256,42 @@ def test_diagnose_writes_everything(recordings, models, name, tmp_path, capsys) 
     assert "gap_map" in figures and "parametric" in figures
     assert "verdict:" in out
     assert report.stat().st_size > 1000
+
+
+def test_a_period_the_motion_does_not_have_is_not_used(recordings, models, tmp_path, capsys) -> None:
+    """`--period 3` on an aperiodic run would take the spread across twelve unrelated stretches (about
+    80 times the noise) as the floor; the angles do not repeat, so the spectrum is used and that is said."""
+    js = tmp_path / "v.json"
+    code, _, err = run(
+        ["validate", "--model", models["uniform"][0], "--data", recordings["held_uniform"], "--period", "3",
+         "--json", js],
+        capsys,
+    )  # fmt: skip
+    assert code == 0, err
+    figures = json.loads(js.read_text())
+    assert figures["noise_floor_method"] == "spectrum"
+    assert "repeat after the period of 3 s given, so it is not used" in figures["noise_floor_detail"]
+    assert max(figures["noise_floor"]) < 0.5 * min(figures["rms"][:3])
+
+
+def test_a_gap_splits_the_run_and_a_short_piece_after_it_is_left_out() -> None:
+    """A 0.5 s hole in 100 Hz stamps is not bridged by interpolation; the 70 samples after a late gap are
+    too short for a 2 Hz filter's trim and are left out with a warning instead of refusing the recording."""
+    from dynid.identify.dataset import Dataset
+    from dynid.identify.preprocess import preprocess, resample
+
+    t = np.arange(4000) / RATE
+    t = np.concatenate([t[:3880], t[3930:]])  # 0.5 s missing, 70 samples after it
+    q = np.column_stack([np.sin(0.7 * t), np.cos(1.1 * t)])
+    ds = Dataset(t, q, 2.0 * q)
+    with pytest.warns(DataWarning, match=r"jump 1 time \(0\.51 s at t = 38\.79 s\).*not interpolated"):
+        uniform = resample(ds)
+    assert [r.stop - r.start for r in uniform.runs] == [3880, 70]
+    assert uniform.is_uniform and uniform.t[3880] == pytest.approx(39.3)  # the samples keep their time
+    np.testing.assert_allclose(uniform.q, q, atol=1e-12)
+    with (
+        pytest.warns(DataWarning, match="jump 1 time"),
+        pytest.warns(DataWarning, match=r"run 1 \(70 samples\) is too short for the 100 samples trimmed"),
+    ):
+        prep = preprocess(ds, cutoff=2.0)
+    assert prep.t[-1] < 38.8 and prep.m == 3880 - 2 * 100

@@ -554,20 +554,34 @@ def kept_rows(
     Returns
     -------
     ndarray of int, shape (k,)
+        A run too short for the trim (a piece after a gap in the stamps) is left out with a
+        :class:`DataWarning`; a :class:`DataError` when no run is long enough.
     """
     if not (isinstance(decimate, int | np.integer) and decimate >= 1):
         raise DataError(f"decimate must be a positive integer; got {decimate!r}; 1 keeps every sample")
     if trim_samples < 0:
         raise DataError(f"trim must not be negative; got {trim_samples} samples; pass 0 to keep the ends")
-    pieces = []
+    pieces, short = [], []
     for r, run in enumerate(runs):
         lo, hi = run.start + trim_samples, run.stop - trim_samples
         if hi - lo < 2:
-            raise DataError(
-                f"trimming {trim_samples} samples from both ends leaves {max(hi - lo, 0)} of run {r} "
-                f"({run.stop - run.start} samples); trim less"
-            )
+            short.append((r, run, max(hi - lo, 0)))
+            continue
         pieces.append(np.arange(lo, hi, int(decimate)))
+    if not pieces:
+        r, run, left = short[0]
+        raise DataError(
+            f"trimming {trim_samples} samples from both ends leaves {left} of run {r} "
+            f"({run.stop - run.start} samples); trim less"
+        )
+    if short:
+        listed = ", ".join(f"{r} ({run.stop - run.start} samples)" for r, run, _ in short)
+        warnings.warn(
+            f"run{'s' if len(short) > 1 else ''} {listed} {'are' if len(short) > 1 else 'is'} too short for "
+            f"the {trim_samples} samples trimmed at both ends (the filter's transient) and left out",
+            DataWarning,
+            stacklevel=2,
+        )
     return np.concatenate(pieces).astype(np.intp)
 
 

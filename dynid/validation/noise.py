@@ -22,7 +22,7 @@ from dynid.identify.periodic import period_of
 from dynid.identify.preparation import Prepared
 from dynid.validation.metrics import NoiseFloor, noise_floor
 
-__all__ = ["MIN_SPECTRAL_SAMPLES", "detect_period", "filter_noise_gain", "measure_noise"]
+__all__ = ["MIN_SPECTRAL_SAMPLES", "REPEAT_TOL", "detect_period", "filter_noise_gain", "measure_noise"]
 
 MIN_SPECTRAL_SAMPLES = 2048
 """Fewest samples of one run for the spectral noise floor (when the data do not repeat a period): three
@@ -76,7 +76,9 @@ def measure_noise(prep: Prepared, *, period: float | None = None) -> NoiseFloor:
     prep : Prepared
         The data as the model sees them.
     period : float, optional
-        Period (s) of the excitation; detected from the angles when not given.
+        Period (s) of the excitation; detected from the angles when not given.  A period after which
+        neither the angles nor the filtered torque repeat (to :data:`REPEAT_TOL`) is not used, and the
+        floor's detail says so.
 
     Returns
     -------
@@ -92,7 +94,16 @@ def measure_noise(prep: Prepared, *, period: float | None = None) -> NoiseFloor:
     rows = prep.rows[(prep.rows >= run.start) & (prep.rows < run.stop)]
     span = slice(int(rows[0]), int(rows[-1]) + 1)
     t = prep.t[span]
-    if period is None:
+    ignored = ""
+    if period is not None and not (
+        _repeats(prep.q[span], period * prep.fs) or _repeats(prep.filter(prep.tau)[span], period * prep.fs)
+    ):
+        ignored = (
+            f"; neither the angles nor the torque repeat after the period of {period:g} s given, so it is "
+            "not used"
+        )
+        period = None
+    elif period is None:
         period = detect_period(t, prep.q[span])
     if period is not None and (t[-1] - t[0]) >= 2 * period - 1.5 / prep.fs:
         tau_f = prep.filter(prep.tau)[span]
@@ -104,13 +115,31 @@ def measure_noise(prep: Prepared, *, period: float | None = None) -> NoiseFloor:
         have = f"{(t[-1] - t[0]) / period:.2f} periods of {period:.3g} s" if period else "no repeated period"
         raise DataError(
             f"cannot measure the noise floor of the held-out data: they hold {have} and {m} samples, "
-            f"fewer than the {MIN_SPECTRAL_SAMPLES} the spectral method needs; record at least two whole "
-            "periods of a periodic excitation (or a longer run)."
+            f"fewer than the {MIN_SPECTRAL_SAMPLES} the spectral method needs{ignored}; record at least two "
+            "whole periods of a periodic excitation (or a longer run)."
         )
     raw = noise_floor(prep.t[run], prep.tau[run])
     gain = filter_noise_gain(prep)
     return NoiseFloor(
         std=raw.std * math.sqrt(gain),
         method="spectrum",
-        detail=raw.detail + (f", times the filter's noise gain {gain:.3g}" if gain != 1.0 else ""),
+        detail=raw.detail + (f", times the filter's noise gain {gain:.3g}" if gain != 1.0 else "") + ignored,
     )
+
+
+REPEAT_TOL = 1e-2
+"""Largest mean square mismatch of the angles (or of the filtered torque) one given period apart, relative
+to their spread, for the data to count as repeating with that period (a wrong period on an aperiodic
+motion gives about 2)."""
+
+
+def _repeats(q: NDArray[np.float64], lag: float) -> bool:
+    """Whether the signals ``q`` repeat after ``lag`` samples (to :data:`REPEAT_TOL` of their spread)."""
+    k = round(lag)
+    if not 0 < k < len(q):
+        return True  # fewer than two periods: the spread across periods is not used anyway
+    x = q - q.mean(axis=0)
+    spread = float(np.mean(np.sum(x**2, axis=1)))
+    if spread <= 0:
+        return True
+    return float(np.mean(np.sum((x[k:] - x[:-k]) ** 2, axis=1))) <= REPEAT_TOL * spread
