@@ -106,6 +106,9 @@ def model_structure(model, robot, train: Dataset, heldout: Dataset) -> ModelStru
             )
     if model is not None:
         cols = model.columns
+        if cols.n_effect:
+            # the baseline refits the model's own columns; its effect terms are candidates like any other
+            cols = column_set(robot, friction=cols.friction, armature=cols.armature)
         settings = dict(model.preprocessing)
         shape = None
         if model.friction is not None and model.friction_source == "layer2":
@@ -167,8 +170,8 @@ def _structure_columns(structure: ModelStructure, q, dq, ddq) -> NDArray[np.floa
         X[s, :, :nb] = compiled_base_regressor(robot, q[s], dq[s], ddq[s])
     if extras:
         E = cols.extra_columns(dq, ddq)
-        for k, j in enumerate(cols.extra_joint):
-            X[:, j, nb + k] = E[:, k]
+        # a coupled motor's columns reach several joints (its weights); the others their own joint
+        X[:, :, nb : nb + extras] = E[:, None, :] * cols.extra_weights[None, :, :]
     if friction_shape is not None:
         F = friction_shape(dq)
         for j in range(n):

@@ -131,7 +131,10 @@ class ColumnSet:
             return out
         nb = self.n_base
         for k in range(len(self.extras)):
-            if self.kinds[nb + k] in ("coulomb", "viscous") and np.count_nonzero(self.extra_weights[:, k]) > 1:
+            if (
+                self.kinds[nb + k] in ("coulomb", "viscous")
+                and np.count_nonzero(self.extra_weights[:, k]) > 1
+            ):
                 out[nb + k] = True
         return out
 
