@@ -23,7 +23,11 @@ Models, each identified on the training part only:
   train.csv`` runs it;
 - ``ols+lin``: OLS with linear friction, unconstrained, no correction (the baseline of the physical layers);
 - ``phys``: the default model's link + friction layers alone (no mixture correction);
-- ``ref``: the reference above.
+- ``ref``: the reference above;
+- TX40 only: ``wrist``, the defaults with the coupled wrist declared (the recording's robot from
+  :func:`dynid.identify.adapters.recording_robot`, as ``dynid identify --transmission`` takes it), and
+  ``+cfric``, the defaults with the effect the diagnosis ranks first on this recording added as a model
+  term (``identify(..., effects="coupled_friction@5+6")``, as ``dynid identify --effects`` takes it).
 
 A model predicts from the states of the whole recording prepared as its identification data were
 (so the held-out part has no filter edge of its own; the held-out torque is never used), without its
@@ -162,6 +166,15 @@ def main() -> None:
     rows["phys"] = score(t, phys)
     t, _, total = model_parts(ols, full)
     rows["ols+lin"] = score(t, total)
+    extra: tuple[str, ...] = ()
+    if args.robot == "tx40":
+        from dynid.identify.adapters import recording_robot
+
+        t, _, total = model_parts(identify(recording_robot("tx40"), train), full)
+        rows["wrist"] = score(t, total)
+        t, _, total = model_parts(identify(robot, train, effects="coupled_friction@5+6"), full)
+        rows["+cfric"] = score(t, total)
+        extra = ("wrist", "+cfric")
     if args.robot == "panda":
         t, tau = gaz_reference(urdf, full)
         rows["ref"] = score(t, tau)
@@ -187,11 +200,12 @@ def main() -> None:
     print(f"\nheld-out RMS (N m); reference: {ref_label}")
     head = f"{'model':<10}" + "".join(f"{'j' + str(j + 1):>8}" for j in range(n)) + f"{'mean':>8}"
     print(head)
-    for label in ("defaults", "phys", "ols+lin", "ref"):
+    for label in ("defaults", "phys", "ols+lin", *extra, "ref"):
         v = rows[label]
         print(f"{label:<10}" + "".join(f"{x:>8.3f}" for x in v) + f"{np.mean(v):>8.3f}")
     print("ratios")
-    for num, den in (("defaults", "ref"), ("phys", "ols+lin"), ("defaults", "phys")):
+    pairs = [("defaults", "ref"), ("phys", "ols+lin"), ("defaults", "phys"), *((e, "ref") for e in extra)]
+    for num, den in pairs:
         r = rows[num] / rows[den]
         label = f"{num}/{den}"
         print(
