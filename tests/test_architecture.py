@@ -277,12 +277,18 @@ def test_every_module_has_a_docstring_and_all():
         tree = ast.parse(path.read_text(encoding="utf-8"))
         if not ast.get_docstring(tree):
             missing_doc.append(module)
-        names = {
-            t.id
+        # Assigned names, also from a tuple target (``__all__, __getattr__, __dir__ = lazy_exports(...)``).
+        targets = [
+            t
             for node in tree.body
             if isinstance(node, ast.Assign | ast.AnnAssign | ast.AugAssign)
             for t in (node.targets if isinstance(node, ast.Assign) else [node.target])
-            if isinstance(t, ast.Name)
+        ]
+        names = {
+            n.id
+            for t in targets
+            for n in ([t] if isinstance(t, ast.Name) else getattr(t, "elts", []))
+            if isinstance(n, ast.Name)
         }
         if "__all__" not in names:
             missing_all.append(module)

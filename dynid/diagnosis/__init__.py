@@ -6,6 +6,8 @@ slow to import).
 
 from __future__ import annotations
 
+from dynid._lazy import lazy_exports
+
 _EXPORTS = {
     "Diagnosis": "result",
     "DiagnosisSettings": "settings",
@@ -16,12 +18,5 @@ _EXPORTS = {
     "gap_map": "gapmap",
     "write_diagnosis_report": "report",
 }
-__all__ = sorted(_EXPORTS)
 
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        import importlib
-
-        return getattr(importlib.import_module(f"dynid.diagnosis.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module 'dynid.diagnosis' has no attribute {name!r}")
+__all__, __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

@@ -108,35 +108,9 @@ def diagnose(
         noise floor is then the spread across periods).
     robot : RobotModel, optional
         The robot, when ``model`` is None.
-    effects : sequence of str
-        The catalogue of candidate effects (default all of :data:`EFFECT_NAMES`).
-    alpha : float
-        Family-wise error rate of the candidate tests (Holm).
-    max_effects : int
-        At most this many effects are accepted (forward selection).
-    min_gain : float
-        Smallest relevant reduction of the held-out loss, in noise variances per sample.
-    min_closure : float
-        An accepted candidate must close at least this fraction of the gap on its joint(s); when the
-        excess is significant and none does, the verdict is ``["unexplained"]``.
-    excess_tol : float
-        The baseline's excess counts only when its ratio to the noise floor exceeds ``1 + excess_tol``
-        (state estimation leaves a small excess even on an effect-free robot).
-    period : float, optional
-        Period (s) of the held-out excitation; detected from the angles when not given.
-    max_samples : int
-        Rows used per dataset (the filtered data are thinned evenly beyond it).
-    block_seconds : float
-        Block length (s) of the Diebold-Mariano block means, the covariance and the bootstrap.
-    refit : bool
-        Refit accepted effects by nonlinear least squares (elasticity, backlash, delay) and refine the
-        continuous hyper-parameters of the others.
-    confound_deg : float
-        Principal angle (degrees) below which two candidates count as not separable.
-    stick_fraction : float
-        Samples of a joint slower than this fraction of its top speed are left out of the fits and
-        losses (sticking and presliding make Coulomb friction ill-defined there; the gap map still
-        shows them in its stiction bin).
+    effects, alpha, max_effects, min_gain, min_closure, excess_tol, period, max_samples, block_seconds, refit, confound_deg, stick_fraction
+        The settings, documented once in :class:`~dynid.diagnosis.settings.DiagnosisSettings` (the
+        defaults there are the method's).
 
     Returns
     -------

@@ -10,6 +10,7 @@ compressed least-squares system) and :mod:`dynid.identify.adapters` (the real re
 
 from __future__ import annotations
 
+from dynid._lazy import lazy_exports
 from dynid.exceptions import DataWarning
 from dynid.identify.dataset import Dataset, load_dataset, save_dataset
 
@@ -33,12 +34,4 @@ _IDENTIFY = {
     "load_model": "model",
     "save_model": "model",
 }
-__all__ += list(_IDENTIFY)
-
-
-def __getattr__(name: str):
-    if name in _IDENTIFY:
-        import importlib
-
-        return getattr(importlib.import_module(f"dynid.identify.{_IDENTIFY[name]}"), name)
-    raise AttributeError(f"module 'dynid.identify' has no attribute {name!r}")
+__all__, __getattr__, __dir__ = lazy_exports(__name__, _IDENTIFY, eager=tuple(__all__))

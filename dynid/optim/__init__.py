@@ -2,19 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = [
-    "CartesianLimits",
-    "ExcitationError",
-    "ExcitationProblem",
-    "ExcitationResult",
-    "FourierTrajectory",
-    "SampledTrajectory",
-    "default_home",
-    "design_excitation",
-    "executable_trajectory",
-    "load_trajectory",
-    "point_to_point",
-]
+from dynid._lazy import lazy_exports
 
 _LAZY = {
     "CartesianLimits": "excitation",
@@ -30,12 +18,4 @@ _LAZY = {
     "load_trajectory": "trajectory",
 }
 
-
-def __getattr__(name: str):
-    # CasADi and ruckig are imported on first use (the command line starts faster).
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module 'dynid.optim' has no attribute {name!r}")
-    import importlib
-
-    return getattr(importlib.import_module(f"dynid.optim.{module}"), name)
+__all__, __getattr__, __dir__ = lazy_exports(__name__, _LAZY)

@@ -11,6 +11,8 @@ sizes the effects of the diagnosis' withheld-effect cases.  Submodules are impor
 
 from __future__ import annotations
 
+from dynid._lazy import lazy_exports
+
 _EXPORTS = {
     "EFFECTS": "effects",
     "EFFECT_NAMES": "effects",
@@ -22,12 +24,5 @@ _EXPORTS = {
     "write_simulation": "simulator",
     "random_fourier": "synthetic",
 }
-__all__ = sorted(_EXPORTS)
 
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        import importlib
-
-        return getattr(importlib.import_module(f"dynid.sim.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module 'dynid.sim' has no attribute {name!r}")
+__all__, __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

@@ -9,6 +9,8 @@ The submodules are imported on first use (matplotlib and scikit-learn are slow t
 
 from __future__ import annotations
 
+from dynid._lazy import lazy_exports
+
 _EXPORTS = {
     "NoiseFloor": "metrics",
     "noise_floor": "metrics",
@@ -24,12 +26,5 @@ _EXPORTS = {
     "Report": "report",
     "render_report": "report",
 }
-__all__ = sorted(_EXPORTS)
 
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        import importlib
-
-        return getattr(importlib.import_module(f"dynid.validation.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module 'dynid.validation' has no attribute {name!r}")
+__all__, __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
