@@ -962,3 +962,28 @@ def test_property_mutated_model_file_loads_or_is_refused(base: Path, tmp_path_fa
     else:
         event(f"loaded after: {op} of {target.name}")
     assert snapshot(folder) == before
+
+
+def test_a_model_file_with_any_one_key_renamed_loads_or_is_refused(base: Path, tmp_path: Path) -> None:
+    """Every key of M.json renamed in turn (its first occurrence): a load or one sentence, never a traceback."""
+    from dynid.identify.model import load_model
+
+    raw = (base / "M.json").read_bytes()
+    keys = sorted(set(re.findall(rb'"(\w+)":', raw)))
+    assert b"source" in keys and len(keys) > 20
+    unexpected, refused = [], 0
+    for key in keys:
+        folder = tmp_path / key.decode()
+        folder.mkdir()
+        for p in base.glob("M*"):
+            (shutil.copytree if p.is_dir() else shutil.copy2)(p, folder / p.name)
+        (folder / "M.json").write_bytes(re.sub(rb'"' + key + rb'":', b'"renamed_' + key + b'":', raw, count=1))
+        try:
+            load_model(folder / "M.json")
+        except DynidError as err:
+            refused += 1
+            assert "\n" not in str(err), str(err)
+        except Exception as err:  # the point: nothing else may escape
+            unexpected.append(f"{key.decode()}: {type(err).__name__}: {err}")
+    assert unexpected == []
+    assert refused > 0  # the required keys are refused, not silently defaulted

@@ -1009,6 +1009,8 @@ def load_model(path: str | os.PathLike[str], robot=None) -> IdentifiedModel:
                 f"{name} is a version-{doc['version']} model file; this dynid reads up to version {VERSION}: upgrade dynid"
             )
         info_robot = doc["robot"]
+        if not isinstance(info_robot, dict) or not isinstance(info_robot.get("source"), str):
+            raise ValueError("its 'robot' entry has no 'source'")
         arrays_path = path.parent / doc["arrays"]
     except ModelFileError:
         raise
