@@ -96,8 +96,13 @@ __all__ = [
     "save_model",
 ]
 
-TAKEOVER = 5.0
-"""Largest ratio of the physical layers' RMS in the joint fit to their RMS fitted alone (per joint)."""
+TAKEOVER = 10.0
+"""Largest ratio of the physical layers' RMS in the joint fit to their RMS fitted alone (per joint).
+
+Set between what was measured: a mixture that took over physical torque shows 12-14 (the Panda
+filtered at 6 Hz, the whole TX40 recording); a joint fit that generalises well shows up to 5.7 (the
+identification benchmark's UR5 with a smooth position-dependent torque, whose held-out error is 0.26x
+OLS with the joint fit kept and 0.84x with the physical layers first)."""
 METHODS = (*ESTIMATORS, "consistent")
 """Layer-1 methods: ``ols``, ``wls``, ``gls``, ``irls``, ``consistent``."""
 FORMAT = "dynid-model"
@@ -729,7 +734,8 @@ class ThreeLayerModel:
         fitted on what they leave, validated as in :class:`GMRCorrection`.  A correction that only adds
         to good physical layers keeps the joint fit (a simulated UR5 with a position ripple that the
         physical layers alone partly absorb into gravity: ratio 4 on the shoulder, and the joint fit
-        predicts held-out data twice as well as the physical layers first).
+        predicts held-out data twice as well as the physical layers first; the identification
+        benchmark: ratio 5.7, held-out 0.26x OLS with the joint fit against 0.84x without).
         """
         prep = system.prepared
         rows = prep.rows
