@@ -35,9 +35,26 @@ if TYPE_CHECKING:
     from dynid.diagnosis import Diagnosis
     from dynid.validation.validate import ValidationResult
 
-__all__ = ["DEFAULT_ROBOT", "PERTURB", "SETTINGS", "DemoResult", "StageRecord", "run_demo"]
+__all__ = ["DEFAULT_ROBOT", "DEMO_FILES", "PERTURB", "SETTINGS", "DemoResult", "StageRecord", "run_demo"]
 
 DEFAULT_ROBOT = "ur5"
+
+DEMO_FILES = (
+    "excitation.json",
+    "identification.csv",
+    "identification.csv.truth.json",
+    "validation.csv",
+    "validation.csv.truth.json",
+    "model.json",
+    "model.npz",
+    "model_ols.json",
+    "model_ols.npz",
+    "model_irls.json",
+    "model_irls.npz",
+    "report.html",
+    "diagnosis.html",
+)
+"""The files :func:`run_demo` may write in its folder (``dynid demo --json`` may not take one of these names)."""
 
 #: Settings of the two modes.
 SETTINGS: dict[str, dict[str, Any]] = {

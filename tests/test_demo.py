@@ -88,6 +88,9 @@ def test_demo_writes_its_files(demo):
         "model_irls.json",
         "report.html",
     } <= names
+    from dynid.demo import DEMO_FILES
+
+    assert names <= set(DEMO_FILES)  # the list the command protects from --json is the demo's whole output
     assert not [n for n in names if n.startswith(".")], "temporary files left behind"
     if figures.get("diagnosis_report"):  # the diagnosis' own report, linked from the demo's
         assert "diagnosis.html" in names

@@ -36,24 +36,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_json_argument(parser)
 
 
-# The demo's own files in --out (dynid.demo.run_demo), which --json must not take the name of.
-_DEMO_FILES = (
-    "excitation.json",
-    "identification.csv",
-    "identification.csv.truth.json",
-    "validation.csv",
-    "validation.csv.truth.json",
-    "model.json",
-    "model.npz",
-    "model_ols.json",
-    "model_ols.npz",
-    "model_irls.json",
-    "model_irls.npz",
-    "report.html",
-    "diagnosis.html",
-)
-
-
 def _check_out(path: str) -> Path:
     out = Path(path)
     if out.exists() and not out.is_dir():
@@ -70,12 +52,12 @@ def _show(line: str) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run the demo; exit code 1 when a stage failed (the diagnosis may fail without stopping it)."""
     from dynid._io import write_json
-    from dynid.demo import run_demo
+    from dynid.demo import DEMO_FILES, run_demo
 
     out = _check_out(args.out)
     check_outputs([output("out", out, folder=True), output("json", args.json, (".json",))])
     json_path = None if args.json is None else Path(args.json)
-    if json_path is not None and json_path.parent.resolve() == out.resolve() and json_path.name in _DEMO_FILES:
+    if json_path is not None and json_path.parent.resolve() == out.resolve() and json_path.name in DEMO_FILES:
         raise UsageError(
             f"--json '{json_path}' is one of the files the demo writes in --out '{out}'; give another name."
         )
