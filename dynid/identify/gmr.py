@@ -125,6 +125,11 @@ def _component(
     return L, sol, math.log(max(weight, 1e-300)) - 0.5 * (maha + logdet + n_in * math.log(2 * math.pi))
 
 
+def _component_log_densities(u, weights, means, covs) -> NDArray[np.float64]:
+    """Weighted log-density (K, m) of each component of a Gaussian mixture at the inputs ``u`` (m, d)."""
+    return np.array([_component(u, w, mu, S)[2] for w, mu, S in zip(weights, means, covs, strict=True)])
+
+
 def _gates(
     u: NDArray[np.float64],
     weights: NDArray[np.float64],
@@ -132,7 +137,7 @@ def _gates(
     covs: NDArray[np.float64],
 ) -> NDArray[np.float64]:
     """Responsibilities ``h_k(u)`` (m, K) of a Gaussian mixture over the inputs."""
-    logp = np.array([_component(u, w, mu, S)[2] for w, mu, S in zip(weights, means, covs, strict=True)])
+    logp = _component_log_densities(u, weights, means, covs)
     return np.exp(logp - logsumexp(logp, axis=0)).T
 
 
@@ -143,8 +148,7 @@ def _log_density(
     covs: NDArray[np.float64],
 ) -> NDArray[np.float64]:
     """Log-density (m,) of a Gaussian mixture over the inputs (standardised units)."""
-    logp = np.array([_component(u, w, mu, S)[2] for w, mu, S in zip(weights, means, covs, strict=True)])
-    return logsumexp(logp, axis=0)
+    return logsumexp(_component_log_densities(u, weights, means, covs), axis=0)
 
 
 def density_gate(mdl: dict[str, Any], u: NDArray[np.float64]) -> NDArray[np.float64]:
