@@ -158,6 +158,28 @@ def test_approach_starts_at_home_ends_at_rest_within_limits(problem, stacked):
     assert np.all(np.abs(run.ddq) <= robot.ddq_max + 1e-9)
 
 
+def test_rests_hold_home_and_excitation_repeats(problem, stacked):
+    robot = problem.robot
+    home = default_home(robot)
+    rate, rest, periods = 100.0, 1.5, 3
+    run = executable_trajectory(robot, stacked.trajectories[:1], rate=rate, home=home, periods=periods, rest=rest)
+    segments = run.meta["segments"]
+    assert [s["kind"] for s in segments] == ["rest", "approach", "excitation", "retreat", "rest"]
+    assert segments[0]["duration"] == rest and segments[-1]["duration"] == rest
+    exc = stacked.trajectories[0]
+    assert segments[2]["duration"] == pytest.approx(periods / exc.base_freq, rel=1e-12)
+    still = (run.t <= rest + 1e-9) | (run.t >= segments[-1]["start"] - 1e-9)
+    assert still.sum() >= 2 * rest * rate
+    np.testing.assert_allclose(run.q[still], np.broadcast_to(home, run.q[still].shape), atol=1e-9)
+    np.testing.assert_allclose(run.dq[still], 0.0, atol=1e-9)
+    # The excitation is periodic in the CSV: one period apart, the samples agree.
+    start = round(segments[2]["start"] * rate)
+    lag = round(rate / exc.base_freq)
+    np.testing.assert_allclose(run.q[start : start + lag], run.q[start + lag : start + 2 * lag], atol=1e-9)
+    with pytest.raises(UsageError, match=r"the rest is -1.0 s; give a duration of at least 0 s"):
+        executable_trajectory(robot, stacked.trajectories[:1], rate=rate, home=home, rest=-1.0)
+
+
 def test_point_to_point_respects_its_limits(ur5):
     seg = point_to_point(ur5, default_home(ur5), default_home(ur5) + 1.0, rate=200.0, speed_fraction=0.5)
     t = np.linspace(0, seg.duration, 400)
@@ -185,6 +207,11 @@ def test_cli_writes_trajectory_csv_and_figures(tmp_path, capsys):
     assert traj.harmonics == 3 and traj.meta["criterion"] == "cond"
     sampled = load_trajectory(csv)
     assert sampled.n == 6 and sampled.t[1] == pytest.approx(1 / 50)
+    # By default the CSV repeats the excitation three times between rests of 2 s at home.
+    kinds = [s["kind"] for s in figures["csv"]["segments"]]
+    assert kinds == ["rest", "approach", "excitation", "retreat", "rest"]
+    assert figures["csv"]["segments"][2]["duration"] == pytest.approx(3 / traj.base_freq)
+    assert figures["csv"]["segments"][0]["duration"] == 2.0
     assert "cond" in capsys.readouterr().out
 
 

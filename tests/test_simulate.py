@@ -609,6 +609,25 @@ def test_cli_writes_data_and_truth(trajectory_file, tmp_path, capsys):
     assert truth["effects"][1]["joints"] == [6] and truth["effects"][1]["value"] == 2.0
 
 
+def test_cli_runs_three_periods_by_default(robot, tmp_path, capsys):
+    from dynid.optim.trajectory import FourierTrajectory
+
+    short = FourierTrajectory(a=np.full((1, 6), 0.02), b=np.zeros((1, 6)), c=np.array([0.0, -1.2, 1.0, -1.0, 0.5, 0.0]), base_freq=5.0)
+    path = tmp_path / "t.json"
+    short.save(path)
+    for extra, periods in (([], 3), (["--periods", "2"], 2)):
+        out = tmp_path / f"d{periods}.csv"
+        code = main(["simulate", "--robot", "ur5", "--trajectory", str(path), "--rate", "100", "--out", str(out),
+                     *extra])  # fmt: skip
+        assert code == 0
+        t = np.loadtxt(out, delimiter=",", skiprows=1, usecols=0)
+        assert t[-1] == pytest.approx(periods / 5.0)
+    code = main(["simulate", "--robot", "ur5", "--trajectory", str(path), "--periods", "0", "--out",
+                 str(tmp_path / "d0.csv")])  # fmt: skip
+    assert code == 2 and "--periods is 0; give a whole number of at least 1" in capsys.readouterr().err
+    assert not (tmp_path / "d0.csv").exists()
+
+
 # ---------------------------------------------------------------------------- synthetic excitation
 # Coefficients of the one random Fourier generator, recorded before the two generators were merged:
 # the diagnosis' cases (whole-arm scaling about the case posture) and the regressor datasets

@@ -59,7 +59,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     group = parser.add_argument_group("executable CSV")
     group.add_argument("--home", metavar="Q[,Q...]", help="start and end pose (rad); default the middle of the ranges")
-    group.add_argument("--periods", type=int, default=1, help="periods of each excitation in the CSV (default 1)")
+    group.add_argument(
+        "--periods",
+        type=int,
+        default=3,
+        help="periods of each excitation in the CSV (default 3: the noise floor and the diagnosis need repeats)",
+    )
+    group.add_argument(
+        "--rest",
+        type=float,
+        default=2.0,
+        metavar="S",
+        help="seconds held still at home before the approach and after the retreat in the CSV (default 2)",
+    )
     group.add_argument(
         "--speed-fraction", type=float, default=0.5, help="fraction of the velocity/acceleration limits for approach"
     )
@@ -152,6 +164,7 @@ def run(args: argparse.Namespace) -> int:
             rate=args.rate,
             home=home,
             periods=args.periods,
+            rest=args.rest,
             speed_fraction=args.speed_fraction,
             jerk_factor=args.jerk_factor,
         )

@@ -55,7 +55,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=float,
         default=None,
         metavar="S",
-        help="length of the run (default: the trajectory's)",
+        help="length of the run (default: --periods periods of a Fourier trajectory, else the trajectory's length)",
+    )
+    parser.add_argument(
+        "--periods",
+        type=int,
+        default=3,
+        metavar="N",
+        help="periods of a Fourier trajectory to run when --duration is not given (default 3: the diagnosis "
+        "measures the noise floor from the spread across repeated periods)",
     )
     parser.add_argument(
         "--perturb",
@@ -80,7 +88,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from dynid.optim.trajectory import load_trajectory
+    from dynid.exceptions import UsageError
+    from dynid.optim.trajectory import FourierTrajectory, load_trajectory
     from dynid.sim.effects import parse_effects
     from dynid.sim.simulator import NoiseModel, check_output_path, simulate, truth_path, write_simulation
 
@@ -93,6 +102,12 @@ def run(args: argparse.Namespace) -> int:
     out = check_output_path(args.out)
     robot = robot_from_args(args)
     trajectory = load_trajectory(args.trajectory)
+    duration = args.duration
+    if args.periods < 1:
+        raise UsageError(f"--periods is {args.periods}; give a whole number of at least 1 (default 3).")
+    if duration is None and isinstance(trajectory, FourierTrajectory):
+        # Repeated periods are what the noise floor, the periodic averaging and the diagnosis need.
+        duration = args.periods / trajectory.base_freq
     result = simulate(
         robot,
         trajectory,
@@ -103,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
         truth_seed=args.truth_seed,
         perturb=args.perturb,
         rate=args.rate,
-        duration=args.duration,
+        duration=duration,
         source=f"the trajectory '{args.trajectory}'",
     )
     data, sidecar = write_simulation(result, out, true_states=args.true_states)

@@ -59,7 +59,7 @@ class Segment:
     Attributes
     ----------
     kind : str
-        ``approach``, ``excitation``, ``transfer`` or ``retreat``.
+        ``rest``, ``approach``, ``excitation``, ``transfer`` or ``retreat``.
     start, duration : float
         Start time in the joined trajectory and length (s).
     index : int
@@ -72,10 +72,14 @@ class Segment:
     index: int = 0
     _ruckig: object | None = None
     _fourier: FourierTrajectory | None = None
+    _pose: np.ndarray | None = None  # a rest: held still at this pose
 
     def evaluate(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """q, dq, ddq at local times ``t`` in [0, duration]: each (len(t), n)."""
         t = np.clip(np.asarray(t, dtype=float), 0.0, self.duration)
+        if self._pose is not None:
+            zeros = np.zeros((t.size, self._pose.size))
+            return np.broadcast_to(self._pose, zeros.shape).copy(), zeros, zeros.copy()
         if self._fourier is not None:
             return self._fourier.evaluate(t)
         rows = [self._ruckig.at_time(float(ti)) for ti in t]
@@ -170,6 +174,7 @@ def executable_trajectory(
     rate: float,
     home=None,
     periods: int = 1,
+    rest: float = 0.0,
     speed_fraction: float = 0.5,
     jerk_factor: float = 5.0,
 ) -> SampledTrajectory:
@@ -187,6 +192,9 @@ def executable_trajectory(
         Start and end pose (rad); default the middle of the joint ranges.  Must lie within the limits.
     periods : int
         Periods of each excitation (identification averages over them).
+    rest : float
+        Seconds held still at ``home`` before the approach and after the retreat (default 0).  Rests give
+        the sensor offsets and the torque noise at standstill, and mark where the motion starts and ends.
     speed_fraction, jerk_factor : float
         ruckig limits, see :func:`point_to_point`.
 
@@ -209,9 +217,14 @@ def executable_trajectory(
                 f"excitation {k + 1} has {exc.n} joints; the robot '{robot.name}' has {robot.n}: design it for this robot."
             )
     home = default_home(robot) if home is None else check_pose(robot, home)
+    if not (math.isfinite(rest) and rest >= 0):
+        raise UsageError(f"the rest is {rest} s; give a duration of at least 0 s, e.g. 2.")
     segments: list[Segment] = []
     clock = 0.0
     pose = home
+    if rest > 0:
+        segments.append(Segment(kind="rest", start=0.0, duration=float(rest), _pose=np.asarray(home, float)))
+        clock += float(rest)
     for k, exc in enumerate(excitations):
         repeated = FourierTrajectory(a=exc.a, b=exc.b, c=exc.c, base_freq=exc.base_freq, periods=int(periods))
         q0 = repeated.evaluate([0.0])[0][0]
@@ -237,6 +250,9 @@ def executable_trajectory(
     )
     segments.append(seg)
     clock += seg.duration
+    if rest > 0:
+        segments.append(Segment(kind="rest", start=clock, duration=float(rest), _pose=np.asarray(home, float)))
+        clock += float(rest)
 
     steps = math.ceil(clock * rate - 1e-9)
     t = np.arange(steps + 1) / rate
