@@ -1,6 +1,7 @@
 """The package's structure, read from the source (nothing is imported).
 
-* Layers import one way: symbolic <- optim <- identify <- sim <- validation <- diagnosis <- commands.
+* Layers import one way: symbolic <- optim <- identify <- sim <- validation <- simmodel <- diagnosis <- fleet <-
+  commands.
   The bottom holds ``dynid._io``, ``dynid._threads``, ``dynid.exceptions`` and any other top-level helper; the top
   holds ``dynid.cli``, the package's face ``dynid/__init__.py`` and the demo's library module, which
   sits beside the commands.
@@ -28,7 +29,7 @@ import dynid
 PACKAGE = Path(dynid.__file__).resolve().parent
 
 # The layers, lowest first.  A module may import modules of its own layer or of lower ones.
-LAYERS = ("symbolic", "optim", "identify", "sim", "validation", "diagnosis", "commands")
+LAYERS = ("symbolic", "optim", "identify", "sim", "validation", "simmodel", "diagnosis", "fleet", "commands")
 BOTTOM = -1  # dynid._io, dynid.exceptions, other top-level helpers
 TOP = len(LAYERS)  # dynid.cli and the package's face
 # Top-level modules that are not helpers: their layer.
@@ -221,6 +222,8 @@ def test_the_walk_finds_every_layer():
     assert layer("dynid.symbolic.robot") < layer("dynid.optim.excitation") < layer("dynid.identify.model")
     assert layer("dynid.identify.model") < layer("dynid.sim.simulator") < layer("dynid.validation.validate")
     assert layer("dynid.validation.validate") < layer("dynid.diagnosis.core") < layer("dynid.commands.demo")
+    assert layer("dynid.validation.validate") < layer("dynid.simmodel.export") < layer("dynid.diagnosis.core")
+    assert layer("dynid.diagnosis.core") < layer("dynid.fleet.core") < layer("dynid.commands.fleet")
     assert layer("dynid._io") < layer("dynid.symbolic.robot") and layer("dynid.commands.demo") < layer(
         "dynid.cli"
     )

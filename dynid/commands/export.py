@@ -1,0 +1,94 @@
+"""``dynid export``: an identified model written into a URDF or MJCF for simulators, reload-checked."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from dynid.commands.common import add_json_argument, check_outputs, output, write_figures
+
+__all__ = ["HELP", "add_arguments", "run"]
+
+HELP = "write an identified model into a URDF or MuJoCo MJCF (consistent inertials, friction), reload-checked"
+
+_SUFFIX = {"urdf": (".urdf",), "mjcf": (".xml", ".mjcf")}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--model", required=True, metavar="M.json", help="model file written by 'dynid identify'")
+    parser.add_argument(
+        "--format", required=True, metavar="{urdf,mjcf}", help="urdf (Pinocchio, Gazebo, Isaac) or mjcf (MuJoCo)"
+    )
+    parser.add_argument(
+        "--template",
+        metavar="robot.urdf",
+        help="URDF to copy (visuals, collisions, meshes and limits are kept; default: the robot description "
+        "the model was identified on); the MJCF is built from it by MuJoCo",
+    )
+    parser.add_argument("--out", required=True, metavar="FILE", help="file to write (.urdf, or .xml for mjcf)")
+    add_json_argument(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    from dynid.exceptions import UsageError
+
+    if args.format not in _SUFFIX:
+        raise UsageError(f"--format is '{args.format}'; choose urdf or mjcf")
+    if args.template is not None and Path(args.template).suffix.lower() != ".urdf":
+        raise UsageError(
+            f"--template '{args.template}' is not a .urdf file; give the robot's URDF (the MJCF is built from it "
+            "by MuJoCo)"
+        )
+    check_outputs(
+        [
+            output("out", args.out, _SUFFIX[args.format], hint=f"the format is {args.format}"),
+            output("json", args.json, (".json",)),
+        ],
+        {"model": args.model, "template": args.template},
+    )
+    if args.format == "mjcf":
+        from dynid.simmodel.mjcf import import_mujoco
+
+        import_mujoco()
+    from dynid.identify.model import load_model
+    from dynid.simmodel.export import export_model
+
+    model = load_model(args.model)
+    result = export_model(
+        model, args.format, args.out, template=args.template, model_name=Path(args.model).name
+    )
+    figures = result.figures()
+    p = result.params
+    print(f"wrote {result.path} ({args.format}, from {result.template})")
+    print(f"  link inertials: {p.source}; physically consistent")
+    if p.projection.get("relative"):
+        print(
+            f"  moved {p.projection['relative']:.3g} (relative) from the identified parameters, "
+            f"{p.projection['mahalanobis']:.3g} standard deviations"
+        )
+    if "note" in p.projection:
+        print(f"  note: {p.projection['note']}")
+    u = p.unidentifiable
+    print(
+        f"  {u['dimension']} directions the data cannot see pulled toward the template"
+        + (f" (never seen: {', '.join(u['unseen'])})" if u["unseen"] else "")
+    )
+    print(f"{'joint':>5} {'mass kg':>10} {'armature':>10} {'damping':>10} {'frictionloss':>12}")
+    for row in figures["joints"]:
+        print(
+            f"{row['joint']:>5} {row['mass']:>10.4g} {row['armature']:>10.4g} {row['damping']:>10.4g} "
+            f"{row['frictionloss']:>12.4g}"
+        )
+    print("reload checks:")
+    for c in result.checks:
+        figure = f"error {c['relative_error']:.2g} <= {c['tolerance']:.0e}" if "relative_error" in c else (
+            f"{len(c['joints'])} joints" if c["joints"] else "no joint has a Coulomb level"
+        )
+        print(f"  passed: {c['check']} ({figure})")
+    if result.not_carried:
+        print("not carried (listed in the file's comment too):")
+        for it in result.not_carried:
+            joints = ",".join(str(j) for j in it["joints"])
+            print(f"  {it['what']} (joints {joints or '-'}): {it['share']}")
+    write_figures(args.json, figures)
+    return 0

@@ -1,0 +1,204 @@
+"""Reload checks of an exported simulator description: the file, read back, gives dynid's torque.
+
+* URDF: numeric Pinocchio (``buildModelFromUrdf``, dynid's locked joints locked again, the armature set
+  as ``model.armature`` because URDF has no field for it) reproduces the rigid-body + armature torque of
+  the exported parameters, :func:`dynid.identify.columns.linear_torque`, to :data:`URDF_TOLERANCE`
+  (relative, over random states).
+* MJCF, inverse dynamics: MuJoCo's ``mj_inverse`` with the constraints disabled (frictionloss and joint
+  limits are constraints in MuJoCo) reproduces rigid body + armature + viscous torque to
+  :data:`MJCF_TOLERANCE`.
+* MJCF, frictionloss: a forward rollout per joint with a Coulomb level.  From rest, with gravity and
+  bias compensated, the joint is pushed by 0.5 times its level (it must hold: MuJoCo's frictionloss is
+  a soft constraint and creeps, so "hold" is a displacement below half the reference's; measured 1-20 %)
+  and by 1.5 times (it must move as the same joint without its frictionloss moves under 0.5 times the
+  level, within 15 %; a level 10 % off gives 20 %): the joint carries that level and no other.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dynid.identify.columns import linear_torque
+
+__all__ = ["MJCF_TOLERANCE", "URDF_TOLERANCE", "check_mjcf", "check_urdf", "random_states"]
+
+URDF_TOLERANCE = 1e-8
+MJCF_TOLERANCE = 1e-6
+_HOLD = 0.5
+_MOVE = 0.15
+
+
+def random_states(robot, count: int, seed: int = 0) -> tuple[NDArray[np.float64], ...]:
+    """Random joint states within the robot's limits: (q, dq, ddq), each (count, n)."""
+    rng = np.random.default_rng(seed)
+    lo = np.maximum(robot.q_min, -np.pi)
+    hi = np.minimum(robot.q_max, np.pi)
+    q = rng.uniform(lo, hi, (count, robot.n))
+    dq = rng.uniform(-1, 1, (count, robot.n)) * np.minimum(robot.dq_max, 3.0)
+    ddq = rng.uniform(-1, 1, (count, robot.n)) * np.minimum(robot.ddq_max, 10.0)
+    return q, dq, ddq
+
+
+def _reference(model, params, q, dq, ddq) -> NDArray[np.float64]:
+    cols = model.columns
+    mask = np.isin(np.array(cols.kinds), ("link", "armature"))
+    return linear_torque(cols, params.identified, q, dq, ddq, mask=mask)
+
+
+def _relative(got, ref) -> float:
+    return float(np.linalg.norm(got - ref) / max(np.linalg.norm(ref), 1e-300))
+
+
+def check_urdf(path: str | Path, model, params, *, count: int = 50) -> dict[str, Any]:
+    """Pinocchio's torque of the exported URDF against dynid's (see the module docstring).
+
+    Parameters
+    ----------
+    path : str or Path
+        The exported URDF.
+    model : IdentifiedModel
+        The model exported.
+    params : SimParameters
+        What was written.
+    count : int
+        Random states.
+
+    Returns
+    -------
+    dict
+        ``check``, ``relative_error``, ``tolerance``, ``states``, ``passed``.
+    """
+    import pinocchio as pin
+
+    robot = model.robot
+    full = pin.buildModelFromUrdf(str(path))
+    names = list(full.names)[1:]
+    locked = [full.getJointId(nm) for nm in names if nm not in robot.joint_names]
+    pm = pin.buildReducedModel(full, locked, pin.neutral(full)) if locked else full
+    pm.armature = np.array(params.armature, dtype=float)
+    pm.gravity.linear = np.array(robot.gravity, dtype=float)
+    data = pm.createData()
+    q, dq, ddq = random_states(robot, count)
+    got = np.array([pin.rnea(pm, data, q[k], dq[k], ddq[k]) for k in range(count)])
+    err = _relative(got, _reference(model, params, q, dq, ddq))
+    return {
+        "check": "URDF in Pinocchio: rigid body + armature (model.armature) vs dynid",
+        "relative_error": err,
+        "tolerance": URDF_TOLERANCE,
+        "states": count,
+        "passed": bool(err <= URDF_TOLERANCE),
+    }
+
+
+def _dofs(mujoco, m, robot) -> NDArray[np.intp]:
+    return np.array(
+        [m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, nm)] for nm in robot.joint_names]
+    )
+
+
+def _qpos(mujoco, m, robot) -> NDArray[np.intp]:
+    return np.array(
+        [m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, nm)] for nm in robot.joint_names]
+    )
+
+
+def _rollout(mujoco, m, robot, q0, joint: int, push: float, seconds: float) -> float:
+    """Displacement (rad) of one joint pushed from rest with gravity and bias compensated."""
+    d = mujoco.MjData(m)
+    qadr, dadr = _qpos(mujoco, m, robot), _dofs(mujoco, m, robot)
+    d.qpos[qadr] = q0
+    mujoco.mj_forward(m, d)
+    d.qfrc_applied[:] = d.qfrc_bias
+    d.qfrc_applied[dadr[joint]] += push
+    for _ in range(max(round(seconds / m.opt.timestep), 1)):
+        mujoco.mj_step(m, d)
+    return float(d.qpos[qadr[joint]] - q0[joint])
+
+
+def check_mjcf(path: str | Path, model, params, *, count: int = 50, seconds: float = 0.2) -> list[dict[str, Any]]:
+    """MuJoCo's inverse dynamics and frictionloss of the exported MJCF (see the module docstring).
+
+    Parameters
+    ----------
+    path : str or Path
+        The exported MJCF.
+    model : IdentifiedModel
+        The model exported.
+    params : SimParameters
+        What was written.
+    count : int
+        Random states of the inverse-dynamics check.
+    seconds : float
+        Length of each frictionloss rollout (s).
+
+    Returns
+    -------
+    list of dict
+        Two checks: ``check``, ``passed`` and their figures.
+    """
+    from dynid.simmodel.mjcf import import_mujoco
+
+    mujoco = import_mujoco()
+    robot = model.robot
+    m = mujoco.MjModel.from_xml_path(str(path))
+    m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
+    d = mujoco.MjData(m)
+    qadr, dadr = _qpos(mujoco, m, robot), _dofs(mujoco, m, robot)
+    q, dq, ddq = random_states(robot, count)
+    got = np.empty_like(q)
+    for k in range(count):
+        d.qpos[:] = m.qpos0
+        d.qvel[:] = 0.0
+        d.qacc[:] = 0.0
+        d.qpos[qadr], d.qvel[dadr], d.qacc[dadr] = q[k], dq[k], ddq[k]
+        mujoco.mj_inverse(m, d)
+        got[k] = d.qfrc_inverse[dadr]
+    ref = _reference(model, params, q, dq, ddq) + dq * params.damping
+    err = _relative(got, ref)
+    out = [
+        {
+            "check": "MJCF in MuJoCo: mj_inverse (constraints off) vs dynid rigid body + armature + viscous",
+            "relative_error": err,
+            "tolerance": MJCF_TOLERANCE,
+            "states": count,
+            "passed": bool(err <= MJCF_TOLERANCE),
+        }
+    ]
+    # frictionloss: forward rollouts from the middle of the joint ranges (well inside the limits)
+    m = mujoco.MjModel.from_xml_path(str(path))
+    q0 = 0.5 * (np.maximum(robot.q_min, -np.pi) + np.minimum(robot.q_max, np.pi))
+    joints = []
+    for j in range(robot.n):
+        f = float(m.dof_frictionloss[dadr[j]])
+        if not f > 0:
+            continue
+        hold = _rollout(mujoco, m, robot, q0, j, 0.5 * f, seconds)
+        move = _rollout(mujoco, m, robot, q0, j, 1.5 * f, seconds)
+        m.dof_frictionloss[dadr[j]] = 0.0
+        free = _rollout(mujoco, m, robot, q0, j, 0.5 * f, seconds)
+        m.dof_frictionloss[dadr[j]] = f
+        ok = abs(hold) <= _HOLD * abs(free) and abs(move - free) <= _MOVE * abs(free)
+        joints.append(
+            {
+                "joint": j + 1,
+                "frictionloss": f,
+                "held_rad": hold,
+                "moved_rad": move,
+                "reference_rad": free,
+                "passed": bool(ok),
+            }
+        )
+    out.append(
+        {
+            "check": "MJCF in MuJoCo: frictionloss in a forward rollout (holds 0.5x its level, slides past 1.5x as "
+            "the frictionless joint does under 0.5x)",
+            "joints": joints,
+            "seconds": seconds,
+            "passed": all(r["passed"] for r in joints),
+        }
+    )
+    return out

@@ -1,0 +1,315 @@
+"""What an identified model puts into a simulator description: bodies, armature, damping, frictionloss.
+
+A simulator needs every link as a real body (positive mass, positive definite pseudo-inertia); an
+identified model holds base parameters, which fix only combinations of the standard ones.
+:func:`simulator_parameters` returns one physically consistent standard set per link:
+
+* a model fitted with ``method="consistent"`` already carries one (``info["consistency"]``): it is
+  used as it is, and the armature folded into a base parameter (joint 1 of a vertical first axis) is
+  read back from the base parameters;
+* any other model: the consistent set closest to the identified parameters in the Mahalanobis
+  distance of their covariance, :func:`dynid.identify.consistent.consistent_solution` (a convex
+  barrier method).  The directions the data cannot see (the null space of the base-parameter map)
+  are pulled toward the template's bodies, so a standard parameter that no base parameter holds
+  keeps the template's value where that value is consistent.
+
+Friction is mapped per joint onto what simulators have, a viscous coefficient (``damping``, N m s/rad)
+and a Coulomb level (``frictionloss``, N m); whatever the friction model holds beyond that (offset,
+Stribeck hump, direction-dependent levels, higher-order viscous terms, a sigmoid's shift) is listed in
+:attr:`SimParameters.not_carried`, as are the mixture correction, effect terms and a coupled
+transmission.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dynid.exceptions import ModelFileError
+from dynid.identify.consistent import consistent_solution, is_consistent
+from dynid.identify.model import IdentifiedModel
+
+__all__ = ["SimParameters", "simulator_parameters", "unidentifiable_directions"]
+
+_STORED_TOLERANCE = 1e-9  # relative gap within which stored standard parameters reproduce the base ones
+
+
+@dataclass(frozen=True)
+class SimParameters:
+    """The parameters a simulator description receives.
+
+    Attributes
+    ----------
+    standard : ndarray, shape (10 n,)
+        Consistent standard parameters per joint body, Pinocchio's order (kg, kg m, kg m^2), about the
+        joint frame.
+    armature : ndarray, shape (n,)
+        Rotor inertia reflected to each joint (kg m^2).
+    damping : ndarray, shape (n,)
+        Viscous friction (N m s/rad).
+    frictionloss : ndarray, shape (n,)
+        Coulomb friction level (N m).
+    identified : ndarray, shape (p,)
+        The identified parameters these values reproduce exactly (``P @ phi``; equal to the model's
+        for a consistent model).
+    source : str
+        ``"consistent fit"`` or ``"closest consistent set"``.
+    projection : dict
+        How far the consistent set moved from the identified parameters (``relative``,
+        ``mahalanobis``) and the solver's report.
+    unidentifiable : dict
+        The standard-parameter directions the data cannot see, pulled toward the template
+        (:func:`unidentifiable_directions`).
+    not_carried : list of dict
+        What the simulator parameters leave out: ``{"what", "joints", "detail"}``.
+    """
+
+    standard: NDArray[np.float64]
+    armature: NDArray[np.float64]
+    damping: NDArray[np.float64]
+    frictionloss: NDArray[np.float64]
+    identified: NDArray[np.float64]
+    source: str
+    projection: dict[str, Any] = field(default_factory=dict)
+    unidentifiable: dict[str, Any] = field(default_factory=dict)
+    not_carried: list[dict[str, Any]] = field(default_factory=list)
+
+
+def unidentifiable_directions(model: IdentifiedModel) -> dict[str, Any]:
+    """The standard-parameter (and armature) directions the identified parameters do not fix.
+
+    Parameters
+    ----------
+    model : IdentifiedModel
+        The model.
+
+    Returns
+    -------
+    dict
+        ``dimension`` (of the null space of the base-parameter map over the standard parameters and
+        the armature), ``unseen`` (names of the single parameters no identified parameter holds:
+        ``m1``, ``Ixx1``, ...), ``combinations`` (how many further directions are combinations of
+        parameters that are seen only together, e.g. the split of joint 1's armature and link
+        inertia), ``regrouped`` (names of the parameters that take part in those combinations).
+    """
+    cols = model.columns
+    n = cols.n
+    P = cols.P[~cols.effect_mask]
+    active = np.concatenate([np.ones(10 * n, dtype=bool), cols.enabled_extras[:n]])
+    names = [*model.robot.param_names, *(f"ia{j + 1}" for j in range(n))]
+    A = P[:, : 11 * n][:, active]
+    labels = [nm for nm, a in zip(names, active, strict=True) if a]
+    seen = np.any(np.abs(A) > 0, axis=0)
+    s = np.linalg.svd(A, compute_uv=False)
+    rank = int(np.sum(s > 1e-10 * s[0])) if s.size else 0
+    dimension = A.shape[1] - rank
+    unseen = [lab for lab, v in zip(labels, seen, strict=True) if not v]
+    # parameters that appear in a null direction although some identified parameter holds them
+    _, _, Vt = np.linalg.svd(A[:, seen], full_matrices=True)
+    null = Vt[rank:]
+    seen_labels = [lab for lab, v in zip(labels, seen, strict=True) if v]
+    regrouped = [lab for k, lab in enumerate(seen_labels) if null.size and np.abs(null[:, k]).max() > 1e-9]
+    return {
+        "dimension": int(dimension),
+        "unseen": unseen,
+        "combinations": int(dimension - len(unseen)),
+        "regrouped": regrouped,
+    }
+
+
+def _whitened_factor(cov: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Upper-triangular ``R`` with ``R^T R = cov^-1`` (eigenvalues floored: a singular block stays usable)."""
+    w, V = np.linalg.eigh(0.5 * (cov + cov.T))
+    top = float(w.max(initial=0.0))
+    if not top > 0:
+        return np.eye(len(cov))
+    w = np.maximum(w, 1e-12 * top)
+    inv = (V / w) @ V.T
+    L = np.linalg.cholesky(0.5 * (inv + inv.T))
+    return L.T
+
+
+def _friction(model: IdentifiedModel, n: int) -> tuple[np.ndarray, np.ndarray, list[dict[str, Any]]]:
+    """Per-joint (damping, frictionloss) from the friction model, and what the two leave out."""
+    damping, loss = np.zeros(n), np.zeros(n)
+    left: list[dict[str, Any]] = []
+    if model.friction is None:
+        return damping, loss, left
+    kind = model.friction.model
+    coefs = model.friction.to_dict()["joints"]
+
+    def leave(what: str, joints: list[int], detail: str) -> None:
+        if joints:
+            left.append({"what": what, "joints": joints, "detail": detail})
+
+    offsets, asym, stribeck, higher, shift = [], [], [], [], []
+    for j, c in enumerate(coefs):
+        if kind == "linear":
+            loss[j], damping[j] = max(c["fc"], 0.0), max(c["fv"], 0.0)
+            if abs(c["fo"]) > 0:
+                offsets.append(j + 1)
+        elif kind == "stribeck":
+            loss[j], damping[j] = max(c["fc"], 0.0), max(c["fv"], 0.0)
+            if abs(c["fs"] - c["fc"]) > 0:
+                stribeck.append(j + 1)
+            if abs(c["fo"]) > 0:
+                offsets.append(j + 1)
+        elif kind == "seed":
+            loss[j] = 0.5 * (c["kc_pos"] + c["kc_neg"])
+            damping[j] = c["kv1"]
+            if c["kc_pos"] != c["kc_neg"]:
+                asym.append(j + 1)
+            if c["kv2"] > 0 or c["kv3"] > 0:
+                higher.append(j + 1)
+            if c["ks_pos"] != c["kc_pos"] or c["ks_neg"] != c["kc_neg"]:
+                stribeck.append(j + 1)
+        elif kind == "sigmoid":
+            loss[j] = 0.5 * abs(c["phi1"])
+            shift.append(j + 1)
+        else:  # "none"
+            pass
+    leave("friction offset", offsets, "the constant torque fo of each joint (no simulator field)")
+    leave("Stribeck friction", stribeck, "the static level above the Coulomb level at low speed")
+    leave(
+        "direction-dependent Coulomb friction",
+        asym,
+        "different levels for positive and negative speed; their mean is the frictionloss",
+    )
+    leave("nonlinear viscous friction", higher, "the dq|dq| and dq^3 terms; only the linear term is damping")
+    leave(
+        "sigmoid friction shape",
+        shift,
+        "the smooth sigmoid and its shift; half its span is the frictionloss, no damping",
+    )
+    return damping, loss, left
+
+
+def simulator_parameters(
+    model: IdentifiedModel,
+    reference=None,
+    *,
+    reference_weight: float = 0.0,
+) -> SimParameters:
+    """Consistent bodies, armature and linear friction of an identified model, for a simulator.
+
+    Parameters
+    ----------
+    model : IdentifiedModel
+        The identified model.
+    reference : RobotModel, optional
+        The bodies the unidentifiable directions are pulled toward (the template's; default the robot
+        the model was identified on).  Same kinematics as the model's robot.
+    reference_weight : float
+        Weight of the log-det pull toward the reference bodies in every direction (0: only the
+        directions the data cannot see are pulled, by a vanishing weight).
+
+    Returns
+    -------
+    SimParameters
+
+    Raises
+    ------
+    ModelFileError
+        Standard parameters that are not a physical body after all (a damaged file).
+    """
+    robot = model.robot
+    cols = model.columns
+    n = cols.n
+    ref = robot if reference is None else reference
+    kinds = np.array(cols.kinds)
+    mask = np.isin(kinds, ("link", "armature"))
+    x = np.asarray(model.params, dtype=np.float64)
+    cons = model.info.get("consistency") or {}
+    stored = cons.get("standard_params")
+    note = None
+    standard = None
+    if stored is not None and len(stored) == 10 * n:
+        standard = np.asarray(stored, dtype=np.float64)
+        # the armature: alone where it has a column, else read back from the base parameter it was folded in
+        arm_cols = cols.P[mask][:, 10 * n : 11 * n]
+        resid = x[mask] - cols.P[mask][:, : 10 * n] @ standard
+        used = np.any(arm_cols != 0, axis=0)
+        armature = np.zeros(n)
+        if used.any():
+            armature[used] = np.linalg.lstsq(arm_cols[:, used], resid, rcond=None)[0]
+        armature = np.maximum(armature, 0.0)
+        phi = np.concatenate([standard, armature, np.zeros(3 * n)])
+        gap = float(np.abs(cols.P[mask] @ phi - x[mask]).max() / max(np.abs(x[mask]).max(), 1e-300))
+        if gap <= _STORED_TOLERANCE and is_consistent(standard).all():
+            source = "consistent fit"
+            projection = {"relative": 0.0, "mahalanobis": 0.0, "solver": cons.get("solver")}
+        else:
+            note = (
+                f"the model's stored standard parameters miss its base parameters by {gap:.2g} (relative); "
+                "the closest consistent set was computed instead"
+            )
+            standard = None
+    if standard is None:
+        sub = model.cov[np.ix_(mask, mask)]
+        R = _whitened_factor(sub)
+        phi, solver = consistent_solution(
+            ref, cols, x, R, 1.0, mask=mask, reference_weight=reference_weight
+        )
+        standard = phi[: 10 * n]
+        armature = np.maximum(phi[10 * n : 11 * n], 0.0)
+        x_c = cols.P[mask] @ phi
+        projection = {
+            "relative": float(np.linalg.norm(x_c - x[mask]) / max(np.linalg.norm(x[mask]), 1e-300)),
+            "mahalanobis": float(np.linalg.norm(R @ (x_c - x[mask]))),
+            "solver": solver,
+        }
+        source = "closest consistent set"
+    if note is not None:
+        projection["note"] = note
+    if not is_consistent(standard).all():
+        bad = ", ".join(str(j + 1) for j in np.flatnonzero(~is_consistent(standard)))
+        raise ModelFileError(
+            f"the standard parameters of link(s) {bad} are not a physical body; identify again with "
+            "--method consistent"
+        )
+    phi_full = np.concatenate([standard, armature, np.zeros(3 * n)])
+    identified = np.where(mask, cols.P @ phi_full, 0.0)
+
+    damping, loss, left = _friction(model, n)
+    not_carried = list(left)
+    if model.gmr is not None and np.any(model.gmr.active_):
+        joints = [j + 1 for j in range(n) if model.gmr.active_[j]]
+        not_carried.append(
+            {"what": "GMM correction", "joints": joints, "detail": "the mixture-regression residual (layer 3)"}
+        )
+    if cols.effects:
+        pattern = cols.pattern[:, cols.effect_mask]
+        for i, term in enumerate(cols.effects):
+            reach = pattern[:, cols.effect_owner == i].any(axis=1)
+            not_carried.append(
+                {
+                    "what": f"effect term {term.key}",
+                    "joints": [int(j) + 1 for j in np.flatnonzero(reach)],
+                    "detail": f"the identified {term.effect} term",
+                }
+            )
+    if getattr(robot, "transmission", None) is not None:
+        T = np.asarray(robot.transmission)
+        coupled = [i + 1 for i in range(n) if np.count_nonzero(T[i]) > 1]
+        not_carried.append(
+            {
+                "what": "coupled transmission",
+                "joints": coupled,
+                "detail": "armature and friction of a motor that turns with several joints are written on "
+                "its own joint only; the cross terms are left out",
+            }
+        )
+    return SimParameters(
+        standard=standard,
+        armature=armature,
+        damping=damping,
+        frictionloss=loss,
+        identified=identified,
+        source=source,
+        projection=projection,
+        unidentifiable=unidentifiable_directions(model),
+        not_carried=not_carried,
+    )

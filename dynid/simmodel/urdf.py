@@ -1,0 +1,278 @@
+"""The identified parameters written into a copy of a URDF.
+
+The copy keeps everything of the template (visuals, collisions, mesh references, limits, transmissions,
+comments); it changes only
+
+* the ``<inertial>`` of each moving joint's child link: the whole body the joint carries (that link and
+  every link fixed to it, as dynid and Pinocchio merge them) goes on the child link, and the links fixed
+  to it lose theirs.  Joints dynid locked (the Panda's fingers) keep their bodies; their share is taken
+  out of the body written on the link they hang from, so the locked model is the identified one;
+* each moving joint's ``<dynamics damping= friction=>``: viscous (N m s/rad) and Coulomb (N m) friction.
+
+URDF has no field for the armature (Pinocchio's ``model.armature``, MuJoCo's ``armature``): it is written
+only in the file's comment.  A template is accepted when its moving joints, once dynid's locked joints
+are set aside, have the model's names, order, placements and axes (to 1e-9).
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dynid.exceptions import UsageError
+from dynid.identify.consistent import is_consistent
+
+__all__ = ["TemplateMatch", "match_template", "read_template", "write_urdf"]
+
+_KINEMATIC_TOL = 1e-9
+
+
+def read_template(path: str | Path) -> ET.Element:
+    """Parse a URDF (comments kept); refuse a file that is not one in one sentence.
+
+    Parameters
+    ----------
+    path : str or Path
+        The URDF file.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise UsageError(f"the template '{path}' does not exist; give the robot's URDF file")
+    try:
+        parser = ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))
+        root = ET.parse(path, parser=parser).getroot()
+    except (ET.ParseError, UnicodeDecodeError) as err:
+        raise UsageError(f"the template '{path}' is not well-formed XML ({err}); give a URDF file") from None
+    if root.tag != "robot":
+        raise UsageError(
+            f"the template '{path}' has the root element <{root.tag}>, not <robot>: it is not a URDF; give the "
+            "robot's URDF (an MJCF is written from a URDF with --format mjcf)"
+        )
+    return root
+
+
+class TemplateMatch:
+    """How a template's links and joints hold a robot model's bodies.
+
+    Attributes
+    ----------
+    joint_elements : list of Element
+        The ``<joint>`` of each model joint, in the model's order.
+    child_links : list of str
+        Each model joint's child link.
+    fixed_links : list of list of str
+        The links fixed to each child link (their inertials are merged onto it).
+    locked : list of str
+        The template's moving joints the model has not (locked at their neutral position).
+    locked_share : ndarray, shape (10 n,)
+        Standard parameters, in each model joint's frame, of the locked bodies hanging from it.
+    template_params : ndarray, shape (10 n,)
+        The template's own bodies as the model sees them (locked ones merged).
+    template_armature : ndarray, shape (n,)
+        The template's armature as Pinocchio reads it (zero for a URDF).
+    """
+
+    def __init__(self, **kw: Any) -> None:
+        self.__dict__.update(kw)
+
+
+def _links_by_parent(root: ET.Element) -> dict[str, list[ET.Element]]:
+    out: dict[str, list[ET.Element]] = {}
+    for j in root.findall("joint"):
+        parent = j.find("parent")
+        if parent is not None:
+            out.setdefault(parent.get("link", ""), []).append(j)
+    return out
+
+
+def match_template(root: ET.Element, path: str | Path, robot) -> TemplateMatch:
+    """Match a template URDF to a robot model: names, order and kinematics.
+
+    Parameters
+    ----------
+    root : Element
+        The parsed template (:func:`read_template`).
+    path : str or Path
+        Its file (Pinocchio reads it for the kinematics).
+    robot : RobotModel
+        The model's robot.
+
+    Raises
+    ------
+    UsageError
+        Other joint names, another order, or other placements or axes: a template of another robot.
+    """
+    import pinocchio as pin
+
+    joints = {j.get("name"): j for j in root.findall("joint")}
+    moving = [name for name, j in joints.items() if j.get("type") not in ("fixed", "floating", "planar")]
+    missing = [name for name in robot.joint_names if name not in joints]
+    if missing:
+        raise UsageError(
+            f"the template '{path}' has no joint {', '.join(repr(m) for m in missing[:4])} of the model "
+            f"(its moving joints: {', '.join(moving[:10])}); give the URDF of the robot the model was "
+            "identified for"
+        )
+    full = pin.buildModelFromUrdf(str(path))
+    names = list(full.names)[1:]
+    locked = [nm for nm in names if nm not in robot.joint_names]
+    reduced = full
+    if locked:
+        reduced = pin.buildReducedModel(full, [full.getJointId(nm) for nm in locked], pin.neutral(full))
+    if list(reduced.names)[1:] != list(robot.joint_names):
+        raise UsageError(
+            f"the template '{path}' orders its joints {', '.join(list(reduced.names)[1:])}; the model has "
+            f"{', '.join(robot.joint_names)}; give the URDF of the robot the model was identified for"
+        )
+    for i, joint in enumerate(robot.joints):
+        M = reduced.jointPlacements[i + 1]
+        off = max(
+            float(np.abs(np.asarray(M.rotation) - joint.rotation).max()),
+            float(np.abs(np.asarray(M.translation) - joint.translation).max()),
+        )
+        if off > _KINEMATIC_TOL or int(reduced.parents[i + 1]) != joint.parent:
+            raise UsageError(
+                f"the joint '{joint.name}' sits elsewhere in the template '{path}' than in the model (placement "
+                f"differs by {off:.3g}): the template describes another robot; give the URDF the model was "
+                "identified for, or one with the same kinematics"
+            )
+    n = robot.n
+    share = np.zeros(10 * n)
+    tparams = np.zeros(10 * n)
+    for i, name in enumerate(robot.joint_names):
+        tparams[10 * i : 10 * i + 10] = reduced.inertias[i + 1].toDynamicParameters()
+        own = full.inertias[full.getJointId(name)].toDynamicParameters()
+        share[10 * i : 10 * i + 10] = tparams[10 * i : 10 * i + 10] - own
+    by_parent = _links_by_parent(root)
+    child_links, fixed_links = [], []
+    for name in robot.joint_names:
+        child = joints[name].find("child")
+        link = child.get("link") if child is not None else None
+        if link is None:
+            raise UsageError(f"the joint '{name}' of the template '{path}' has no <child link=...>; fix the URDF")
+        child_links.append(link)
+        group, stack = [], [link]
+        while stack:
+            for j in by_parent.get(stack.pop(), []):
+                if j.get("type") == "fixed":
+                    c = j.find("child")
+                    if c is not None:
+                        group.append(c.get("link"))
+                        stack.append(c.get("link"))
+        fixed_links.append(group)
+    return TemplateMatch(
+        joint_elements=[joints[nm] for nm in robot.joint_names],
+        child_links=child_links,
+        fixed_links=fixed_links,
+        locked=locked,
+        locked_share=share,
+        template_params=tparams,
+        template_armature=np.zeros(n),
+    )
+
+
+def _num(v: float) -> str:
+    return repr(float(v))
+
+
+def _inertial(standard: NDArray[np.float64]) -> ET.Element:
+    """A URDF ``<inertial>`` of standard parameters about the link frame."""
+    m = float(standard[0])
+    c = standard[1:4] / m
+    Io = np.array(
+        [
+            [standard[4], standard[5], standard[7]],
+            [standard[5], standard[6], standard[8]],
+            [standard[7], standard[8], standard[9]],
+        ]
+    )
+    Ic = Io - m * (float(c @ c) * np.eye(3) - np.outer(c, c))
+    el = ET.Element("inertial")
+    ET.SubElement(el, "origin", {"xyz": " ".join(_num(a) for a in c), "rpy": "0 0 0"})
+    ET.SubElement(el, "mass", {"value": _num(m)})
+    ET.SubElement(
+        el,
+        "inertia",
+        {
+            "ixx": _num(Ic[0, 0]),
+            "ixy": _num(Ic[0, 1]),
+            "ixz": _num(Ic[0, 2]),
+            "iyy": _num(Ic[1, 1]),
+            "iyz": _num(Ic[1, 2]),
+            "izz": _num(Ic[2, 2]),
+        },
+    )
+    return el
+
+
+def _replace_child(parent: ET.Element, new: ET.Element, tag: str) -> None:
+    old = parent.find(tag)
+    if old is None:
+        parent.insert(0, new)
+    else:
+        index = list(parent).index(old)
+        parent.remove(old)
+        parent.insert(index, new)
+
+
+def write_urdf(root: ET.Element, match: TemplateMatch, robot, params, comment: str) -> str:
+    """The template's text with the identified bodies and friction (see the module docstring).
+
+    Parameters
+    ----------
+    root : Element
+        The parsed template; changed in place.
+    match : TemplateMatch
+        How it holds the model's bodies (:func:`match_template`).
+    robot : RobotModel
+        The model's robot.
+    params : SimParameters
+        The values to write.
+    comment : str
+        Text of the comment put first inside ``<robot>``.
+
+    Returns
+    -------
+    str
+        The URDF (UTF-8 text with an XML declaration).
+
+    Raises
+    ------
+    UsageError
+        A body that, once the locked bodies' share is taken out, is no physical body.
+    """
+    links = {lk.get("name"): lk for lk in root.findall("link")}
+    n = robot.n
+    for i in range(n):
+        body = params.standard[10 * i : 10 * i + 10] - match.locked_share[10 * i : 10 * i + 10]
+        if not (body[0] > 0 and is_consistent(body)[0]):
+            raise UsageError(
+                f"the identified body of joint '{robot.joint_names[i]}' minus the locked joints' bodies of the "
+                f"template ({', '.join(match.locked)}) is not a physical body; give a template without those "
+                "joints (fixed instead)"
+            )
+        link = links.get(match.child_links[i])
+        if link is None:
+            raise UsageError(f"the template has no <link name='{match.child_links[i]}'>; fix the URDF")
+        _replace_child(link, _inertial(body), "inertial")
+        for other in match.fixed_links[i]:
+            el = links.get(other)
+            if el is not None and el.find("inertial") is not None:
+                el.remove(el.find("inertial"))
+        joint = match.joint_elements[i]
+        dyn = ET.Element(
+            "dynamics", {"damping": _num(params.damping[i]), "friction": _num(params.frictionloss[i])}
+        )
+        old = joint.find("dynamics")
+        if old is not None:
+            joint.remove(old)
+        joint.append(dyn)
+    for old in [c for c in list(root) if c.tag is ET.Comment and "dynid export" in (c.text or "")]:
+        root.remove(old)
+    root.insert(0, ET.Comment(comment))
+    ET.indent(root, space="  ")
+    return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
