@@ -17,6 +17,7 @@ __all__ = [
     "add_degrees_argument",
     "add_json_argument",
     "add_robot_arguments",
+    "add_topic_argument",
     "check_data_fits_model",
     "check_outputs",
     "model_files",
@@ -55,9 +56,19 @@ def add_degrees_argument(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def add_topic_argument(parser: argparse.ArgumentParser) -> None:
+    """``--topic``: the JointState topic to read from a ROS 2 recording."""
+    parser.add_argument(
+        "--topic",
+        metavar="NAME",
+        help="for a ROS 2 recording (.mcap, or a rosbag2 folder), the sensor_msgs/JointState topic to read "
+        "(needed when the bag holds several; ignored for .csv and .npz)",
+    )
+
+
 def read_dataset(path: str | os.PathLike[str], n_joints: int | None = None, *, robot_name: str | None = None,
-                 degrees: bool = False):
-    """Read a dataset file for a command, with ``--degrees`` passed to the reader.
+                 degrees: bool = False, topic: str | None = None, joint_names: Sequence[str] | None = None):
+    """Read a dataset file for a command, with ``--degrees`` and ``--topic`` passed to the reader.
 
     Parameters
     ----------
@@ -69,6 +80,10 @@ def read_dataset(path: str | os.PathLike[str], n_joints: int | None = None, *, r
         Robot name for messages.
     degrees : bool
         Whether the file's angles are in degrees.
+    topic : str, optional
+        The JointState topic of a ROS 2 recording.
+    joint_names : sequence of str, optional
+        The robot's joint names in its order, which map a ROS 2 recording's joints to columns.
 
     Returns
     -------
@@ -85,6 +100,10 @@ def read_dataset(path: str | os.PathLike[str], n_joints: int | None = None, *, r
         kwargs["degrees"] = degrees
     elif degrees:
         raise UsageError("--degrees is not available with this dataset reader; give the angles in rad.")
+    if topic is not None:
+        kwargs["topic"] = topic
+    if joint_names is not None:
+        kwargs["joint_names"] = tuple(joint_names)
     return load_dataset(path, n_joints, **kwargs)
 
 

@@ -8,6 +8,7 @@ import argparse
 from dynid.commands.common import (
     add_degrees_argument,
     add_json_argument,
+    add_topic_argument,
     check_data_fits_model,
     check_outputs,
     model_files,
@@ -36,6 +37,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="held-out data of the same robot (best: several periods of a periodic excitation)",
     )
     add_degrees_argument(parser)
+    add_topic_argument(parser)
     parser.add_argument(
         "--robot",
         help="robot to load the model with (default: the one recorded in the model file); it must be the robot "
@@ -97,8 +99,9 @@ def run(args: argparse.Namespace) -> int:
 
         robot = load_robot(args.robot)
     model = load_model(args.model, robot=robot)
-    train = read_dataset(args.data, degrees=args.degrees)
-    heldout = read_dataset(args.heldout, degrees=args.degrees)
+    names = model.robot.joint_names
+    train = read_dataset(args.data, degrees=args.degrees, topic=args.topic, joint_names=names)
+    heldout = read_dataset(args.heldout, degrees=args.degrees, topic=args.topic, joint_names=names)
     check_data_fits_model(model, train, model_path=args.model, data_option="data")
     check_data_fits_model(model, heldout, model_path=args.model, data_option="heldout")
     result = diagnose(

@@ -8,6 +8,7 @@ from dynid.commands.common import (
     add_degrees_argument,
     add_json_argument,
     add_robot_arguments,
+    add_topic_argument,
     check_outputs,
     model_files,
     output,
@@ -50,9 +51,13 @@ def _cutoff(text: str) -> float | str | None:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_robot_arguments(parser)
     parser.add_argument(
-        "--data", required=True, metavar="D.csv", help="dataset (.csv or .npz: t, q_i, tau_i [, dq_i, ddq_i])"
+        "--data",
+        required=True,
+        metavar="D.csv",
+        help="dataset (.csv or .npz: t, q_i, tau_i [, dq_i, ddq_i]; or a ROS 2 .mcap / rosbag2 folder)",
     )
     add_degrees_argument(parser)
+    add_topic_argument(parser)
     parser.add_argument(
         "--method",
         default="irls",
@@ -153,7 +158,10 @@ def run(args: argparse.Namespace) -> int:
 
         robot = robot.with_transmission(load_transmission(args.transmission, robot.n))
     start = time.perf_counter()
-    data = read_dataset(args.data, robot.n, robot_name=robot.name, degrees=args.degrees)
+    data = read_dataset(
+        args.data, robot.n, robot_name=robot.name, degrees=args.degrees, topic=args.topic,
+        joint_names=robot.joint_names,
+    )
     model = identify(
         robot,
         data,

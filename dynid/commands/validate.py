@@ -8,6 +8,7 @@ from pathlib import Path
 from dynid.commands.common import (
     add_degrees_argument,
     add_json_argument,
+    add_topic_argument,
     check_data_fits_model,
     check_outputs,
     output,
@@ -33,6 +34,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="held-out dataset (.csv or .npz), not the identification data",
     )
     add_degrees_argument(parser)
+    add_topic_argument(parser)
     parser.add_argument(
         "--compare",
         nargs="+",
@@ -96,7 +98,9 @@ def run(args: argparse.Namespace) -> int:
         robot = load_robot(args.robot)
     files = [args.model, *args.compare]
     models = [load_model(path, robot=robot) for path in files]
-    data = read_dataset(args.data, degrees=args.degrees)
+    data = read_dataset(
+        args.data, degrees=args.degrees, topic=args.topic, joint_names=models[0].robot.joint_names
+    )
     for path, model in zip(files, models, strict=True):
         check_data_fits_model(model, data, model_path=path, data_option="data")
     stems = [Path(f).stem for f in files]

@@ -43,7 +43,7 @@ import os
 import re
 import warnings
 import zipfile
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import KW_ONLY, InitVar, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -620,8 +620,8 @@ def _check_extension(path: Path) -> str:
     suffix = path.suffix.lower()
     if suffix not in _EXTENSIONS:
         raise DataError(
-            f"{path.name}: unknown extension '{path.suffix}'; a dataset file ends in .csv or .npz "
-            "(see 'Dataset files' in the README)"
+            f"{path.name}: unknown extension '{path.suffix}'; a dataset file ends in .csv or .npz, or is a "
+            "ROS 2 recording (.mcap, or a rosbag2 folder) (see 'Dataset files' in the README)"
         )
     return suffix
 
@@ -902,8 +902,10 @@ def load_dataset(
     robot_name: str | None = None,
     degrees: bool = False,
     robot: Any = None,
+    topic: str | None = None,
+    joint_names: Sequence[str] | None = None,
 ) -> Dataset:
-    """Read a dataset file (``.csv`` or ``.npz``), checking it by the one rule of this module.
+    """Read a dataset file (``.csv`` or ``.npz``), or a ROS 2 recording, checking it by the one rule of this module.
 
     Parameters
     ----------
@@ -923,6 +925,15 @@ def load_dataset(
     robot : RobotModel, optional
         The robot the data come from: sets ``n_joints`` and ``robot_name`` when they are not given, and
         refuses torques beyond :func:`check_torque_scale`.
+    topic : str, optional
+        For a ROS 2 recording (an ``.mcap`` or ``.db3`` file, or a rosbag2 folder with ``metadata.yaml``),
+        the ``sensor_msgs/msg/JointState`` topic to read; needed when the bag holds more than one.  Ignored
+        for ``.csv`` and ``.npz`` files.  A bag is read by :func:`dynid.identify.rosbag.read_rosbag`
+        (positions in rad, efforts in N m, mapped to the robot's joint order, resampled when the stamps
+        are irregular) and then checked like a file.
+    joint_names : sequence of str, optional
+        The robot's joint names in its joint order, to map a ROS 2 recording's joints (default
+        ``robot.joint_names``; a bag without either is refused).
 
     Returns
     -------
@@ -943,7 +954,22 @@ def load_dataset(
     DataWarning
         When rows identical to the row before (a sample logged twice) were dropped.
     """
+    from dynid.identify.rosbag import is_rosbag, read_rosbag
+
     path = Path(path)
+    if is_rosbag(path):
+        names = joint_names if joint_names is not None else getattr(robot, "joint_names", None)
+        if names is None:
+            raise DataError(
+                f"{path.name} is a ROS 2 recording, whose joints are known by name, but no robot was given to "
+                "put them in order; pass robot= (or joint_names=), or --robot / a model on the command line"
+            )
+        name = robot_name if robot_name is not None else getattr(robot, "name", None)
+        ds = read_rosbag(path, names, topic=topic, robot_name=name)
+        if n_joints is not None:
+            ds.check_joints(n_joints, name)
+        ds = _check_units(ds, path.name, degrees)
+        return ds if robot is None else check_torque_scale(ds, robot, source=path.name)
     suffix = _check_extension(path)
     if robot is not None:
         n_joints = robot.n if n_joints is None else n_joints
@@ -951,7 +977,10 @@ def load_dataset(
     if not path.exists():
         raise DataError(f"no dataset file at {path}; check the path")
     if path.is_dir():
-        raise DataError(f"{path} is a folder; give the path of a .csv or .npz dataset file")
+        raise DataError(
+            f"{path} is a folder; give the path of a .csv or .npz dataset file (a ROS 2 rosbag2 folder holds "
+            "a metadata.yaml)"
+        )
     meta: dict[str, Any] = {}
     try:
         if suffix == ".csv":
