@@ -1,0 +1,167 @@
+"""``dynid export``: identified models written into URDF and MJCF, reloaded by Pinocchio and MuJoCo."""
+
+from __future__ import annotations
+
+import re
+import xml.etree.ElementTree as ET
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dynid.cli import main
+from dynid.identify.columns import column_set
+from dynid.identify.consistent import is_consistent
+from dynid.identify.model import identify, load_model, save_model
+from dynid.sim.synthetic import random_fourier, synthetic_dataset, true_parameters
+from dynid.simmodel.checks import URDF_TOLERANCE, check_urdf
+from dynid.simmodel.export import default_template, export_model
+
+
+def _identified(robot, folder: Path, name: str, *, seed: int = 1, friction: str = "linear"):
+    """A model identified on simulated data with known armature and friction; returns (model file, truth x)."""
+    rng = np.random.default_rng(seed)
+    cols = column_set(robot, friction=True, armature=True)
+    x = true_parameters(cols, rng)
+    traj = random_fourier(robot, rng, periods=1, base_freq=0.2)
+    ds = synthetic_dataset(cols, x, traj, rate=200, rng=rng, noise=0.02)
+    model = identify(robot, ds, method="irls", friction=friction, gmm="off")
+    path = folder / f"{name}.json"
+    save_model(model, path)
+    return path, dict(zip(cols.names, x, strict=True))
+
+
+@pytest.fixture(scope="module")
+def ur5_model(tmp_path_factory, ur5):
+    return _identified(ur5, tmp_path_factory.mktemp("ur5"), "ur5")
+
+
+def _count(path: Path, tag: str) -> int:
+    return len(ET.parse(path).getroot().findall(f".//{tag}"))
+
+
+def test_urdf_export_reloads_in_pinocchio_and_keeps_the_template(ur5_model, tmp_path):
+    path, _ = ur5_model
+    model = load_model(path)
+    out = tmp_path / "ur5.urdf"
+    result = export_model(model, "urdf", out)
+    (check,) = result.checks
+    assert check["passed"] and check["relative_error"] <= URDF_TOLERANCE
+    template = default_template(model.robot)
+    assert _count(out, "visual") == _count(template, "visual") > 0
+    assert _count(out, "collision") == _count(template, "collision") > 0
+    assert _count(out, "limit") == _count(template, "limit")
+    assert is_consistent(result.params.standard).all()
+    text = out.read_text()
+    assert "dynid export (urdf)" in text and "armature" in text and "friction offset" in text
+    # the data cannot see link 1's mass: it was pulled to the template's value
+    assert "m1" in result.params.unidentifiable["unseen"]
+    assert result.params.standard[0] == pytest.approx(model.robot.params[0], rel=1e-2)
+    assert {it["what"] for it in result.not_carried} >= {"friction offset", "armature"}
+
+
+def test_a_wrong_armature_fails_the_urdf_check(ur5_model, tmp_path):
+    path, _ = ur5_model
+    model = load_model(path)
+    out = tmp_path / "ur5.urdf"
+    result = export_model(model, "urdf", out)
+    wrong = replace(result.params, armature=result.params.armature * 1.001 + 1e-4)
+    assert not check_urdf(out, model, wrong)["passed"]
+
+
+def test_mjcf_export_reloads_in_mujoco_with_the_identified_friction(ur5_model, tmp_path):
+    mujoco = pytest.importorskip("mujoco", reason="the MJCF export needs mujoco (pip install dynid[mujoco])")
+    path, truth = ur5_model
+    model = load_model(path)
+    out = tmp_path / "ur5.xml"
+    result = export_model(model, "mjcf", out)
+    inverse, friction = result.checks
+    assert inverse["passed"] and inverse["relative_error"] <= 1e-6
+    assert friction["passed"] and len(friction["joints"]) == 6
+    m = mujoco.MjModel.from_xml_path(str(out))
+    dofs = [m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, nm)] for nm in model.robot.joint_names]
+    fc = np.array([truth[f"fc{j + 1}"] for j in range(6)])
+    fv = np.array([truth[f"fv{j + 1}"] for j in range(6)])
+    # recovery: the simulated Coulomb and viscous friction come back in MuJoCo's fields
+    np.testing.assert_allclose(m.dof_frictionloss[dofs], fc, rtol=0.03)
+    np.testing.assert_allclose(m.dof_damping[dofs], fv, rtol=0.03)
+    np.testing.assert_allclose(m.dof_armature[dofs], result.params.armature, rtol=1e-12)
+    assert "dynid export (mjcf)" in out.read_text()
+
+
+def test_panda_with_locked_fingers_keeps_them(panda, tmp_path):
+    mujoco = pytest.importorskip("mujoco", reason="the MJCF export needs mujoco (pip install dynid[mujoco])")
+    path, _ = _identified(panda, tmp_path, "panda")
+    model = load_model(path)
+    urdf = export_model(model, "urdf", tmp_path / "panda.urdf")
+    assert urdf.checks[0]["passed"]
+    assert set(urdf.locked) == {"panda_finger_joint1", "panda_finger_joint2"}
+    joints = {j.get("name"): j.get("type") for j in ET.parse(tmp_path / "panda.urdf").getroot().iter("joint")}
+    assert joints["panda_finger_joint1"] == "prismatic"
+    mjcf = export_model(model, "mjcf", tmp_path / "panda.xml")
+    assert all(c["passed"] for c in mjcf.checks)
+    assert mujoco.MjModel.from_xml_path(str(tmp_path / "panda.xml")).nv == 9
+
+
+def test_gaz_panda_urdf_as_the_template(shared_data, tmp_path):
+    from dynid.symbolic import load_robot
+
+    urdf = shared_data / "panda_gaz2019" / "model" / "panda_arm_gaz2019_nohand.urdf"
+    if not urdf.is_file():
+        pytest.skip(f"the Gaz Panda URDF is not at {urdf}")
+    path, _ = _identified(load_robot(urdf), tmp_path, "gaz", friction="stribeck")
+    result = export_model(load_model(path), "urdf", tmp_path / "gaz.urdf", template=urdf)
+    assert result.checks[0]["passed"]
+    assert "Stribeck friction" in {it["what"] for it in result.not_carried}
+
+
+def _one_line_error(capsys, argv, pattern: str, leftover: Path) -> None:
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and re.search(pattern, err), err
+    assert not leftover.exists()
+
+
+def test_bad_inputs_end_in_one_sentence(ur5_model, tmp_path, capsys):
+    path, _ = ur5_model
+    out = tmp_path / "x.urdf"
+    _one_line_error(
+        capsys, ["export", "--model", str(path), "--format", "sdf", "--out", str(out)], "choose urdf or mjcf", out
+    )
+    from dynid.symbolic.robot import BUILTIN_ROBOTS, example_robot_data_dir
+
+    ur10 = example_robot_data_dir() / BUILTIN_ROBOTS["ur10"]["urdf"]
+    _one_line_error(
+        capsys,
+        ["export", "--model", str(path), "--format", "urdf", "--template", str(ur10), "--out", str(out)],
+        "describes another robot",
+        out,
+    )
+    renamed = tmp_path / "renamed.urdf"
+    renamed.write_text(default_template(load_model(path).robot).read_text().replace("elbow_joint", "elbow"))
+    _one_line_error(
+        capsys,
+        ["export", "--model", str(path), "--format", "urdf", "--template", str(renamed), "--out", str(out)],
+        "has no joint 'elbow_joint'",
+        out,
+    )
+    not_a_model = tmp_path / "n.json"
+    not_a_model.write_text('{"hello": 1}')
+    _one_line_error(
+        capsys,
+        ["export", "--model", str(not_a_model), "--format", "urdf", "--out", str(out)],
+        "not a readable dynid model file",
+        out,
+    )
+
+
+def test_the_command_writes_checks_and_not_carried(ur5_model, tmp_path, capsys):
+    import json
+
+    path, _ = ur5_model
+    out, js = tmp_path / "ur5.urdf", tmp_path / "e.json"
+    assert main(["export", "--model", str(path), "--format", "urdf", "--out", str(out), "--json", str(js)]) == 0
+    doc = json.loads(js.read_text())
+    assert doc["checks"][0]["passed"] and doc["not_carried"]
+    assert "reload checks:" in capsys.readouterr().out
