@@ -18,6 +18,7 @@ from dynid.sim import effects as sim_effects
 from dynid.sim.cases import case_excitation
 from dynid.sim.simulator import simulate
 from dynid.sim.truth import build_truth
+from dynid.validation.html_page import format_number
 from dynid.validation.validate import validate
 
 
@@ -160,6 +161,8 @@ def test_diagnose_out_writes_the_refitted_model(ur5, coupled, tmp_path, capsys) 
             str(tmp_path / "M2.json"),
             "--json",
             str(tmp_path / "G.json"),
+            "--report",
+            str(tmp_path / "G.html"),
         ]
     )
     assert code == 0
@@ -167,6 +170,23 @@ def test_diagnose_out_writes_the_refitted_model(ur5, coupled, tmp_path, capsys) 
     assert "refitted with coupled_friction@5+6" in out
     refit = json.loads((tmp_path / "G.json").read_text())["refit"]
     assert refit["written"] and refit["effects"] == ["coupled_friction@5+6"]
+    # before and after per joint, with their ratio, in the printed summary and in the report
+    lines = out[out.index("held-out RMS (N m)  joint  before   after   ratio") :].splitlines()[1:7]
+    assert [int(line.split()[0]) for line in lines] == [1, 2, 3, 4, 5, 6]
+    assert float(lines[5].split()[3]) == pytest.approx(
+        refit["rms_after"][5] / refit["rms_before"][5], abs=0.006
+    )
+    page = (tmp_path / "G.html").read_text()
+    table = page[page.index("The model with the accepted effects") :]
+    table = table[: table.index("</table>")]
+    assert "after / before" in table and table.count("<tr>") == 7  # header and one row per joint
+    for j in range(6):
+        for value in (
+            refit["rms_before"][j],
+            refit["rms_after"][j],
+            refit["rms_after"][j] / refit["rms_before"][j],
+        ):
+            assert format_number(value, 3) in table
     m2 = load_model(tmp_path / "M2.json", robot=ur5)
     assert [t.key for t in m2.effects] == ["coupled_friction@5+6"]
     before, after = _heldout_rms(plain, held), _heldout_rms(m2, held)

@@ -127,8 +127,7 @@ def run(args: argparse.Namespace) -> int:
         figures["refit"] = refit
         if refit.get("written"):
             context["refitted model"] = (
-                f"{args.out} with {', '.join(refit['effects'])}: held-out RMS (N m) before "
-                f"{_fmt(refit['rms_before'])}, after {_fmt(refit['rms_after'])}"
+                f"{args.out} with {', '.join(refit['effects'])} (held-out RMS per joint below)"
             )
     write_figures(args.json, figures)
     if report is not None:
@@ -142,13 +141,10 @@ def run(args: argparse.Namespace) -> int:
                 "robot": model.robot.name,
                 **context,
             },
+            refit=figures.get("refit"),
         )
         print(f"report written to {report}")
     return 0
-
-
-def _fmt(values) -> str:
-    return "[" + " ".join("-" if v is None else f"{v:.3g}" for v in values) + "]"
 
 
 def _write_refit(model, train, heldout, result, out: str) -> dict:

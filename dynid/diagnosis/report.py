@@ -21,7 +21,7 @@ import numpy as np
 from dynid._io import write_text
 from dynid.validation.html_page import check_report_path, figure_html, format_number, html_page, html_table
 
-__all__ = ["diagnosis_figures", "render_diagnosis_html", "write_diagnosis_report"]
+__all__ = ["diagnosis_figures", "refit_rows", "render_diagnosis_html", "write_diagnosis_report"]
 
 
 def _table(headers: list[str], rows: list[list[Any]], text_columns: int = 1) -> str:
@@ -167,8 +167,55 @@ def diagnosis_figures(result) -> list[tuple[str, str, bytes]]:
     return out
 
 
+def refit_rows(refit: dict[str, Any], joint_names: list[str] | tuple[str, ...]) -> list[list[Any]]:
+    """One row per joint: held-out RMS before and after the accepted effects and their ratio.
+
+    Parameters
+    ----------
+    refit : dict
+        ``rms_before`` and ``rms_after`` (N m per joint), as ``dynid diagnose --out`` records them.
+    joint_names : sequence of str
+        The joints' names.
+
+    Returns
+    -------
+    list of list
+        ``[joint, before (N m), after (N m), after / before]`` per joint (the ratio None where the
+        model's own error is zero or not finite).
+    """
+    before = np.asarray(refit["rms_before"], dtype=np.float64)
+    after = np.asarray(refit["rms_after"], dtype=np.float64)
+    rows: list[list[Any]] = []
+    for j, name in enumerate(joint_names):
+        ok = np.isfinite(before[j]) and np.isfinite(after[j]) and before[j] > 0
+        rows.append(
+            [f"{j + 1} ({name})", float(before[j]), float(after[j]), after[j] / before[j] if ok else None]
+        )
+    return rows
+
+
+def _refit_html(refit: dict[str, Any], joint_names) -> str:
+    rows = refit_rows(refit, joint_names)
+    b = np.asarray(refit["rms_before"], dtype=np.float64)
+    a = np.asarray(refit["rms_after"], dtype=np.float64)
+    better = sum(1 for r in rows if r[3] is not None and r[3] < 1)
+    effects = ", ".join(refit.get("effects", []))
+    where = f" ({html.escape(str(refit['path']))})" if refit.get("path") else ""
+    return (
+        "<h2>The model with the accepted effects</h2>"
+        f"<p>Refitted on the training data with {html.escape(effects)} added as model terms{where}. "
+        f"Held-out RMS per joint before and after (the same held-out data as above); lower on {better} of "
+        f"{len(rows)} joints, mean {format_number(float(np.mean(b)), 3)} to {format_number(float(np.mean(a)), 3)} N m.</p>"
+        + _table(["joint", "before (N m)", "after (N m)", "after / before"], rows)
+    )
+
+
 def render_diagnosis_html(
-    result, *, title: str = "dynid gap diagnosis", context: dict[str, Any] | None = None
+    result,
+    *,
+    title: str = "dynid gap diagnosis",
+    context: dict[str, Any] | None = None,
+    refit: dict[str, Any] | None = None,
 ) -> str:
     """The report as one HTML string.
 
@@ -180,6 +227,9 @@ def render_diagnosis_html(
         Page title.
     context : dict, optional
         Extra facts shown in a table (model file, data files, robot).
+    refit : dict, optional
+        The model refitted with the accepted effects (``dynid diagnose --out``): ``rms_before``,
+        ``rms_after`` (N m per joint, held out), ``effects`` and ``path``; shown as a per-joint table.
     """
     doc = result.to_dict()
     dec = doc["decomposition"]
@@ -190,6 +240,8 @@ def render_diagnosis_html(
     )
     if context:
         parts.append(html_table(None, [[k, str(v)] for k, v in context.items()], text_columns=2))
+    if refit and refit.get("written"):
+        parts.append(_refit_html(refit, result.joint_names))
     parts.append("<h2>Where the held-out error lies</h2>")
     rows = []
     for j in range(n):
@@ -317,6 +369,7 @@ def write_diagnosis_report(
     *,
     title: str = "dynid gap diagnosis",
     context: dict[str, Any] | None = None,
+    refit: dict[str, Any] | None = None,
 ) -> Path:
     """Write the HTML report atomically (a temporary file renamed into place).
 
@@ -330,10 +383,12 @@ def write_diagnosis_report(
         Page title.
     context : dict, optional
         Extra facts shown in a table.
+    refit : dict, optional
+        The model refitted with the accepted effects (see :func:`render_diagnosis_html`).
 
     Returns
     -------
     Path
     """
     path = check_report_path(path, pdf=False)
-    return write_text(path, render_diagnosis_html(result, title=title, context=context))
+    return write_text(path, render_diagnosis_html(result, title=title, context=context, refit=refit))
