@@ -244,7 +244,7 @@ def test_irregular_stamps_are_resampled_at_the_median_interval(ur5, tmp_path):
     assert "1 message stamped before the message stored ahead of it: the messages are put in stamp order" in note
     assert "1 message repeating an earlier stamp dropped" in note
     steps = np.diff(np.unique(ns)) * 1e-9
-    dt = float(np.median(steps))
+    dt = round(float(np.median(steps)), 6)  # the median interval to the microsecond
     assert f"q, tau and dq are resampled linearly onto a uniform grid at {1 / dt:.6g} Hz (the median interval" in note
     assert "split there into separate runs, not interpolated across the gap" in note
     assert ds.is_uniform and abs(ds.dt - dt) < 1e-12 and len(ds.runs) == 2
@@ -273,6 +273,26 @@ def test_zero_stamps_fall_back_to_receive_time_and_dq_only_when_measured(ur5, tm
     ]
     np.testing.assert_allclose(ds.t, t, rtol=0, atol=1e-12)
     np.testing.assert_array_equal(ds.q, q)
+
+
+def test_gripper_messages_are_skipped_and_dq_is_kept_only_when_every_message_has_it(ur5, tmp_path):
+    t = np.arange(300) / RATE
+    q, dq, tau = sine_run(t)
+    stamps = T0_NS + np.round(t * 1e9).astype(np.int64)
+    items = []
+    for k in range(len(t)):
+        velocity = dq[k] if k % 50 else ()  # every 50th message without velocities
+        items.append((int(stamps[k]), message(int(stamps[k]), ur5.joint_names, q[k], tau[k], velocity)))
+        if k % 10 == 0:  # the gripper's own message on the same topic
+            items.append((int(stamps[k]) + 1, message(int(stamps[k]) + 1, FINGERS[1:], [0.01], [2.0], [0.0])))
+    ds, notes = read(write_bag(tmp_path / "gripper", {"/joint_states": items}), ur5)
+    assert ds.dq is None and ds.m == len(t) and ds.meta["skipped_messages"] == 30
+    np.testing.assert_array_equal(ds.q, q)
+    np.testing.assert_array_equal(ds.tau, tau)
+    assert notes == [
+        "gripper (/joint_states): 30 messages naming none of the robot's joints skipped; some messages carry "
+        "no velocities, so dq is left out (it is derived from q)"
+    ]
 
 
 # ---------------------------------------------------------------------- the commands

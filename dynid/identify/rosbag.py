@@ -23,9 +23,9 @@ The rules, each said once (a :class:`~dynid.exceptions.DataWarning`) when it app
   unset) the bag's receive times are used instead.  Messages are put in stamp order (the bag stores
   them in the order they arrived), and a message whose stamp repeats an earlier one is dropped;
 * sampling: stamps that are not uniform (to a relative 1e-6) are resampled onto a uniform grid whose
-  step is their median interval (:func:`dynid.identify.preprocess.resample`): linear interpolation of
-  ``q`` and ``tau``, and of ``dq`` only when every message carries velocities (otherwise ``dq`` is left
-  out and derived from ``q`` later, as for a CSV without ``dq`` columns).  A gap in the stamps is
+  step is their median interval rounded to the microsecond (:func:`dynid.identify.preprocess.resample`):
+  linear interpolation of ``q`` and ``tau``, and of ``dq`` only when every message carries velocities
+  (otherwise ``dq`` is left out and derived from ``q`` later, as for a CSV without ``dq`` columns).  A gap in the stamps is
   treated as for any file: it splits the data into separate runs and is never interpolated across.
 """
 
@@ -324,8 +324,9 @@ def _resample(ds: Any) -> tuple[Any, str]:
     from dynid.identify.preprocess import GAP_SECONDS, GAP_STEPS, resample
 
     steps = np.diff(ds.t)
-    dt = float(np.median(steps))
-    steps = steps[steps <= max(GAP_STEPS * dt, GAP_SECONDS)]  # the sampling, not the gaps
+    median = float(np.median(steps))
+    dt = round(median, 6) if median >= 1e-4 else median  # to the microsecond: 1000 Hz, not 999.7 Hz
+    steps = steps[steps <= max(GAP_STEPS * median, GAP_SECONDS)]  # the sampling, not the gaps
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", DataWarning)
         uniform = resample(ds, dt=dt, method="linear")
@@ -334,7 +335,7 @@ def _resample(ds: Any) -> tuple[Any, str]:
     note = (
         f"the stamps are irregular (intervals {steps.min() * 1e3:.4g} to {steps.max() * 1e3:.4g} ms), so "
         f"{signals} are resampled linearly onto a uniform grid at {1.0 / dt:.6g} Hz (the median interval, "
-        f"{dt * 1e3:.4g} ms)"
+        f"{dt * 1e3:.6g} ms)"
     )
     if gap_notes:
         note += "; " + "; ".join(gap_notes)
