@@ -259,6 +259,11 @@ def test_irregular_stamps_are_resampled_at_the_median_interval(ur5, tmp_path):
     assert dq_err < 0.8 * w**3 * h**2 / 8
     assert tau_err < 10.0 * w**2 * h**2 / 8
     assert q_err > 1e-9  # the grid is not the stamps: the values were interpolated
+    # ... and linearly, between the two stamps around each grid point.
+    t_src, first = np.unique(t_true, return_index=True)
+    for name, src in (("q", q), ("dq", dq), ("tau", tau)):
+        linear = np.column_stack([np.interp(ds.t, t_src, src[first, j]) for j in range(6)])
+        np.testing.assert_allclose(getattr(ds, name), linear, rtol=0, atol=1e-12 * np.abs(src).max(), err_msg=name)
 
 
 def test_zero_stamps_fall_back_to_receive_time_and_dq_only_when_measured(ur5, tmp_path):
