@@ -202,6 +202,26 @@ def test_missing_joint_and_wrong_lengths_are_refused(run, ur5, tmp_path):
         load_dataset(write_bag(tmp_path / "no_effort", {"/joint_states": items}), robot=ur5)
 
 
+def test_a_namespace_prefix_on_the_joint_names_is_dropped_when_only_one_fits(run, ur5, panda, tmp_path):
+    short = run.select_rows(np.arange(40))
+    prefixed = [f"ur5/{j}" for j in ur5.joint_names]
+    ds, notes = read(write_bag(tmp_path / "prefixed", {"/joint_states": joint_messages(short, prefixed)}), ur5)
+    np.testing.assert_array_equal(ds.q, short.q)
+    assert ds.meta["joint_prefix"] == "ur5/"
+    assert notes == ["prefixed (/joint_states): the joint names carry the prefix 'ur5/' "
+                     "(ur5/shoulder_pan_joint is shoulder_pan_joint)"]
+    two = [*prefixed, *(f"left_{j}" for j in ur5.joint_names)]
+    items = [(r, message(T0_NS + k, two, np.tile(short.q[k], 2), np.tile(short.tau[k], 2)))
+             for k, (r, _) in enumerate(joint_messages(short, prefixed))]
+    with pytest.raises(DataError, match=r"message 0 on /joint_states names the joints of the robot 'ur5' under 2 "
+                                        r"prefixes \(left_, ur5/\), one arm each; dynid reads one arm"):
+        load_dataset(write_bag(tmp_path / "two_arms", {"/joint_states": items}), robot=ur5)
+    with pytest.raises(DataError, match=r"prefixed: no message on /joint_states names a joint of the robot "
+                                        r"'panda' \(they name ur5/elbow_joint, .*; give the robot \(--robot\) the "
+                                        r"bag was recorded on"):
+        load_dataset(tmp_path / "prefixed", robot=panda)
+
+
 def test_no_joint_state_no_robot_no_rosbags(files, ur5, tmp_path, monkeypatch):
     chatter = write_bag(tmp_path / "chatter", {"/chatter": ["a", "b"]})
     with pytest.raises(DataError, match=r"chatter holds no sensor_msgs/msg/JointState messages \(it holds "

@@ -15,7 +15,8 @@ The rules, each said once (a :class:`~dynid.exceptions.DataWarning`) when it app
   ``JointState`` topics and no choice, a topic the bag does not hold, or one of another type are
   refused;
 * joints: each message's ``name`` list is mapped to the robot's joint names (any order, which may change
-  from message to message); joints the robot does not have (fingers, a gripper) are ignored, and
+  from message to message; a prefix common to all of them, such as ``ur5_`` or ``left/``, is allowed
+  when only one fits, and said); joints the robot does not have (fingers, a gripper) are ignored, and
   messages holding none of the robot's joints are skipped; a robot joint missing from a message is
   refused, and so is a message whose ``position``, ``velocity`` or ``effort`` length differs from its
   ``name`` list (an empty ``velocity`` means not measured; ``effort`` is required);
@@ -191,8 +192,9 @@ def read_rosbag(
     rows_q: list[NDArray[np.float64]] = []
     rows_tau: list[NDArray[np.float64]] = []
     rows_dq: list[NDArray[np.float64] | None] = []
-    maps: dict[tuple[str, ...], tuple[NDArray[np.intp], tuple[str, ...]] | None] = {}
+    maps: dict[tuple[str, ...], tuple[NDArray[np.intp], tuple[str, ...], str] | None] = {}
     ignored: dict[str, None] = {}
+    prefixes: dict[str, None] = {}
     skipped = 0
     try:
         with Reader(path) as reader:
@@ -207,8 +209,9 @@ def read_rosbag(
                 if mapping is None:  # none of the robot's joints: a gripper's own message
                     skipped += 1
                     continue
-                index, extra = mapping
+                index, extra, prefix = mapping
                 ignored.update(dict.fromkeys(extra))
+                prefixes.update(dict.fromkeys([prefix] if prefix else []))
                 position, velocity, effort = (np.asarray(a, dtype=np.float64) for a in
                                               (msg.position, msg.velocity, msg.effort))
                 for field, values, required in (("position", position, True), ("velocity", velocity, False),
@@ -235,6 +238,12 @@ def read_rosbag(
             "folder (with metadata.yaml) or an .mcap file written by ros2 bag record"
         ) from None
 
+    if not stamps and maps:
+        seen = sorted({n for names in maps for n in names})
+        raise DataError(
+            f"{name}: no message on {chosen} names a joint of {robot} (they name {', '.join(seen)}; {robot} "
+            f"has {', '.join(wanted)}); give the robot (--robot) the bag was recorded on"
+        )
     if len(stamps) < 2:
         raise DataError(
             f"{name}: the topic {chosen} holds {len(stamps)} JointState message(s) with the joints of "
@@ -242,6 +251,12 @@ def read_rosbag(
         )
     notes: list[str] = []
     meta: dict[str, Any] = {"source": str(path), "topic": chosen, "joint_names": wanted, "messages": len(stamps)}
+    if prefixes:
+        meta["joint_prefix"] = list(prefixes) if len(prefixes) > 1 else next(iter(prefixes))
+        shown = ", ".join(f"'{p}'" for p in prefixes)
+        notes.append(
+            f"the joint names carry the prefix {shown} ({next(iter(prefixes))}{wanted[0]} is {wanted[0]})"
+        )
     if ignored:
         meta["ignored_joints"] = list(ignored)
         notes.append(
@@ -297,26 +312,39 @@ def _count(k: int, noun: str) -> str:
 
 def _joint_map(
     names: tuple[str, ...], wanted: list[str], source: str, topic: str, k: int, robot: str
-) -> tuple[NDArray[np.intp], tuple[str, ...]] | None:
-    """Index of each robot joint in a message's name list and the names the robot lacks (None: no joint)."""
+) -> tuple[NDArray[np.intp], tuple[str, ...], str] | None:
+    """Index of each robot joint in a message's name list, the names the robot lacks and the prefix of its
+    joints' names (None: none of its joints)."""
     if len(set(names)) != len(names):
         twice = sorted({n for n in names if names.count(n) > 1})
         raise DataError(
             f"{source}: message {k} on {topic} names joint '{twice[0]}' twice; each joint must appear once"
         )
     position = {n: i for i, n in enumerate(names)}
-    found = [j for j in wanted if j in position]
+    prefix = ""
+    if not all(j in position for j in wanted):  # a namespace prefix (ur5_, left/) on every joint of the robot
+        fits = {n[: -len(wanted[0])] for n in names if n.endswith(wanted[0]) and n != wanted[0]}
+        fits = {p for p in fits if all(p + j in position for j in wanted)}
+        if len(fits) > 1:
+            raise DataError(
+                f"{source}: message {k} on {topic} names the joints of {robot} under "
+                f"{len(fits)} prefixes ({', '.join(sorted(fits))}), one arm each; dynid reads one arm: "
+                "record each arm on its own topic"
+            )
+        prefix = fits.pop() if fits else ""
+    found = [j for j in wanted if prefix + j in position]
     if not found:
         return None
-    missing = [j for j in wanted if j not in position]
+    missing = [j for j in wanted if prefix + j not in position]
     if missing:
         raise DataError(
             f"{source}: message {k} on {topic} has no joint '{missing[0]}' of {robot} (it names "
             f"{', '.join(names)}; {robot} has {', '.join(wanted)}); record all of the robot's joints, or "
             "give the robot (--robot) the bag was recorded on"
         )
-    extra = tuple(n for n in names if n not in set(wanted))
-    return np.array([position[j] for j in wanted], dtype=np.intp), extra
+    keys = [prefix + j for j in wanted]
+    extra = tuple(n for n in names if n not in set(keys))
+    return np.array([position[j] for j in keys], dtype=np.intp), extra, prefix
 
 
 def _resample(ds: Any) -> tuple[Any, str]:
