@@ -36,12 +36,15 @@ import os
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from dynid.exceptions import DataError, DataWarning
+
+if TYPE_CHECKING:
+    from dynid.identify.dataset import Dataset
 
 __all__ = ["JOINT_STATE", "ROSBAG_SUFFIXES", "is_rosbag", "read_rosbag"]
 
@@ -136,7 +139,7 @@ def read_rosbag(
     *,
     topic: str | None = None,
     robot_name: str | None = None,
-) -> Any:
+) -> Dataset:
     """Read the ``JointState`` messages of a ROS 2 recording as a dataset in the robot's joint order.
 
     Parameters
@@ -268,10 +271,12 @@ def read_rosbag(
         meta["skipped_messages"] = skipped
         notes.append(f"{_count(skipped, 'message')} naming none of the robot's joints skipped")
     ns = np.asarray(stamps, dtype=np.int64)
-    if not ns.any() or (ns == 0).any():
+    zero = int((ns == 0).sum())
+    if zero:
         ns = np.asarray(received, dtype=np.int64)
         meta["stamps"] = "receive"
-        notes.append("the header stamps are zero, so the bag's receive times are used as the time")
+        which = "the header stamps are" if zero == len(ns) else f"{zero} of {len(ns)} header stamps are"
+        notes.append(f"{which} zero, so the bag's receive times are used as the time")
     else:
         meta["stamps"] = "header"
     q, tau = np.array(rows_q), np.array(rows_tau)
@@ -347,7 +352,7 @@ def _joint_map(
     return np.array([position[j] for j in keys], dtype=np.intp), extra, prefix
 
 
-def _resample(ds: Any) -> tuple[Any, str]:
+def _resample(ds: Dataset) -> tuple[Dataset, str]:
     """Uniform grid at the median interval (linear); the note that says so."""
     from dynid.identify.preprocess import GAP_SECONDS, GAP_STEPS, resample
 
