@@ -165,3 +165,41 @@ def test_the_command_writes_checks_and_not_carried(ur5_model, tmp_path, capsys):
     doc = json.loads(js.read_text())
     assert doc["checks"][0]["passed"] and doc["not_carried"]
     assert "reload checks:" in capsys.readouterr().out
+
+
+def test_validate_scores_a_simulator_description_as_it_stands(ur5_model, tmp_path, capsys):
+    """Data simulated from the exported values: the MJCF (with armature) predicts them to the noise."""
+    pytest.importorskip("mujoco", reason="the MJCF export needs mujoco (pip install dynid[mujoco])")
+    import json
+
+    from dynid.simmodel.nominal import description_model
+    from dynid.validation.validate import validate
+
+    path, _ = ur5_model
+    model = load_model(path)
+    xml, urdf = tmp_path / "ur5.xml", tmp_path / "ur5.urdf"
+    p = export_model(model, "mjcf", xml).params
+    export_model(model, "urdf", urdf)
+    robot = model.robot
+    cols = column_set(robot, friction=True, armature=True)
+    x = cols.P @ np.concatenate([p.standard, p.armature, p.frictionloss, p.damping, np.zeros(robot.n)])
+    rng = np.random.default_rng(7)
+    traj = random_fourier(robot, rng, periods=2, base_freq=0.2)
+    noise = 0.02
+    ds = synthetic_dataset(cols, x, traj, rate=200, rng=rng, noise=noise)
+    rms_xml = np.asarray(validate(description_model(xml, ds), ds).figures()["rms"])
+    rms_urdf = np.asarray(validate(description_model(urdf, ds), ds).figures()["rms"])
+    np.testing.assert_allclose(rms_xml, noise, rtol=0.15)
+    # the URDF has no armature: the joints with a sizeable one are predicted worse
+    big = p.armature > 0.01
+    assert big.any() and np.all(rms_urdf[big] > 1.5 * noise)
+
+    data = tmp_path / "V.csv"
+    header = ["t", *(f"q_{j + 1}" for j in range(robot.n)), *(f"tau_{j + 1}" for j in range(robot.n))]
+    rows = np.column_stack([ds.t, ds.q, ds.tau])
+    data.write_text(",".join(header) + "\n" + "\n".join(",".join(repr(float(v)) for v in r) for r in rows) + "\n")
+    js = tmp_path / "v.json"
+    assert main(["validate", "--model", str(xml), "--data", str(data), "--json", str(js)]) == 0
+    # read from the CSV without dq, ddq: filtered and differentiated, the noise is partly filtered out
+    assert np.all(np.asarray(json.loads(js.read_text())["rms"]) < noise)
+    assert "nominal" in capsys.readouterr().out

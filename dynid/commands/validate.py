@@ -25,7 +25,11 @@ HELP = "validate identified models on held-out data: RMS, NRMS, R^2 per joint, n
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "--model", required=True, metavar="M.json", help="model file written by 'dynid identify'"
+        "--model",
+        required=True,
+        metavar="M.json",
+        help="model file written by 'dynid identify', or a simulator's robot description (.urdf, MuJoCo .xml) "
+        "scored as it stands: rigid body, armature, damping and Coulomb friction from the file, nothing identified",
     )
     parser.add_argument(
         "--data",
@@ -41,7 +45,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="extend",
         default=[],
         metavar="M2.json",
-        help="more models to compare on the same data, in one table and the same figures",
+        help="more models (or .urdf / .xml descriptions) to compare on the same data, in one table and the "
+        "same figures",
     )
     parser.add_argument(
         "--report", metavar="R.html", help="write a self-contained HTML report (or a PDF: R.pdf)"
@@ -73,6 +78,9 @@ def _row(values, fmt: str = "{:>10.4g}") -> str:
 def run(args: argparse.Namespace) -> int:
     from dynid._io import to_jsonable
     from dynid.identify.model import load_model
+    from dynid.identify.preparation import Preprocessing
+    from dynid.simmodel.nominal import description_model, is_description
+    from dynid.symbolic.robot import load_robot
     from dynid.validation.report import check_report_path, render_report
     from dynid.validation.validate import compare, validate, write_predictions
 
@@ -93,14 +101,21 @@ def run(args: argparse.Namespace) -> int:
 
     robot = None
     if args.robot is not None:
-        from dynid.symbolic.robot import load_robot
-
         robot = load_robot(args.robot)
     files = [args.model, *args.compare]
-    models = [load_model(path, robot=robot) for path in files]
+    # a simulator description (URDF, MuJoCo .xml) is scored as it stands, nothing identified
+    loaded = [None if is_description(path) else load_model(path, robot=robot) for path in files]
+    first_robot = loaded[0].robot if loaded[0] is not None else load_robot(args.model)
     data = read_dataset(
-        args.data, degrees=args.degrees, topic=args.topic, joint_names=models[0].robot.joint_names
+        args.data, degrees=args.degrees, topic=args.topic, joint_names=first_robot.joint_names
     )
+    # compared with identified models, a description is seen through their preprocessing
+    settings = next((model.preprocessing for model in loaded if model is not None), None)
+    prep = None if settings is None else Preprocessing.from_settings(settings)
+    models = [
+        model if model is not None else description_model(path, data, preprocessing=prep)
+        for model, path in zip(loaded, files, strict=True)
+    ]
     for path, model in zip(files, models, strict=True):
         check_data_fits_model(model, data, model_path=path, data_option="data")
     stems = [Path(f).stem for f in files]

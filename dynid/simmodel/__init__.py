@@ -3,7 +3,9 @@
 :mod:`dynid.simmodel.parameters` (consistent bodies, armature, damping and frictionloss of a model, and
 what a simulator cannot carry), :mod:`dynid.simmodel.urdf` (a copy of the robot's URDF with them),
 :mod:`dynid.simmodel.mjcf` (the MJCF MuJoCo builds from that URDF), :mod:`dynid.simmodel.checks` (the
-reload checks) and :mod:`dynid.simmodel.export` (:func:`export_model`, what ``dynid export`` calls).
+reload checks) and :mod:`dynid.simmodel.export` (:func:`export_model`, what ``dynid export`` calls) and
+:mod:`dynid.simmodel.nominal` (a URDF or MJCF as the model under test, what ``dynid validate --model
+robot.urdf`` scores).
 The submodules are imported on first use (``mujoco`` is optional).
 """
 
@@ -18,6 +20,7 @@ _EXPORTS = {
     "export_model": "export",
     "check_urdf": "checks",
     "check_mjcf": "checks",
+    "description_model": "nominal",
 }
 
 __all__, __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

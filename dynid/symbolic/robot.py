@@ -526,6 +526,28 @@ def _load_urdf(path: Path, *, name: str, source: str, lock=(), tool=None, ddq_ma
     return _from_pin_model(model, name=name, source=source, tool=tool, ddq_max=ddq_max)
 
 
+def _load_mjcf(path: Path, *, name: str, source: str, tool=None) -> RobotModel:
+    """A MuJoCo MJCF read by Pinocchio's parser (bodies, joints, limits, armature)."""
+    import pinocchio as pin
+
+    if not path.is_file():
+        raise RobotModelError(
+            f"the MJCF file '{path}' does not exist; give the path of an existing MuJoCo .xml file."
+        )
+    try:
+        with _captured_stderr() as said:
+            model = pin.buildModelFromMJCF(str(path))
+    except (ValueError, RuntimeError) as exc:
+        lines = [ln.strip() for ln in (said.text or str(exc)).splitlines() if ln.strip()]
+        first = lines[0] if lines else type(exc).__name__
+        raise RobotModelError(
+            f"the file '{path}' could not be read as a MuJoCo MJCF ({first}); give a MuJoCo model of the arm."
+        ) from None
+    if model.nv == 0:
+        raise RobotModelError(f"the MJCF file '{path}' has no movable joint; give an arm with at least one.")
+    return _from_pin_model(model, name=name, source=source, tool=tool, ddq_max=None)
+
+
 def _refuse_mimic_joints(path: Path, lock=()) -> None:
     """Refuse a URDF whose movable joints include a mimic joint (dynid does not model them)."""
     try:
@@ -1002,7 +1024,7 @@ def load_robot(
     robot : str or Path or RobotModel
         ``"ur5"``, ``"ur10"``, ``"panda"`` (7-DOF arm, hand rigidly attached, fingers locked), a
         ``.urdf`` path, or a ``.toml`` modified-DH table.  A RobotModel is returned as is (with the
-        limit overrides applied).
+        limit overrides applied).  A MuJoCo ``.xml`` (MJCF) is read by Pinocchio's MJCF parser.
     q_min, q_max, dq_max, ddq_max : float or sequence of float, optional
         Override the model's joint limits (one value for all joints, or one per joint).
     tool : str, optional
@@ -1044,6 +1066,8 @@ def load_robot(
             )
         elif path.suffix.lower() == ".urdf":
             model = check_inertias(_load_urdf(path, name=path.stem, source=str(path), tool=tool))
+        elif path.suffix.lower() in (".xml", ".mjcf"):
+            model = check_inertias(_load_mjcf(path, name=path.stem, source=str(path), tool=tool))
         elif path.suffix.lower() == ".toml":
             model = check_inertias(_load_mdh(path, name=path.stem))
             if tool is not None and tool != model.tool_name:
@@ -1053,8 +1077,8 @@ def load_robot(
                 )
         else:
             raise RobotModelError(
-                f"unknown robot '{text}'; give a built-in name ({', '.join(BUILTIN_ROBOTS)}), a .urdf file or a "
-                "modified-DH .toml table."
+                f"unknown robot '{text}'; give a built-in name ({', '.join(BUILTIN_ROBOTS)}), a .urdf file, a "
+                "MuJoCo .xml (MJCF) or a modified-DH .toml table."
             )
     if any(v is not None for v in (q_min, q_max, dq_max, ddq_max)):
         model = model.with_limits(q_min=q_min, q_max=q_max, dq_max=dq_max, ddq_max=ddq_max)
