@@ -203,3 +203,31 @@ def test_validate_scores_a_simulator_description_as_it_stands(ur5_model, tmp_pat
     # read from the CSV without dq, ddq: filtered and differentiated, the noise is partly filtered out
     assert np.all(np.asarray(json.loads(js.read_text())["rms"]) < noise)
     assert "nominal" in capsys.readouterr().out
+
+
+def test_heldout_shares_agree_with_the_exported_description(ur5_model, tmp_path):
+    """The export's held-out RMS (regressor) equals the exported MJCF's read back by Pinocchio's parser."""
+    pytest.importorskip("mujoco", reason="the MJCF export needs mujoco (pip install dynid[mujoco])")
+    from dynid.simmodel.nominal import description_model
+    from dynid.validation.validate import validate
+
+    path, truth = ur5_model
+    model = load_model(path)
+    robot = model.robot
+    cols = column_set(robot, friction=True, armature=True)
+    x = np.array([truth[name] for name in cols.names])
+    rng = np.random.default_rng(11)
+    ds = synthetic_dataset(cols, x, random_fourier(robot, rng, periods=2, base_freq=0.2), rate=200, rng=rng, noise=0.02)
+    xml = tmp_path / "ur5.xml"
+    result = export_model(model, "mjcf", xml, heldout=ds)
+    h = result.heldout
+    assert h["closure"] < 1e-9
+    nominal = validate(description_model(xml, ds, preprocessing=None), ds).figures()["rms"]
+    np.testing.assert_allclose(h["rms_exported"], nominal, rtol=1e-6)
+    # the simulated offsets (|fo| up to 0.5 N m) are what MJCF cannot carry
+    fo = np.abs([truth[f"fo{j + 1}"] for j in range(robot.n)])
+    np.testing.assert_allclose(h["rms_exported"], np.sqrt(fo**2 + 0.02**2), rtol=0.1, atol=0.01)
+    (part,) = h["parts"]
+    assert part["part"].startswith("friction beyond") and part["rise_mean"] > 0.1
+    offset = next(it for it in result.not_carried if it["what"] == "friction offset")
+    assert offset["share"].startswith("held-out RMS")

@@ -5,7 +5,15 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from dynid.commands.common import add_json_argument, check_outputs, output, write_figures
+from dynid.commands.common import (
+    add_degrees_argument,
+    add_json_argument,
+    check_data_fits_model,
+    check_outputs,
+    output,
+    read_dataset,
+    write_figures,
+)
 
 __all__ = ["HELP", "add_arguments", "run"]
 
@@ -26,6 +34,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "the model was identified on); the MJCF is built from it by MuJoCo",
     )
     parser.add_argument("--out", required=True, metavar="FILE", help="file to write (.urdf, or .xml for mjcf)")
+    parser.add_argument(
+        "--heldout",
+        metavar="V.csv",
+        help="held-out data on which to measure the share of what the format cannot carry (default: the "
+        "model file's figures where they tell it)",
+    )
+    add_degrees_argument(parser)
     add_json_argument(parser)
 
 
@@ -44,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
             output("out", args.out, _SUFFIX[args.format], hint=f"the format is {args.format}"),
             output("json", args.json, (".json",)),
         ],
-        {"model": args.model, "template": args.template},
+        {"model": args.model, "template": args.template, "heldout": args.heldout},
     )
     if args.format == "mjcf":
         from dynid.simmodel.mjcf import import_mujoco
@@ -54,8 +69,17 @@ def run(args: argparse.Namespace) -> int:
     from dynid.simmodel.export import export_model
 
     model = load_model(args.model)
+    heldout = None
+    if args.heldout is not None:
+        heldout = read_dataset(args.heldout, degrees=args.degrees, joint_names=model.robot.joint_names)
+        check_data_fits_model(model, heldout, model_path=args.model, data_option="heldout")
     result = export_model(
-        model, args.format, args.out, template=args.template, model_name=Path(args.model).name
+        model,
+        args.format,
+        args.out,
+        template=args.template,
+        model_name=Path(args.model).name,
+        heldout=heldout,
     )
     figures = result.figures()
     p = result.params
@@ -85,6 +109,12 @@ def run(args: argparse.Namespace) -> int:
             f"{len(c['joints'])} joints" if c["joints"] else "no joint has a Coulomb level"
         )
         print(f"  passed: {c['check']} ({figure})")
+    if result.heldout is not None:
+        h = result.heldout
+        print(
+            f"held-out RMS (mean over joints): dynid's model {h['rms_full_mean']:.4g} N m, the exported "
+            f"{args.format.upper()} {h['rms_exported_mean']:.4g} N m"
+        )
     if result.not_carried:
         print("not carried (listed in the file's comment too):")
         for it in result.not_carried:

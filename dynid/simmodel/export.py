@@ -48,6 +48,9 @@ class ExportResult:
         What the format leaves out, with its share of the training error where the model file tells it.
     locked : list of str
         Joints of the template the model does not move (kept, at their neutral position in the checks).
+    heldout : dict or None
+        Held-out RMS of the model, of the export and of the model without each part the export loses
+        (:func:`dynid.simmodel.shares.heldout_shares`), when held-out data were given.
     """
 
     path: Path
@@ -57,6 +60,7 @@ class ExportResult:
     checks: list[dict[str, Any]] = field(default_factory=list)
     not_carried: list[dict[str, Any]] = field(default_factory=list)
     locked: list[str] = field(default_factory=list)
+    heldout: dict[str, Any] | None = None
 
     def figures(self) -> dict[str, Any]:
         """JSON-ready figures: ``checks``, ``not_carried`` and the values written."""
@@ -82,6 +86,7 @@ class ExportResult:
             ],
             "checks": self.checks,
             "not_carried": self.not_carried,
+            "heldout": self.heldout,
         }
 
 
@@ -112,13 +117,49 @@ def default_template(robot) -> Path:
     )
 
 
-def _shares(model, items: list[dict[str, Any]], fmt: str, params: SimParameters) -> list[dict[str, Any]]:
-    """Add to each item left out its share of the training error, where the model file holds it."""
+_FRICTION_ITEMS = (
+    "friction offset",
+    "Stribeck friction",
+    "direction-dependent Coulomb friction",
+    "nonlinear viscous friction",
+    "sigmoid friction shape",
+)
+
+
+def _measured(heldout: dict[str, Any], item: dict[str, Any]) -> str | None:
+    """The held-out share of a part left out, from :func:`heldout_shares`; None when not measured."""
+    what = item["what"]
+    for part in heldout["parts"]:
+        name = part["part"]
+        hit = (
+            (what in _FRICTION_ITEMS and name.startswith("friction beyond"))
+            or (what == "GMM correction" and name == "GMM correction")
+            or (what == name)
+            or (what == "armature" and name.startswith("rigid body"))
+        )
+        if hit:
+            together = " (with the other friction terms)" if what in _FRICTION_ITEMS else ""
+            together = " (with the consistency projection)" if what == "armature" else together
+            return (
+                f"held-out RMS {np.mean(part['rms_without']):.4g} N m without it{together}, "
+                f"{heldout['rms_full_mean']:.4g} N m with it (mean over joints)"
+            )
+    return None
+
+
+def _shares(
+    model, items: list[dict[str, Any]], fmt: str, params: SimParameters, heldout: dict[str, Any] | None = None
+) -> list[dict[str, Any]]:
+    """Add to each item left out its share of the error: held-out if measured, else training where the
+    model file holds it, else a sentence saying it cannot be computed."""
     out = []
     layers = model.rms_layers or {}
     for item in items:
         item = dict(item)
-        if item["what"] == "GMM correction" and "gmm" in layers and "friction" in layers:
+        measured = None if heldout is None else _measured(heldout, item)
+        if measured is not None:
+            item["share"] = measured
+        elif item["what"] == "GMM correction" and "gmm" in layers and "friction" in layers:
             before = np.asarray(layers["friction"], dtype=float)
             after = np.asarray(layers["gmm"], dtype=float)
             item["training_rms_without"] = before.tolist()
@@ -128,20 +169,20 @@ def _shares(model, items: list[dict[str, Any]], fmt: str, params: SimParameters)
             )
         else:
             item["share"] = (
-                "cannot be computed from the model file (its training states are not stored); run "
-                "'dynid validate' with the exported description to measure it"
+                "cannot be computed from the model file (its training states are not stored); give "
+                "--heldout data to measure it"
             )
         out.append(item)
     if fmt == "urdf":
-        out.append(
-            {
-                "what": "armature",
-                "joints": [j + 1 for j in range(len(params.armature)) if params.armature[j] > 0],
-                "detail": "URDF has no armature field (Pinocchio's model.armature, MuJoCo's joint armature); "
-                "values: " + ", ".join(f"{a:.6g}" for a in params.armature) + " kg m^2 (in this comment only)",
-                "share": "kept in the MJCF export",
-            }
-        )
+        arm = {
+            "what": "armature",
+            "joints": [j + 1 for j in range(len(params.armature)) if params.armature[j] > 0],
+            "detail": "URDF has no armature field (Pinocchio's model.armature, MuJoCo's joint armature); "
+            "values: " + ", ".join(f"{a:.6g}" for a in params.armature) + " kg m^2 (in this comment only)",
+        }
+        measured = None if heldout is None else _measured(heldout, arm)
+        arm["share"] = measured or "kept in the MJCF export"
+        out.append(arm)
     if fmt == "mjcf":
         out.append(
             {
@@ -184,6 +225,7 @@ def export_model(
     template: str | os.PathLike[str] | None = None,
     model_name: str = "the model",
     reference_weight: float = 0.0,
+    heldout=None,
 ) -> ExportResult:
     """Write an identified model into a copy of a robot description and check it by reloading it.
 
@@ -201,6 +243,9 @@ def export_model(
         How the model is named in the file's comment.
     reference_weight : float
         Pull toward the template's bodies in every direction (see :func:`simulator_parameters`).
+    heldout : Dataset, optional
+        Held-out data on which the share of each part the format leaves out is measured
+        (:func:`dynid.simmodel.shares.heldout_shares`).
 
     Returns
     -------
@@ -221,7 +266,12 @@ def export_model(
     match = match_template(root, tpl, robot)
     reference = robot.with_params(match.template_params)
     params = simulator_parameters(model, reference, reference_weight=reference_weight)
-    items = _shares(model, params.not_carried, fmt, params)
+    shares = None
+    if heldout is not None:
+        from dynid.simmodel.shares import heldout_shares
+
+        shares = heldout_shares(model, params, fmt, heldout)
+    items = _shares(model, params.not_carried, fmt, params, shares)
     comment = _comment(model_name, fmt, params, items, match.locked)
     text = write_urdf(root, match, robot, params, comment)
     if fmt == "mjcf":
@@ -249,4 +299,5 @@ def export_model(
         checks=checks,
         not_carried=items,
         locked=list(match.locked),
+        heldout=shares,
     )
