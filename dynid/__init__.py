@@ -58,6 +58,9 @@ _API: dict[str, tuple[str, str]] = {
     # diagnosis (dynid.diagnosis: its package is the entry point)
     "Diagnosis": ("dynid.diagnosis", "Diagnosis"),
     "diagnose": ("dynid.diagnosis", "diagnose"),
+    # fleets on Dask and drift (dynid.fleet)
+    "FleetResult": ("dynid.fleet.core", "FleetResult"),
+    "identify_fleet": ("dynid.fleet.core", "identify_fleet"),
     # the demo
     "DemoResult": ("dynid.demo", "DemoResult"),
     "run_demo": ("dynid.demo", "run_demo"),

@@ -34,6 +34,7 @@ COMMANDS = {
     "identify": "identify",
     "validate": "validate",
     "diagnose": "diagnose",
+    "fleet": "fleet",
     "export": "export",
     "export-c": "export_c",
 }

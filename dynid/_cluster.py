@@ -1,0 +1,118 @@
+"""The one way dynid reaches a Dask cluster: a ``dask.distributed.Client`` for an address, or a local one.
+
+>>> with cluster_client(None, workers=2) as client:           # a LocalCluster of 2 single-thread workers
+...     rows = client.gather(client.map(work, items, pure=False))
+>>> with cluster_client("tcp://10.0.0.5:8786") as client:    # a running scheduler
+...     ...
+
+Every parallel part of dynid (the fleet's identifications, the diagnosis benchmark, the excitation
+design's restarts) takes its ``Client`` from :func:`cluster_client` and hands work to Dask's own
+engine (``client.map`` / ``client.gather``, or joblib's ``dask`` backend); nothing here distributes
+work itself.  ``dask.distributed`` is imported only when a cluster is asked for.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import Any
+
+from dynid.exceptions import UsageError
+
+__all__ = ["cluster_client", "worker_peak_memory"]
+
+CONNECT_TIMEOUT = "10s"
+"""How long a scheduler address is tried before it is refused."""
+
+
+def _distributed() -> Any:
+    try:
+        import distributed
+    except ImportError:
+        raise UsageError(
+            "running on a Dask cluster needs the packages dask and distributed, which are not installed; "
+            "install them with pip install 'dynid[fleet]'."
+        ) from None
+    return distributed
+
+
+@contextmanager
+def cluster_client(
+    scheduler: str | None = None, *, workers: int = 2, threads_per_worker: int = 1, timeout: str = CONNECT_TIMEOUT
+) -> Iterator[Any]:
+    """A ``dask.distributed.Client``: connected to ``scheduler``, or to a LocalCluster started here.
+
+    Parameters
+    ----------
+    scheduler : str, optional
+        Address of a running scheduler (``tcp://host:8786``, or a scheduler file path ending in
+        ``.json``).  None starts a ``LocalCluster`` of ``workers`` processes, closed on leaving the block.
+    workers : int
+        Worker processes of the local cluster (default 2), each with ``threads_per_worker`` threads.
+    threads_per_worker : int
+        Threads per local worker (default 1: dynid's numerical work is single-threaded per task).
+    timeout : str
+        How long to try the scheduler before giving up.
+
+    Yields
+    ------
+    distributed.Client
+
+    Raises
+    ------
+    UsageError
+        The packages are missing, ``workers`` is below 1, or no scheduler answers at ``scheduler``.
+    """
+    distributed = _distributed()
+    if scheduler is None:
+        if int(workers) != workers or workers < 1:
+            raise UsageError(f"the local cluster needs at least 1 worker; got {workers}; give --workers 1 or more.")
+        # Workers inherit the environment: one BLAS/OpenMP thread each, as dynid's tasks expect.
+        for key in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+            os.environ.setdefault(key, "1")
+        cluster = distributed.LocalCluster(
+            n_workers=int(workers),
+            threads_per_worker=int(threads_per_worker),
+            processes=True,
+            dashboard_address=":0",  # a free port: never clash with another cluster
+            silence_logs=40,
+        )
+        try:
+            with distributed.Client(cluster) as client:
+                yield client
+        finally:
+            cluster.close()
+        return
+    kwargs = {"scheduler_file": scheduler} if str(scheduler).endswith(".json") else {"address": scheduler}
+    try:
+        client = distributed.Client(**kwargs, timeout=timeout)
+    except (OSError, TimeoutError, ValueError) as exc:
+        reason = str(exc).splitlines()[0].rstrip(".") if str(exc) else type(exc).__name__
+        raise UsageError(
+            f"no Dask scheduler answered at '{scheduler}' within {timeout} ({reason}); give the address of a "
+            "running scheduler (tcp://HOST:8786) or leave --scheduler out to use a local cluster."
+        ) from None
+    with client:
+        yield client
+
+
+def worker_peak_memory(client: Any) -> dict[str, float]:
+    """Peak resident memory of each worker process so far (MiB), by worker address.
+
+    Parameters
+    ----------
+    client : distributed.Client
+
+    Returns
+    -------
+    dict of str to float
+        ``ru_maxrss`` of each worker's process (Linux: KiB, converted to MiB).
+    """
+    return {address: float(kib) / 1024.0 for address, kib in client.run(_peak_rss_kib).items()}
+
+
+def _peak_rss_kib() -> int:
+    import resource
+
+    return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)

@@ -1,0 +1,204 @@
+"""dynid fleet: recordings found by path or manifest, identified on a real LocalCluster as serially, drift found.
+
+A small simulated fleet (three UR5s within manufacturing tolerance, three short recordings each, one robot's
+joint-3 friction raised by half from its third recording on) is made once per module by the fleet's own
+simulator; identifications use linear friction and no mixture (what the drift tests read), as the fleet
+benchmark does.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+pytest.importorskip("distributed", reason="the fleet runs on dask.distributed (pip install 'dynid[fleet]')")
+pytest.importorskip("pyarrow", reason="the fleet table is written as Parquet through pyarrow")
+
+from dynid.cli import main
+from dynid.exceptions import UsageError
+from dynid.fleet.core import FleetResult, identify_fleet
+from dynid.fleet.drift import detect_drift, holm
+from dynid.fleet.recordings import find_recordings, parse_time
+from dynid.fleet.simulated import Change, simulate_fleet
+
+OPTIONS = {"friction": "linear", "gmm": "off"}
+CHANGED, JOINT, AT = "robot_01", 3, 2
+
+
+@pytest.fixture(scope="module")
+def fleet(tmp_path_factory):
+    root = tmp_path_factory.mktemp("fleet")
+    truth = simulate_fleet(
+        "ur5", root, robots=3, recordings=3, duration=6.0, base_freq=0.2, seed=4,
+        changes={1: Change("friction", at=AT, joint=JOINT, factor=1.5)},
+    )
+    pattern = str(root / "**" / "*.csv")
+    return {"root": root, "truth": truth, "pattern": pattern, "serial": identify_fleet("ur5", pattern, serial=True, **OPTIONS)}
+
+
+def _strip(rows):
+    return [{k: v for k, v in r.items() if k != "elapsed_s"} for r in rows]
+
+
+def test_a_local_cluster_of_two_workers_gives_the_serial_table(fleet, tmp_path):
+    """Four recordings (two robots) keep it short; the drift tests are a function of the table."""
+    recordings = find_recordings(fleet["pattern"])[1:5]
+    on_cluster = identify_fleet("ur5", recordings, workers=2, **OPTIONS)
+    assert on_cluster.info["scheduler"] == "local" and on_cluster.info["workers"] == 2
+    assert len(on_cluster.rows) == 4 and not on_cluster.errors
+    assert _strip(on_cluster.rows) == _strip(fleet["serial"].rows[1:5])
+    out = on_cluster.write(tmp_path / "out")
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(out / "fleet.parquet")
+    assert table.num_rows == 4 and table.column_names == on_cluster.columns
+    np.testing.assert_array_equal(table.column("fc3").to_numpy(), on_cluster.column("fc3"))
+    with open(out / "fleet.csv", encoding="utf-8") as f:
+        rows = list(csv.DictReader(f))
+    assert [float(r["fc3_std"]) for r in rows] == list(on_cluster.column("fc3_std"))
+    assert "robot_01" in (out / "report.html").read_text(encoding="utf-8")
+
+
+def test_the_table_holds_parameters_with_their_spread_and_the_held_out_error(fleet):
+    result = fleet["serial"]
+    assert [r["robot"] for r in result.rows] == ["robot_00"] * 3 + ["robot_01"] * 3 + ["robot_02"] * 3
+    assert [r["order"] for r in result.rows] == [0, 1, 2] * 3
+    assert result.rows[0]["time"] == "2026-01-15"
+    for name in ("fc3", "fv3", "Izz1R", "heldout_rms_mean", "heldout_rms_6", "cond"):
+        values = result.column(name)
+        assert np.all(np.isfinite(values)), name
+    std = result.column("fc3_std")
+    assert np.all(std > 0) and np.all(std < 0.1 * np.abs(result.column("fc3")))
+    # the held-out error is the last 20 %: 1.2 s of a 6 s recording
+    assert np.allclose(result.column("heldout_s"), 1.2, atol=0.01)
+    assert np.all(result.column("heldout_rms_mean") < 1.0)
+
+
+def test_a_friction_jump_is_flagged_at_its_recording_and_the_unchanged_robots_are_not(fleet):
+    drift = fleet["serial"].drift
+    flagged = drift.flagged_robots
+    assert list(flagged) == [CHANGED]
+    top = flagged[CHANGED][0]
+    assert top.parameter in (f"fc{JOINT}", f"fv{JOINT}")
+    assert top.change_order == AT and top.change_time == "2026-03-15"
+    # the change is the truth's: +50 % friction (Coulomb, identified as such with the seed model's nonlinearity)
+    fc = next(t for t in drift.tests if t.robot == CHANGED and t.parameter == f"fc{JOINT}")
+    assert fc.flagged and 1.35 < fc.after / fc.before < 1.65
+    assert all(not t.flagged for t in drift.tests if t.robot != CHANGED)
+
+
+def test_the_drift_test_reads_the_identifications_standard_deviations(fleet):
+    """The same values with a hundred times the spread are no evidence of change: no threshold on values."""
+    result = fleet["serial"]
+    wide = [{k: (v * 100 if k.endswith("_std") else v) for k, v in r.items()} for r in result.rows]
+    drift = detect_drift(FleetResult(wide, result.columns, result.parameters, result.settings, info=result.info))
+    assert drift.flagged_robots == {}
+    assert detect_drift(result).flagged_robots.keys() == {CHANGED}
+
+
+def test_the_tested_parameters_are_friction_armature_and_what_a_tool_moves(fleet):
+    tested = set(fleet["serial"].drift.parameters)
+    assert {f"fc{j}" for j in range(1, 7)} | {f"fv{j}" for j in range(1, 7)} <= tested
+    assert not any(name.startswith("fo") for name in tested)
+    shifts = {p["name"]: p["tool_shift"] for p in fleet["serial"].parameters}
+    links = [name for name in tested if shifts[name] != 0]
+    assert links and all(abs(shifts[name]) > 0 for name in links)
+    assert "Izz1R" in tested  # a tool far from joint 1's axis adds inertia about it
+
+
+def test_holm_adjusts_step_down():
+    np.testing.assert_allclose(holm(np.array([0.01, 0.04, 0.03, 0.005])), [0.03, 0.06, 0.06, 0.02])
+    assert holm(np.array([])).size == 0
+
+
+def test_recordings_come_from_the_path_or_a_manifest(tmp_path):
+    for robot, name in (("arm_b", "2026-02-01.csv"), ("arm_a", "3.csv"), ("arm_a", "12.csv"), ("arm_b", "2026-01-01.npz")):
+        (tmp_path / robot).mkdir(exist_ok=True)
+        (tmp_path / robot / name).write_text("t\n")
+    (tmp_path / "arm_a" / "12.csv.truth.json").write_text("{}")
+    found = find_recordings(str(tmp_path / "**" / "*"))
+    assert [(r.robot, r.time, r.order) for r in found] == [
+        ("arm_a", "3", 0), ("arm_a", "12", 1), ("arm_b", "2026-01-01", 0), ("arm_b", "2026-02-01", 1)
+    ]
+    manifest = tmp_path / "fleet.csv"
+    manifest.write_text(
+        "path,robot,time\narm_a/3.csv,x,2026-05-01\narm_a/12.csv,x,2026-04-01\n"
+        "arm_b/2026-02-01.csv,y,1\narm_b/2026-01-01.npz,y,0\n"
+    )
+    found = find_recordings(str(tmp_path / "**" / "*"), manifest)
+    assert [(r.robot, os.path.basename(r.path), r.order) for r in found] == [
+        ("x", "12.csv", 0), ("x", "3.csv", 1), ("y", "2026-01-01.npz", 0), ("y", "2026-02-01.csv", 1)
+    ]
+    assert parse_time("2026-03-01T08-30") - parse_time("2026-03-01") == 8.5 * 3600
+    assert parse_time("rec_7") == 7.0 and parse_time("latest") is None
+    (tmp_path / "arm_a" / "latest.csv").write_text("t\n")
+    with pytest.raises(UsageError, match=r"neither an ISO date nor an index; name recordings <robot>/"):
+        find_recordings(str(tmp_path / "arm_a" / "*.csv"))
+
+
+def _cli(args, capsys):
+    code = main(["fleet", "--robot", "ur5", *args])
+    err = capsys.readouterr().err.strip().splitlines()
+    return code, err
+
+
+def test_an_empty_glob_is_one_sentence_exit_2(tmp_path, capsys):
+    code, err = _cli(["--data", str(tmp_path / "none" / "*.csv"), "--out", str(tmp_path / "out")], capsys)
+    assert code == 2 and len(err) == 1
+    assert err[0].startswith("dynid fleet: error: no recording matches") and "quote it" in err[0]
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_manifest_missing_a_recording_is_one_sentence_exit_2(tmp_path, capsys):
+    for name in ("0.csv", "1.csv"):
+        (tmp_path / "arm").mkdir(exist_ok=True)
+        (tmp_path / "arm" / name).write_text("t\n")
+    manifest = tmp_path / "fleet.csv"
+    manifest.write_text("path,robot,time\narm/0.csv,arm,0\n")
+    code, err = _cli(
+        ["--data", str(tmp_path / "arm" / "*.csv"), "--manifest", str(manifest), "--out", str(tmp_path / "out")], capsys
+    )
+    assert code == 2 and len(err) == 1
+    assert "arm/1.csv' is not in the manifest" in err[0] and err[0].endswith("or narrow the pattern.")
+    manifest.write_text("path,robot\narm/0.csv,arm\n")
+    code, err = _cli(
+        ["--data", str(tmp_path / "arm" / "*.csv"), "--manifest", str(manifest), "--out", str(tmp_path / "out")], capsys
+    )
+    assert code == 2 and len(err) == 1 and "has no column time" in err[0]
+    assert not (tmp_path / "out").exists()
+
+
+def test_an_unknown_scheduler_address_is_one_sentence_exit_2(tmp_path, capsys):
+    (tmp_path / "arm").mkdir()
+    (tmp_path / "arm" / "0.csv").write_text("t\n")
+    code, err = _cli(
+        ["--data", str(tmp_path / "arm" / "*.csv"), "--scheduler", "no-port-here", "--out", str(tmp_path / "out")],
+        capsys,
+    )
+    assert code == 2 and len(err) == 1
+    assert "no Dask scheduler answered at 'no-port-here'" in err[0] and "leave --scheduler out" in err[0]
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_scheduler_that_does_not_answer_is_refused_after_the_timeout():
+    from dynid._cluster import cluster_client
+
+    with pytest.raises(UsageError, match=r"no Dask scheduler answered at 'tcp://127.0.0.1:9' within 1s"):
+        with cluster_client("tcp://127.0.0.1:9", timeout="1s"):
+            pass
+
+
+def test_a_refused_recording_is_reported_and_the_fleet_goes_on(fleet, tmp_path):
+    recordings = find_recordings(fleet["pattern"])[:2]
+    bad = tmp_path / "robot_09"
+    bad.mkdir()
+    (bad / "0.csv").write_text("t,q_1\n0,0\n")
+    rec = find_recordings(str(bad / "0.csv"))[0]
+    result = identify_fleet("ur5", [*recordings, replace(rec, order=0)], serial=True, drift=False, **OPTIONS)
+    assert [bool(r["error"]) for r in result.rows] == [False, False, True]
+    assert "q_" in result.rows[2]["error"] or "column" in result.rows[2]["error"]
+    assert result.drift is None and result.column("fc1")[2] != result.column("fc1")[2]  # NaN: no parameters
