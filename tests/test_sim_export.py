@@ -61,13 +61,23 @@ def test_urdf_export_reloads_in_pinocchio_and_keeps_the_template(ur5_model, tmp_
     assert {it["what"] for it in result.not_carried} >= {"friction offset", "armature"}
 
 
-def test_a_wrong_armature_fails_the_urdf_check(ur5_model, tmp_path):
+def test_a_file_that_does_not_hold_the_values_fails_the_check(ur5_model, tmp_path):
     path, _ = ur5_model
     model = load_model(path)
     out = tmp_path / "ur5.urdf"
     result = export_model(model, "urdf", out)
-    wrong = replace(result.params, armature=result.params.armature * 1.001 + 1e-4)
-    assert not check_urdf(out, model, wrong)["passed"]
+    standard = result.params.standard.copy()
+    standard[20] *= 1.001  # link 3's mass, 0.1 % more than the file holds
+    assert not check_urdf(out, model, replace(result.params, standard=standard))["passed"]
+    mujoco = pytest.importorskip("mujoco", reason="the MJCF export needs mujoco (pip install dynid[mujoco])")
+    del mujoco
+    from dynid.simmodel.checks import check_mjcf
+
+    xml = tmp_path / "ur5.xml"
+    result = export_model(model, "mjcf", xml)
+    wrong = replace(result.params, armature=result.params.armature + 1e-3)
+    inverse, _ = check_mjcf(xml, model, wrong)
+    assert not inverse["passed"]
 
 
 def test_mjcf_export_reloads_in_mujoco_with_the_identified_friction(ur5_model, tmp_path):
@@ -114,6 +124,25 @@ def test_gaz_panda_urdf_as_the_template(shared_data, tmp_path):
     result = export_model(load_model(path), "urdf", tmp_path / "gaz.urdf", template=urdf)
     assert result.checks[0]["passed"]
     assert "Stribeck friction" in {it["what"] for it in result.not_carried}
+
+
+def test_tx40_with_its_coupled_wrist(shared_data, tmp_path):
+    """The coupled motor's cross terms are listed as not carried; what is carried reloads exactly."""
+    pytest.importorskip("mujoco", reason="the MJCF export needs mujoco (pip install dynid[mujoco])")
+    from dynid.identify.adapters import tx40_transmission
+    from dynid.symbolic import load_robot
+
+    urdf = shared_data / "tx40" / "model" / "tx40_mdh_modified.urdf"
+    if not urdf.is_file():
+        pytest.skip(f"the TX40 URDF is not at {urdf}")
+    robot = load_robot(urdf).with_transmission(tx40_transmission())
+    path, _ = _identified(robot, tmp_path, "tx40")
+    model = load_model(path)
+    for fmt, name in (("urdf", "tx40.urdf"), ("mjcf", "tx40.xml")):
+        result = export_model(model, fmt, tmp_path / name)
+        assert all(c["passed"] for c in result.checks)
+        coupled = next(it for it in result.not_carried if it["what"] == "coupled transmission")
+        assert coupled["joints"] == [6]
 
 
 def _one_line_error(capsys, argv, pattern: str, leftover: Path) -> None:

@@ -135,11 +135,12 @@ def _measured(heldout: dict[str, Any], item: dict[str, Any]) -> str | None:
             (what in _FRICTION_ITEMS and name.startswith("friction beyond"))
             or (what == "GMM correction" and name == "GMM correction")
             or (what == name)
-            or (what == "armature" and name.startswith("rigid body"))
+            or (what in ("armature", "coupled transmission") and name.startswith("rigid body"))
         )
         if hit:
             together = " (with the other friction terms)" if what in _FRICTION_ITEMS else ""
-            together = " (with the consistency projection)" if what == "armature" else together
+            if what in ("armature", "coupled transmission"):
+                together = " (with the rest of the rigid-body change: consistency projection, armature)"
             return (
                 f"held-out RMS {np.mean(part['rms_without']):.4g} N m without it{together}, "
                 f"{heldout['rms_full_mean']:.4g} N m with it (mean over joints)"
