@@ -295,17 +295,27 @@ def test_heldout_data_without_a_noise_estimate_is_refused(small):
 
 def test_a_floor_from_the_spectrum_makes_the_verdict_provisional(ur5, small):
     model, train, held = small
-    # Less than one period of a slow excitation: no repeated period, the floor comes from the spectrum.
+    # Less than one period of a slow excitation: no repeated period in either run, the floor comes from
+    # the spectrum.
     slow = simulate(
         ur5, case_excitation(ur5, 23, base_freq=0.15), duration=5.0, friction="linear", seed=23, truth_seed=21
     ).to_dataset()
-    d = diagnose(model, train, slow, max_samples=3000, max_effects=1)
+    slow_train = simulate(
+        ur5, case_excitation(ur5, 24, base_freq=0.15), duration=6.0, friction="linear", seed=24, truth_seed=21
+    ).to_dataset()
+    d = diagnose(model, slow_train, slow, max_samples=3000, max_effects=1)
     assert d.noise.method == "spectrum"
     assert d.provisional and d.to_dict()["provisional"] is True
     assert "Provisional" in d.summary() and "three periods" in d.summary()
     periodic = diagnose(model, train, held, max_samples=3000, max_effects=1)
     assert periodic.noise.method == "periods"
     assert not periodic.provisional and "Provisional" not in periodic.summary()
+    # A periodic training run lends its floor to the aperiodic held-out run: the same noise, measured.
+    lent = diagnose(model, train, slow, max_samples=3000, max_effects=1)
+    assert lent.noise.method == "training periods" and not lent.provisional
+    assert "did not change between the two recordings" in lent.summary()
+    np.testing.assert_allclose(lent.noise.std, periodic.noise.std, rtol=0.25)
+    assert np.all(lent.noise.std >= d.noise.std * 0.5)
 
 
 def test_unknown_effect_names_are_refused(small):
@@ -370,3 +380,26 @@ def test_the_command_refuses_a_report_in_a_missing_folder_before_any_work(tmp_pa
     err = capsys.readouterr().err
     assert "the folder" in err and "does not exist" in err and "Traceback" not in err
     assert not (tmp_path / "missing").exists()
+
+
+def test_heldout_needed_scales_the_run_to_the_holm_threshold():
+    """An undecided candidate's z-score grows as sqrt(T): the run that reaches alpha / m, times 1.5."""
+    from types import SimpleNamespace
+
+    from scipy.stats import norm
+
+    from dynid.diagnosis.result import heldout_needed
+
+    top = SimpleNamespace(p_value=float(norm.sf(2.0)), closure=0.9, significant=False)
+    others = [SimpleNamespace(p_value=0.5, closure=0.1, significant=False)] * 9
+    d = SimpleNamespace(
+        verdict=["unexplained"],
+        ranking=[top, *others],
+        settings={"alpha": 0.05, "min_closure": 0.5},
+        residuals={"t": np.linspace(0.0, 30.0, 3001)},
+    )
+    expected = 30.0 * (norm.isf(0.05 / 10) / 2.0) ** 2 * 1.5
+    assert heldout_needed(d) == pytest.approx(expected, rel=1e-9)
+    assert heldout_needed(SimpleNamespace(**{**vars(d), "verdict": ["none"]})) is None
+    top_closes_little = SimpleNamespace(p_value=top.p_value, closure=0.2, significant=False)
+    assert heldout_needed(SimpleNamespace(**{**vars(d), "ranking": [top_closes_little, *others]})) is None

@@ -256,6 +256,14 @@ def test_diagnose_writes_everything(recordings, models, name, tmp_path, capsys) 
     assert "gap_map" in figures and "parametric" in figures
     assert "verdict:" in out
     assert report.stat().st_size > 1000
+    # Neither run repeats a period: the floor is a spectral lower bound, and the diagnosis prints the
+    # commands that would record held-out data to settle the verdict.
+    assert figures["provisional"] is True
+    settle = figures["settle"]
+    assert settle["commands"][0].startswith("dynid excite --robot ur5 ") and "--periods 3" in settle["commands"][0]
+    assert "--rate 100 " in settle["commands"][0]
+    assert settle["commands"][-1].startswith(f"dynid diagnose --model {models[name][0]} ")
+    assert "To settle it, record it like this:" in out and settle["commands"][0] in out
 
 
 def test_a_period_the_motion_does_not_have_is_not_used(recordings, models, tmp_path, capsys) -> None:

@@ -121,6 +121,12 @@ def run(args: argparse.Namespace) -> int:
         c = dec["closure"][j]
         print(f"{j + 1:>5}  {result.excess['ratio'][j]:6.2f}  {'-' if c != c else f'{c:6.2f}'}")
     figures = result.to_dict()
+    settle = _settling_commands(args, model, heldout, result)
+    if settle:
+        figures["settle"] = settle
+        print(settle["reason"] + " To settle it, record it like this:")
+        for line in settle["commands"]:
+            print("  " + line)
     context = {}
     if args.out:
         refit = _write_refit(model, train, heldout, result, args.out)
@@ -145,6 +151,42 @@ def run(args: argparse.Namespace) -> int:
         )
         print(f"report written to {report}")
     return 0
+
+
+def _settling_commands(args, model, heldout, result) -> dict | None:
+    """The exact commands that would record held-out data to settle a provisional or undecided verdict."""
+    import math
+    import shlex
+
+    import numpy as np
+
+    from dynid.diagnosis.result import heldout_needed
+
+    need = heldout_needed(result)
+    if need is None and not result.provisional:
+        return None
+    rate = 1.0 / float(np.median(np.diff(heldout.t)))
+    base_freq = 0.1  # excite's default: a 10 s period
+    periods = max(3, math.ceil((need or 0.0) * base_freq))
+    if need is not None:
+        reason = f"Undecided: about {need:.0f} s of held-out data would decide the best candidate."
+    else:
+        reason = (
+            "Provisional: the held-out data do not repeat a period, so the noise floor is a lower bound."
+        )
+    robot = shlex.quote(str(model.robot.source))
+    csv = "heldout_excitation.csv"
+    return {
+        "reason": reason,
+        "heldout_seconds": need,
+        "commands": [
+            f"dynid excite --robot {robot} --criterion cond --seed 11 --base-freq {base_freq:g} "
+            f"--out heldout_excitation.json --csv {csv} --rate {rate:.6g} --periods {periods}",
+            f"# play {csv} on the robot (it rests 2 s at home at both ends); log t, q_i, tau_i to heldout.csv",
+            f"dynid diagnose --model {shlex.quote(args.model)} --data {shlex.quote(args.data)} "
+            "--heldout heldout.csv",
+        ],
+    }
 
 
 def _write_refit(model, train, heldout, result, out: str) -> dict:

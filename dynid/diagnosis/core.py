@@ -169,7 +169,7 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
     bl.check_training_length(structure, train)
     tr_sample = bl.sample(structure, train, settings)
     ho_sample = bl.sample(structure, heldout, settings)
-    noise = measure_noise(ho_sample.prep, period=settings.period)
+    noise = _noise_floor(tr_sample.prep, ho_sample.prep, settings.period)
     sigma = np.maximum(noise.std, 1e-12)
     block = _block_rows(ho_sample, settings.block_seconds)
 
@@ -247,8 +247,39 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
             "after": sel.residual if sel.accepted else held.residual,
             "noise_std": sigma,
         },
-        provisional=noise.method != "periods",
+        provisional=noise.method not in MEASURED_FLOORS,
     )
+
+
+MEASURED_FLOORS = ("periods", "training periods")
+"""Noise-floor methods that measure the noise (not a lower bound): a verdict on them is not provisional."""
+
+
+def _noise_floor(train_prep, heldout_prep, period: float | None) -> NoiseFloor:
+    """The held-out data's noise floor, from the training run's periods when the held-out run has none.
+
+    The spread across repeated periods measures the noise; the spectrum's high-frequency level is only a
+    lower bound when the noise is coloured.  A held-out run that does not repeat a period (most field
+    recordings) takes the floor of a training run that does, recorded at the same rate and put through the
+    same filter, assuming the noise of one robot does not change between two recordings of a session.  The
+    held-out spectral level stays a lower bound per joint: where it is higher, the held-out run is noisier
+    than training, and it is used.
+    """
+    noise = measure_noise(heldout_prep, period=period)
+    if noise.method == "periods" or abs(train_prep.fs - heldout_prep.fs) > 1e-6 * heldout_prep.fs:
+        return noise
+    try:
+        trained = measure_noise(train_prep)
+    except DataError:
+        return noise
+    if trained.method != "periods":
+        return noise
+    higher = noise.std > trained.std
+    detail = "training run: " + trained.detail
+    if np.any(higher):
+        joints = ", ".join(str(j + 1) for j in np.flatnonzero(higher))
+        detail += f"; the held-out spectral level is higher on joint(s) {joints} and is used there"
+    return NoiseFloor(std=np.maximum(noise.std, trained.std), method="training periods", detail=detail)
 
 
 def _block_rows(ho: bl.Sample, block_seconds: float) -> int:
@@ -301,7 +332,14 @@ def _verdict(
             )
     else:
         verdict = ["none"]
-    if noise.method != "periods":
+    if noise.method == "training periods":
+        notes.insert(
+            0,
+            "The held-out data do not repeat a period, so the noise floor is the training run's spread "
+            "across its periods, at the same rate and through the same filter: this assumes the torque noise "
+            "of the robot did not change between the two recordings.",
+        )
+    elif noise.method not in MEASURED_FLOORS:
         notes.insert(
             0,
             "Provisional: the held-out data do not repeat a period, so the noise floor comes from the "

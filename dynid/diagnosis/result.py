@@ -198,6 +198,31 @@ def _describe_refit(r: RankedCandidate) -> str:
     return f"half gap {1000 * eff['a']:.2g} mrad"
 
 
+def heldout_needed(d: Diagnosis) -> float | None:
+    """Seconds of held-out data that would make the best undecided candidate significant, or None.
+
+    A candidate that would close enough of its joints' gap but is not significant after the correction
+    for the candidates tested is undecided.  Its held-out gain grows with the length of the run and its
+    standard deviation with the square root, so its z-score grows as ``sqrt(T)``: the run that reaches
+    the Holm threshold of the top candidate (``alpha / m``, one-sided) is ``T (z_needed / z_now)^2``,
+    with a margin of 1.5 for the chance that this run's z-score was lucky.
+    """
+    from scipy.stats import norm
+
+    if d.verdict != ["unexplained"] or not d.ranking:
+        return None
+    top = d.ranking[0]
+    if top.significant or top.closure < d.settings.get("min_closure", 0.5):
+        return None
+    t = np.asarray(d.residuals.get("t", ()), dtype=float)
+    if t.size < 2 or not (0 < top.p_value < 0.5):
+        return None
+    alpha = float(d.settings.get("alpha", 0.05))
+    z_now = float(norm.isf(top.p_value))
+    z_needed = float(norm.isf(alpha / len(d.ranking)))
+    return float((t[-1] - t[0]) * max(1.0, (z_needed / z_now) ** 2) * 1.5)
+
+
 def verdict_text(d: Diagnosis) -> str:
     """Plain-words account of a diagnosis (a few lines)."""
     dec = d.decomposition
@@ -222,7 +247,8 @@ def verdict_text(d: Diagnosis) -> str:
                 lines.append(
                     f"The best candidate, {closes}, but that gain is not significant on these held-out data "
                     f"once the {len(d.ranking)} candidates tested are accounted for (Holm-adjusted p = "
-                    f"{top.p_holm:.2g}): a longer held-out run would decide."
+                    f"{top.p_holm:.2g}): a longer held-out run would decide"
+                    + (f" (about {need:.0f} s)." if (need := heldout_needed(d)) else ".")
                 )
             else:
                 lines.append(f"The closest candidate, {closes}; that is not taken as the cause.")

@@ -64,7 +64,9 @@ class NoiseFloor:
     std : ndarray, shape (n,)
         Noise standard deviation (N m).
     method : str
-        ``"periods"`` (spread across repeated periods) or ``"spectrum"`` (high-frequency level).
+        ``"periods"`` (spread across repeated periods), ``"training periods"`` (the diagnosis: the
+        training run's spread across its periods, for held-out data that do not repeat) or ``"spectrum"``
+        (high-frequency level, a lower bound for coloured noise).
     detail : str
         How it was measured, in words.
     """
