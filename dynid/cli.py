@@ -21,6 +21,7 @@ import importlib
 import re
 import signal
 import sys
+import warnings
 from collections.abc import Iterator, Sequence
 
 __all__ = ["main"]
@@ -87,6 +88,29 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _one_line_warnings(command: str, fallback):
+    """A ``warnings.showwarning`` that prints dynid's own warnings as one line each, once per message.
+
+    Python's default prints ``file:line: Category: message`` and the source line; a user of the command needs
+    the message alone, and the same message (a gap in one recording, seen by each stage that reads it) once.
+    Other packages' warnings keep their default form.
+    """
+    from dynid.exceptions import DynidWarning
+
+    seen: set[str] = set()
+
+    def show(message, category, filename, lineno, file=None, line=None) -> None:
+        if not issubclass(category, DynidWarning):
+            fallback(message, category, filename, lineno, file, line)
+            return
+        text = " ".join(str(message).split())
+        if text not in seen:
+            seen.add(text)
+            print(f"dynid {command}: warning: {text}", file=sys.stderr if file is None else file)
+
+    return show
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``dynid`` command; returns the exit code."""
     from dynid.exceptions import DynidError
@@ -105,7 +129,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError:  # not the main thread: signals stay as they are
         pass
     try:
-        return int(args._module.run(args) or 0)
+        with warnings.catch_warnings():
+            if argv is None:  # the console command (tests calling main(argv) keep pytest's warning capture)
+                warnings.showwarning = _one_line_warnings(args.command, warnings.showwarning)
+            return int(args._module.run(args) or 0)
     except DynidError as exc:
         print(f"dynid {args.command}: error: {exc}", file=sys.stderr)
         return 2

@@ -671,6 +671,27 @@ def test_slightly_rounded_inertia_warns_and_loads(work: Path) -> None:
     assert model.params[9] == pytest.approx(0.1105 + 5.0 * (0.0**2 + 0.02**2))  # about the origin
 
 
+def test_the_command_prints_a_warning_as_one_line_once(work: Path) -> None:
+    """The console command shows dynid's warnings as ``dynid CMD: warning: ...``, one line each, once."""
+    import subprocess
+    import sys
+
+    robot = _toml(work, "Izz = [0.03", "Izz = [0.1105")
+    entry = "import sys; from dynid.cli import main; sys.exit(main())"
+    proc = subprocess.run(
+        [sys.executable, "-c", entry, "info", "--robot", str(work / robot)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=work,
+    )
+    assert proc.returncode == 0, proc.stderr
+    lines = [ln for ln in proc.stderr.splitlines() if "warning" in ln.lower()]
+    assert len(lines) == 1, proc.stderr
+    assert lines[0].startswith("dynid info: warning: ") and "0.1105 exceeds the sum of the other two" in lines[0]
+    assert "RobotModelWarning" not in proc.stderr and ".py:" not in proc.stderr
+
+
 def test_builtin_robots_are_physical() -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("error", RobotModelWarning)
