@@ -126,6 +126,21 @@ def test_gaz_panda_urdf_as_the_template(shared_data, tmp_path):
     assert "Stribeck friction" in {it["what"] for it in result.not_carried}
 
 
+def test_a_modified_dh_table_gets_a_urdf_of_its_own(tmp_path):
+    """A table robot (revolute and prismatic joints, armature in the table) exports to both formats."""
+    pytest.importorskip("mujoco", reason="the MJCF export needs mujoco (pip install dynid[mujoco])")
+    from dynid.symbolic import load_robot
+
+    robot = load_robot(Path(__file__).resolve().parent / "data" / "rrpr_mdh.toml")
+    path, _ = _identified(robot, tmp_path, "rrpr")
+    model = load_model(path)
+    for fmt, name in (("urdf", "rrpr.urdf"), ("mjcf", "rrpr.xml")):
+        result = export_model(model, fmt, tmp_path / name)
+        assert all(c["passed"] for c in result.checks), result.checks
+    kinds = {j.get("name"): j.get("type") for j in ET.parse(tmp_path / "rrpr.urdf").getroot().iter("joint")}
+    assert sorted(kinds.values()).count("prismatic") == 1
+
+
 def test_tx40_with_its_coupled_wrist(shared_data, tmp_path):
     """The coupled motor's cross terms are listed as not carried; what is carried reloads exactly."""
     pytest.importorskip("mujoco", reason="the MJCF export needs mujoco (pip install dynid[mujoco])")

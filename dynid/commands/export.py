@@ -83,7 +83,12 @@ def run(args: argparse.Namespace) -> int:
     )
     figures = result.figures()
     p = result.params
-    print(f"wrote {result.path} ({args.format}, from {result.template})")
+    origin = (
+        f"a URDF written from the table {result.template}"
+        if result.template.suffix.lower() == ".toml"
+        else str(result.template)
+    )
+    print(f"wrote {result.path} ({args.format}, from {origin})")
     print(f"  link inertials: {p.source}; physically consistent")
     if p.projection.get("relative"):
         print(

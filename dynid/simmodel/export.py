@@ -11,6 +11,7 @@ failing check raises :class:`dynid.exceptions.IdentificationError` and leaves no
 from __future__ import annotations
 
 import os
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -21,7 +22,7 @@ from dynid._io import atomic_path
 from dynid.exceptions import IdentificationError, UsageError
 from dynid.simmodel.checks import check_mjcf, check_urdf
 from dynid.simmodel.parameters import SimParameters, simulator_parameters
-from dynid.simmodel.urdf import match_template, read_template, write_urdf
+from dynid.simmodel.urdf import match_template, read_template, robot_urdf, write_urdf
 
 __all__ = ["FORMATS", "ExportResult", "default_template", "export_model"]
 
@@ -39,7 +40,7 @@ class ExportResult:
     format : str
         ``urdf`` or ``mjcf``.
     template : Path
-        The URDF the file was built from.
+        The URDF the file was built from (a modified-DH table: the table, from which one was written).
     params : SimParameters
         The values written.
     checks : list of dict
@@ -239,7 +240,8 @@ def export_model(
     out : str or path-like
         The file to write (its folder must exist).
     template : str or path-like, optional
-        The URDF to copy (default: the one the model was identified on, :func:`default_template`).
+        The URDF to copy (default: the one the model was identified on, :func:`default_template`; for
+        a modified-DH table, a URDF written from it by :func:`dynid.simmodel.urdf.robot_urdf`).
     model_name : str
         How the model is named in the file's comment.
     reference_weight : float
@@ -262,9 +264,18 @@ def export_model(
     if fmt not in FORMATS:
         raise UsageError(f"unknown format {fmt!r}; choose one of {', '.join(FORMATS)}")
     robot = model.robot
-    tpl = default_template(robot) if template is None else Path(template)
-    root = read_template(tpl)
-    match = match_template(root, tpl, robot)
+    if template is None and Path(str(robot.source)).suffix.lower() == ".toml":
+        # a modified-DH table has no URDF: one is written from the robot's canonical tree
+        with tempfile.TemporaryDirectory() as folder:
+            generated = Path(folder) / f"{robot.name}.urdf"
+            generated.write_text(robot_urdf(robot), encoding="utf-8")
+            root = read_template(generated)
+            match = match_template(root, generated, robot)
+        tpl = Path(str(robot.source))
+    else:
+        tpl = default_template(robot) if template is None else Path(template)
+        root = read_template(tpl)
+        match = match_template(root, tpl, robot)
     reference = robot.with_params(match.template_params)
     params = simulator_parameters(model, reference, reference_weight=reference_weight)
     shares = None

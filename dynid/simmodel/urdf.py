@@ -10,7 +10,8 @@ comments); it changes only
 * each moving joint's ``<dynamics damping= friction=>``: viscous (N m s/rad) and Coulomb (N m) friction.
 
 URDF has no field for the armature (Pinocchio's ``model.armature``, MuJoCo's ``armature``): it is written
-only in the file's comment.  A template is accepted when its moving joints, once dynid's locked joints
+only in the file's comment.  A robot with no URDF of its own (a modified-DH table) gets one from its
+canonical tree (:func:`robot_urdf`: links, joints, limits, bodies; no geometry).  A template is accepted when its moving joints, once dynid's locked joints
 are set aside, have the model's names, order, placements and axes (to 1e-9).
 """
 
@@ -26,7 +27,7 @@ from numpy.typing import NDArray
 from dynid.exceptions import UsageError
 from dynid.identify.consistent import is_consistent
 
-__all__ = ["TemplateMatch", "match_template", "read_template", "write_urdf"]
+__all__ = ["TemplateMatch", "match_template", "read_template", "robot_urdf", "write_urdf"]
 
 _KINEMATIC_TOL = 1e-9
 
@@ -274,5 +275,69 @@ def write_urdf(root: ET.Element, match: TemplateMatch, robot, params, comment: s
     for old in [c for c in list(root) if c.tag is ET.Comment and "dynid export" in (c.text or "")]:
         root.remove(old)
     root.insert(0, ET.Comment(comment))
+    ET.indent(root, space="  ")
+    return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+
+
+_AXES = {"X": "1 0 0", "Y": "0 1 0", "Z": "0 0 1"}
+
+
+def robot_urdf(robot) -> str:
+    """A URDF of a robot's canonical tree: one link per joint, the joints with their limits, the tool frame.
+
+    For a robot with no URDF of its own (a modified-DH table).  It has no geometry; URDF has no
+    acceleration limit and no gravity (Pinocchio and MuJoCo assume ``0 0 -9.81``), and the effort limit,
+    which URDF requires, is written as 0 (unknown).
+
+    Parameters
+    ----------
+    robot : RobotModel
+        The robot.
+
+    Returns
+    -------
+    str
+        The URDF text.
+    """
+    import pinocchio as pin
+
+    root = ET.Element("robot", {"name": robot.name})
+    ET.SubElement(root, "link", {"name": "base_link"})
+    links = ["base_link"]
+    for i, joint in enumerate(robot.joints):
+        link = f"{joint.name}_link"
+        el = ET.SubElement(root, "link", {"name": link})
+        body = np.asarray(robot.params[10 * i : 10 * i + 10], dtype=float)
+        if body[0] > 0:
+            el.append(_inertial(body))
+        links.append(link)
+        kind = "revolute" if joint.revolute else "prismatic"
+        j = ET.SubElement(root, "joint", {"name": joint.name, "type": kind})
+        ET.SubElement(j, "parent", {"link": links[joint.parent]})
+        ET.SubElement(j, "child", {"link": link})
+        rpy = pin.rpy.matrixToRpy(np.asarray(joint.rotation, dtype=float))
+        ET.SubElement(j, "origin", {"xyz": " ".join(_num(v) for v in joint.translation), "rpy": " ".join(_num(v) for v in rpy)})
+        axis = _AXES.get(joint.kind[1]) if joint.kind[1] in _AXES else " ".join(_num(v) for v in joint.axis)
+        ET.SubElement(j, "axis", {"xyz": axis})
+        ET.SubElement(
+            j,
+            "limit",
+            {
+                "lower": _num(robot.q_min[i]),
+                "upper": _num(robot.q_max[i]),
+                "velocity": _num(robot.dq_max[i]),
+                "effort": "0",
+            },
+        )
+    ET.SubElement(root, "link", {"name": robot.tool_name})
+    tool = ET.SubElement(root, "joint", {"name": f"{robot.tool_name}_joint", "type": "fixed"})
+    ET.SubElement(tool, "parent", {"link": links[robot.tool_parent]})
+    ET.SubElement(tool, "child", {"link": robot.tool_name})
+    rpy = pin.rpy.matrixToRpy(np.asarray(robot.tool_rotation, dtype=float))
+    ET.SubElement(
+        tool,
+        "origin",
+        {"xyz": " ".join(_num(v) for v in robot.tool_translation), "rpy": " ".join(_num(v) for v in rpy)},
+    )
     ET.indent(root, space="  ")
     return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
