@@ -171,6 +171,12 @@ def _friction(model: IdentifiedModel, n: int) -> tuple[np.ndarray, np.ndarray, l
             shift.append(j + 1)
         else:  # "none"
             pass
+    negative = [j + 1 for j, c in enumerate(coefs) if c.get("fc", 0.0) < 0 or c.get("fv", 0.0) < 0]
+    leave(
+        "negative Coulomb or viscous coefficient",
+        negative,
+        "identified below zero (an unconstrained fit); a simulator needs >= 0, so 0 was written",
+    )
     leave("friction offset", offsets, "the constant torque fo of each joint (no simulator field)")
     leave("Stribeck friction", stribeck, "the static level above the Coulomb level at low speed")
     leave(

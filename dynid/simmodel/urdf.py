@@ -118,7 +118,11 @@ def match_template(root: ET.Element, path: str | Path, robot) -> TemplateMatch:
             f"(its moving joints: {', '.join(moving[:10])}); give the URDF of the robot the model was "
             "identified for"
         )
-    full = pin.buildModelFromUrdf(str(path))
+    try:
+        full = pin.buildModelFromUrdf(str(path))
+    except (ValueError, RuntimeError) as err:
+        first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        raise UsageError(f"Pinocchio cannot read the template '{path}' ({first}); check that it is a valid URDF") from None
     names = list(full.names)[1:]
     locked = [nm for nm in names if nm not in robot.joint_names]
     reduced = full
