@@ -139,7 +139,10 @@ def main() -> None:
     rss1 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"process peak RSS {rss1:.0f} MiB (ru_maxrss; {rss1 - rss0:+.0f} MiB over the data set-up)")
 
-    ols = identify(robot, train, method="ols", friction="linear", gmm="off", preprocessing=pre)
+    # the paper's baseline: unconstrained least squares (no bounds, no consistency projection)
+    ols = identify(
+        robot, train, method="ols", friction="linear", gmm="off", preprocessing=pre, physical=False
+    )
 
     def heldout(model) -> np.ndarray:
         ref = model.prepare(test).tau_reference

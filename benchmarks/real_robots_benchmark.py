@@ -195,6 +195,14 @@ def main() -> None:
     if check:
         print(f"physical check: {check['kept']}; ratios {np.round(check['ratio'], 2).tolist()}")
     print(f"bounds held at 0: {fig.get('bounds', {}).get('active')}")
+    cons = fig.get("consistency")
+    if cons:
+        rise = cons.get("rms_rise")
+        print(
+            f"link inertias: held at the consistency bound on links {cons['at_bound']}, "
+            f"{cons['mahalanobis']:.3g} std from the unconstrained estimate"
+            + ("" if rise is None else f", training RMS x{np.round(rise, 3).tolist()}")
+        )
     for note in fig.get("notes", []):
         print(f"  note: {note}")
     print(f"\nheld-out RMS (N m); reference: {ref_label}")

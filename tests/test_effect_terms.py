@@ -92,7 +92,7 @@ def test_the_model_file_keeps_the_terms_and_older_files_load(ur5, coupled, tmp_p
         )
     save_model(model, tmp_path / "M.json")
     doc = json.loads((tmp_path / "M.json").read_text())
-    assert doc["version"] == 2 and doc["effects"][0]["key"] == "coupled_friction@5+6"
+    assert doc["version"] == 3 and doc["effects"][0]["key"] == "coupled_friction@5+6"
     again = load_model(tmp_path / "M.json", robot=ur5)
     assert again.effects == model.effects
     np.testing.assert_allclose(again.predict(held), model.predict(held), atol=1e-10)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import warnings
 
 import numpy as np
@@ -237,3 +238,97 @@ def test_identify_command_writes_the_model_and_figures(ur5, pipeline_data, tmp_p
     assert code == 2
     assert "q has 6 columns; the robot 'panda' has 7 joints" in capsys.readouterr().err
     assert not (tmp_path / "P.json").exists()
+
+
+@pytest.fixture(scope="module")
+def impossible_data(ur5):
+    """Few noisy samples of a UR5 whose Iyy6 < 0: its unconstrained estimate has no consistent body."""
+    rng = np.random.default_rng(22)
+    cols = column_set(ur5)
+    params = ur5.params.copy()
+    params[10 * 5 + 6] = -0.02  # Iyy6 < 0: no body has that, and Iyy6 is a base parameter alone
+    extras = np.concatenate([np.full(6, 0.02), rng.uniform(0.5, 3, 6), rng.uniform(0.2, 2, 6), np.zeros(6)])
+    x_bad = cols.P @ np.concatenate([params, extras])
+    return synthetic_dataset(cols, x_bad, random_fourier(ur5, rng), rate=10, rng=rng, noise=0.3)
+
+
+@pytest.mark.parametrize("friction", ["linear", "seed"])  # layer 1 alone; the layers refitted together
+def test_default_fit_has_consistent_links_and_names_the_link_at_the_bound(
+    ur5, impossible_data, friction, tmp_path, capsys
+) -> None:
+    k = column_set(ur5).names.index("Iyy6")
+    free = identify(ur5, impossible_data, friction=friction, gmm="off", physical=False)
+    assert free.params[k] < 0 and free.standard_params is None and "consistency" not in free.info
+    model = identify(ur5, impossible_data, friction=friction, gmm="off")
+    c = model.info["consistency"]
+    assert model.params[k] >= 0
+    phi = model.standard_params
+    assert phi.shape == (6, 10)
+    assert np.all(np.linalg.eigvalsh(pseudo_inertia(phi)).min(axis=1) >= EPS * (1 - 1e-6))
+    # the standard set reproduces the model's base parameters
+    cols = model.columns
+    x_from_phi = cols.P[:, :60] @ phi.ravel()
+    link = np.array(cols.kinds) == "link"
+    np.testing.assert_allclose(x_from_phi[link], model.params[link], rtol=1e-7, atol=1e-9)
+    # with 1 period at 10 Hz and 0.3 N m of noise the data push every link against the bound (each
+    # multiplier >= 6 squared std); a consistent estimate names none (the test below)
+    assert 6 in c["at_bound"] and model.info["bounds"]["links_at_bound"] == c["at_bound"]
+    assert c["mahalanobis"] > 1 and max(c["rms_rise"]) > 1.005  # per joint: the weighted sum rises
+    # the model file (version 3) carries the bodies, as a URDF inertial takes them
+    json_path, _ = save_model(model, tmp_path / "M.json")
+    doc = json.loads(json_path.read_text())
+    assert doc["version"] == 3 and len(doc["links"]) == 6 and doc["links"][5]["at_bound"]
+    body = doc["links"][5]
+    c6 = np.array(body["com"])
+    ixx, ixy, ixz, iyy, iyz, izz = body["inertia_com"]
+    Ic = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
+    np.testing.assert_allclose(
+        Ic + body["mass"] * (c6 @ c6 * np.eye(3) - np.outer(c6, c6)),
+        [
+            [phi[5, 4], phi[5, 5], phi[5, 7]],
+            [phi[5, 5], phi[5, 6], phi[5, 8]],
+            [phi[5, 7], phi[5, 8], phi[5, 9]],
+        ],
+        atol=1e-12,
+    )
+    again = load_model(json_path, robot=ur5)
+    np.testing.assert_allclose(again.standard_params, phi, atol=0)
+    # a version-2 file (no bodies) still loads
+    del doc["links"], doc["consistency"]
+    doc["version"] = 2
+    json_path.write_text(json.dumps(doc))
+    old = load_model(json_path, robot=ur5)
+    assert old.standard_params is None and old.links() is None
+    np.testing.assert_allclose(old.params, model.params, atol=0)
+    # the command says which link is held at the bound
+    data = save_dataset(impossible_data, tmp_path / "D.csv")
+    assert (
+        main(
+            [
+                "identify",
+                "--robot",
+                "ur5",
+                "--data",
+                str(data),
+                "--gmm",
+                "off",
+                "--out",
+                str(tmp_path / "C.json"),
+            ]
+        )
+        == 0
+    )
+    assert re.search(r"held at the physical-consistency bound on links? [0-9, ]*6 ", capsys.readouterr().out)
+
+
+def test_default_fit_keeps_an_estimate_that_is_consistent_as_it_is(ur5) -> None:
+    rng = np.random.default_rng(21)  # the data of test_consistent_fit_returns_a_consistent_estimate_unchanged
+    cols = column_set(ur5)
+    x = true_parameters(cols, rng)
+    ds = synthetic_dataset(cols, x, random_fourier(ur5, rng, periods=2), rate=50, rng=rng, noise=0.01)
+    model = identify(ur5, ds, method="irls", friction="linear", gmm="off")
+    free = identify(ur5, ds, method="irls", friction="linear", gmm="off", physical=False)
+    assert model.info["consistency"]["at_bound"] == [] and model.info["bounds"]["active"] == []
+    assert model.info["consistency"]["mahalanobis"] < 1e-6
+    np.testing.assert_allclose(model.params, free.params, rtol=1e-9, atol=1e-12)
+    assert np.all(np.linalg.eigvalsh(pseudo_inertia(model.standard_params)).min(axis=1) > 0)

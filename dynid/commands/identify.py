@@ -131,6 +131,27 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_json_argument(parser)
 
 
+def _links_line(figures: dict) -> str:
+    """One line on the links' physical consistency: as identified, or which links sit at the bound."""
+    c = figures.get("consistency")
+    if c is None:
+        return "link inertias: not checked for physical consistency (--unconstrained)"
+    held = c.get("at_bound", [])
+    if not held:
+        return "link inertias: physically consistent as identified" + (
+            f" ({c['mahalanobis']:.3g} std from the unconstrained estimate)"
+            if c["mahalanobis"] > 1e-6
+            else ""
+        )
+    rise = c.get("rms_rise")
+    rise_text = "" if rise is None else f"; training RMS x{min(rise):.3g}..x{max(rise):.3g} per joint"
+    return (
+        f"link inertias: held at the physical-consistency bound on link{'s' if len(held) > 1 else ''} "
+        f"{', '.join(str(k) for k in held)} ({c['mahalanobis']:.3g} std from the unconstrained estimate"
+        f"{rise_text}; --unconstrained lifts it)"
+    )
+
+
 def run(args: argparse.Namespace) -> int:
     import time
 
@@ -229,12 +250,7 @@ def run(args: argparse.Namespace) -> int:
                 "; "
             )
         )
-    if "consistency" in figures:
-        c = figures["consistency"]
-        print(
-            f"consistent: relative distance {c['relative_distance']:.3g}, {c['mahalanobis']:.3g} std from the "
-            f"unconstrained estimate; smallest pseudo-inertia eigenvalue {min(c['min_eigenvalues']):.3g}"
-        )
+    print(_links_line(figures))
     print(f"wrote {json_path} and {arrays_path}")
     write_figures(args.json, {**figures, "elapsed_s": elapsed, "model": str(json_path)})
     return 0

@@ -57,7 +57,7 @@ from dynid._io import atomic_path, dumps_json, to_jsonable
 from dynid._threads import single_blas_thread
 from dynid.exceptions import DynidError, ModelFileError, UsageError
 from dynid.identify.columns import ColumnSet, column_set, linear_torque
-from dynid.identify.consistent import ConsistentLS, pseudo_inertia
+from dynid.identify.consistent import ConsistentLS, consistent_projection, link_inertials, pseudo_inertia
 from dynid.identify.dataset import Dataset
 from dynid.identify.effect_terms import (
     Candidate,
@@ -106,8 +106,10 @@ OLS with the joint fit kept and 0.84x with the physical layers first)."""
 METHODS = (*ESTIMATORS, "consistent")
 """Layer-1 methods: ``ols``, ``wls``, ``gls``, ``irls``, ``consistent``."""
 FORMAT = "dynid-model"
-VERSION = 2
-"""Model file version: 2 adds effect terms and a coupled transmission; version-1 files still load."""
+VERSION = 3
+"""Model file version: 2 adds effect terms and a coupled transmission; 3 the links' consistent standard
+parameters (``links``: mass, centre of mass and inertia of each body, as a URDF inertial takes them) and the
+links held at the consistency bound; version-1 and -2 files still load."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -429,7 +431,30 @@ class IdentifiedModel:
                 "validation_rms": self.info.get("gmm_validation_rms"),
             },
             **{k: v for k, v in self.info.items() if k != "gmm_validation_rms"},
+            "links": self.links(),
         }
+
+    @property
+    def standard_params(self) -> NDArray[np.float64] | None:
+        """Consistent standard parameters of the links, shape (n, 10) (kg, kg m, kg m^2 about each link
+        frame's origin), or None for an unconstrained fit (and model files before version 3 made without
+        the method ``consistent``)."""
+        c = self.info.get("consistency")
+        if not c or "standard_params" not in c:
+            return None
+        return np.asarray(c["standard_params"], dtype=np.float64).reshape(self.robot.n, 10)
+
+    def links(self) -> list[dict[str, Any]] | None:
+        """Each link's body as a URDF inertial takes it (:func:`dynid.identify.consistent.link_inertials`),
+        with ``name`` (its joint) and ``at_bound``; None without consistent standard parameters."""
+        phi = self.standard_params
+        if phi is None:
+            return None
+        held = set(self.info["consistency"].get("at_bound", []))
+        return [
+            {"joint": name, **body, "at_bound": j + 1 in held}
+            for j, (name, body) in enumerate(zip(self.robot.joint_names, link_inertials(phi), strict=True))
+        ]
 
 
 # ---------------------------------------------------------------------------- the pipeline
@@ -580,24 +605,33 @@ class ThreeLayerModel:
         if hasattr(est, "n_iter_"):
             info["irls"] = {"iterations": int(est.n_iter_), "converged": bool(est.converged_)}
         lower = physical_lower_bounds(cols) if self.physical else None
+        consistent = self._consistency()
         x0 = est.params_
         if lower is not None and hasattr(est, "R_"):
             x0 = bounded_triangular(est.R_, est.rhs_, lower)
         if joint:
-            x, cov, friction, source, gmr, rms_layers = self._joint(system, est, info, x0, lower)
+            x, cov, friction, source, gmr, rms_layers = self._joint(system, est, info, x0, lower, consistent)
         else:
+            if consistent is not None and not isinstance(est, ConsistentLS):
+                x0 = self._project_layer1(system, est, x0, consistent, info)
             x, cov, friction, source, gmr, rms_layers = self._sequence(system, est, info, x0)
+        # the barrier of the consistent projection stops a rounding error inside a bound: put it on it
+        if lower is not None:
+            x = np.asarray(x, dtype=np.float64).copy()
+            x[_at_bound(x, lower)] = lower[_at_bound(x, lower)]
         info["bounds"] = _bounds_info(cols, np.asarray(x), lower)
         system.release()
         if isinstance(est, ConsistentLS):
-            info["consistency"] = {
-                "relative_distance": est.distance_["relative"],
-                "mahalanobis": est.distance_["mahalanobis"],
-                "rms_change": [float(v) for v in est.distance_["rms_change"]],
-                "min_eigenvalues": [float(v) for v in est.min_eigenvalues_],
-                "standard_params": [float(v) for v in est.standard_],
-                "solver": est.solver_,
-            }
+            info["consistency"] = _consistency_figures(
+                est.standard_,
+                est.solver_,
+                relative_distance=est.distance_["relative"],
+                mahalanobis=est.distance_["mahalanobis"],
+                rms_before=est.unconstrained_.rms_,
+                rms_after=est.rms_,
+            )
+        if "consistency" in info:
+            info["bounds"]["links_at_bound"] = list(info["consistency"]["at_bound"])
         if gmr is not None:
             info["gmm_validation_rms"] = gmr.validation_rms_.tolist()
         self.link_ = est
@@ -619,6 +653,44 @@ class ThreeLayerModel:
             effect_reference=effect_reference,
         )
         return self
+
+    def _consistency(self) -> dict[str, Any] | None:
+        """Options of the consistent projection of the link parameters (None: the unconstrained fit).
+
+        Every physical fit keeps its links consistent (``J >= eps I`` for every pseudo-inertia): when the
+        base parameters admit such a standard set they are kept as they are; otherwise they are projected to
+        the closest one in the estimate's own metric and the later layers refitted on what they leave.
+        The method ``consistent`` adds its pull toward the URDF bodies.
+        """
+        if self.method == "consistent":
+            return {"reference_weight": self.reference_weight}
+        if self.physical:
+            return {"reference_weight": 0.0}
+        return None
+
+    def _project_layer1(
+        self, system, est: LinkEstimator, x0, consistent: dict[str, Any], info: dict[str, Any]
+    ):
+        """Layer 1 made consistent: the closest consistent parameters in the weighted least-squares metric."""
+        cols = system.columns
+        x_hat = np.asarray(est.params_, dtype=np.float64)
+        sigma2 = float(est.rss_) / max(system.m * cols.n - cols.p, 1)
+        x_c, phi, solver = consistent_projection(
+            self.robot, cols, x_hat, est.R_, max(sigma2, 1e-300), **consistent
+        )
+        if solver["iterations"] == 0:
+            x_c = np.asarray(x0, dtype=np.float64)
+        with single_blas_thread():
+            before, after = system.rms(x0), system.rms(x_c)
+        info["consistency"] = _consistency_figures(
+            phi[: 10 * cols.n],
+            solver,
+            relative_distance=float(np.linalg.norm(x_c - x_hat) / max(np.linalg.norm(x_hat), 1e-300)),
+            mahalanobis=float(np.linalg.norm(est.R_ @ (x_c - x_hat)) / np.sqrt(max(sigma2, 1e-300))),
+            rms_before=before,
+            rms_after=after,
+        )
+        return x_c
 
     def _effect_terms(self, layer1_friction: bool) -> tuple[Candidate, ...]:
         """The effect terms asked for, checked against what the model identifies anyway."""
@@ -782,12 +854,9 @@ class ThreeLayerModel:
         }
         return phys
 
-    def _joint(self, system, est: LinkEstimator, info: dict[str, Any], x0, lower):
+    def _joint(self, system, est: LinkEstimator, info: dict[str, Any], x0, lower, consistent):
         """The layers refitted together (:func:`dynid.identify.refine.refine`)."""
         cols = system.columns
-        consistent = None
-        if self.method == "consistent":
-            consistent = {"reference_weight": self.reference_weight}
         out = refine(
             system,
             x0,
@@ -817,15 +886,14 @@ class ThreeLayerModel:
         info["refinement"] = refinement
         if "consistency" in out.info:
             c = out.info["consistency"]
-            phi = np.asarray(c["standard_params"], dtype=np.float64)
-            J = pseudo_inertia(phi.reshape(-1, 10))
-            info["consistency"] = {
-                "relative_distance": c["relative_distance"],
-                "mahalanobis": c["mahalanobis"],
-                "min_eigenvalues": [float(np.linalg.eigvalsh(j).min()) for j in J],
-                "standard_params": c["standard_params"],
-                "solver": c["solver"],
-            }
+            info["consistency"] = _consistency_figures(
+                c["standard_params"],
+                c["solver"],
+                relative_distance=c["relative_distance"],
+                mahalanobis=c["mahalanobis"],
+                rms_before=c.get("rms_unprojected"),
+                rms_after=c.get("rms_projected"),
+            )
         return out.params, cov, friction, source, out.gmr, out.rms_layers
 
     def predict(self, q, dq=None, ddq=None) -> NDArray[np.float64]:
@@ -846,14 +914,46 @@ def _rms(r: NDArray[np.float64]) -> list[float]:
     return [float(v) for v in np.sqrt(np.mean(r**2, axis=0))]
 
 
+def _consistency_figures(
+    standard, solver: dict[str, Any], *, relative_distance, mahalanobis, rms_before, rms_after
+) -> dict[str, Any]:
+    """JSON-ready figures of the consistent projection (``info["consistency"]``).
+
+    ``at_bound`` names the links (1-based) whose consistency constraint held the fit away from the
+    unconstrained estimate; ``rms_before`` / ``rms_after`` are the training RMS (N m per joint) of the
+    fit before and after the projection (the later layers refitted), ``rms_rise`` their ratio.
+    """
+    phi = np.asarray(standard, dtype=np.float64)
+    J = pseudo_inertia(phi.reshape(-1, 10))
+    out: dict[str, Any] = {
+        "relative_distance": float(relative_distance),
+        "mahalanobis": float(mahalanobis),
+        "min_eigenvalues": [float(np.linalg.eigvalsh(j).min()) for j in J],
+        "standard_params": [float(v) for v in phi],
+        "solver": dict(solver),
+        "at_bound": [int(k) for k in solver.get("at_bound", [])],
+    }
+    if rms_before is not None and rms_after is not None:
+        b = np.asarray(rms_before, dtype=np.float64)
+        a = np.asarray(rms_after, dtype=np.float64)
+        out["rms_before"] = b.tolist()
+        out["rms_after"] = a.tolist()
+        out["rms_rise"] = (a / np.where(b > 0, b, 1.0)).tolist()
+    return out
+
+
 def _bounds_info(
     cols: ColumnSet, x: NDArray[np.float64], lower: NDArray[np.float64] | None
 ) -> dict[str, Any]:
     """Whether the fit was bounded and which parameters sit at their bound (JSON-ready)."""
     if lower is None:
         return {"physical": False, "active": []}
-    at = np.isfinite(lower) & (x <= lower + 1e-12 * max(1.0, float(np.abs(x).max(initial=0.0))))
-    return {"physical": True, "active": [cols.names[i] for i in np.flatnonzero(at)]}
+    return {"physical": True, "active": [cols.names[i] for i in np.flatnonzero(_at_bound(x, lower))]}
+
+
+def _at_bound(x: NDArray[np.float64], lower: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Parameters at their lower bound, to 1e-12 of the largest parameter."""
+    return np.isfinite(lower) & (x <= lower + 1e-12 * max(1.0, float(np.abs(x).max(initial=0.0))))
 
 
 def _layer1_friction(cols: ColumnSet, x: NDArray[np.float64], prep: Prepared) -> NDArray[np.float64]:

@@ -284,7 +284,9 @@ def _refine(
         kappa, _ = long_run_factor(resid, prep.noise_correlation)
         scale2 = float(np.sum(weights * kappa * np.mean(resid**2, axis=0)) / n)
         x_sel, info["consistency"] = _consistent_step(system, C, x_sel, step.R, scale2, consistent, x0)
+        info["consistency"]["rms_unprojected"] = _rms(resid)  # the training RMS before the projection
         fric, corr = _nuisance_step(C, tau, x_sel, Fb, Gb, layer, gmr)
+        info["consistency"]["rms_projected"] = _rms(tau - C.torque(x_sel) - fric - corr)
     link = C.torque(x_sel)
     resid = tau - link - fric - corr
     cov_sel, kappa = _covariance(step, resid, weights, prep.noise_correlation, Fb, Gb)
@@ -527,15 +529,17 @@ def _covariance(step: _LinkSolution, resid, weights, floor, Fb, Gb):
 
 def _consistent_step(system, C: _Columns, x_sel, R, scale2, options, x0):
     """Project the refined link parameters onto physically consistent ones (Mahalanobis metric)."""
-    from dynid.identify.consistent import consistent_solution
+    from dynid.identify.consistent import consistent_projection
 
     cols = system.columns
     x_full = np.asarray(x0, dtype=np.float64).copy()
     x_full[C.sel] = x_sel
     mask = np.zeros(cols.p, dtype=bool)
     mask[C.sel] = True
-    phi, solver = consistent_solution(cols.robot, cols, x_full, R, max(scale2, 1e-300), mask=mask, **options)
-    x_c = cols.P[mask] @ phi
+    x_proj, phi, solver = consistent_projection(
+        cols.robot, cols, x_full, R, max(scale2, 1e-300), mask=mask, **options
+    )
+    x_c = x_proj[mask]
     info = {
         "mahalanobis": float(np.linalg.norm(R @ (x_c - x_sel)) / np.sqrt(max(scale2, 1e-300))),
         "relative_distance": float(np.linalg.norm(x_c - x_sel) / max(np.linalg.norm(x_sel), 1e-300)),
