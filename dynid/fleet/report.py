@@ -53,7 +53,8 @@ def _flagged_figure(drift: Any, robot: str, tests: list[Any]) -> bytes:
         ax.axvline(t.change_order - 0.5, color="#d62728", ls="--", lw=1)
         ax.hlines([t.before, t.after], [order[0], t.change_order], [t.change_order - 1, order[-1]],
                   color="#d62728", lw=1)
-        ax.set_title(f"{t.parameter}: change at recording {t.change_order}", fontsize=9)
+        ax.set_title(f"{t.parameter}: change at recording {t.change_order} ({t.change_time})", fontsize=9)
+        ax.set_xticks(order, [str(x) for x in s["time"]], rotation=30, ha="right")
         ax.set_xlabel("recording", fontsize=8)
         ax.tick_params(labelsize=7)
     png = figure_png(fig)
@@ -73,15 +74,16 @@ def _overview_figure(drift: Any, names: list[str], flagged: set[tuple[str, str]]
             if s is None or not s["value"]:
                 continue
             order, value, std = np.array(s["order"]), np.array(s["value"]), np.array(s["std"])
-            ref = value[0] if value[0] != 0 else 1.0
+            shift = value - value[0]
             hot = (robot, name) in flagged
             colour = colours[k % len(colours)] if hot else "#999999"
             k += hot
-            ax.fill_between(order, (value - 2 * std) / ref, (value + 2 * std) / ref, color=colour,
-                            alpha=0.15 if hot else 0.04, lw=0)
-            ax.plot(order, value / ref, "-", color=colour, lw=1.4 if hot else 0.6,
-                    label=robot if hot else None, zorder=3 if hot else 2)
-        ax.set_title(f"{name} / first recording", fontsize=9)
+            ax.fill_between(order, shift - 2 * std, shift + 2 * std, color=colour, alpha=0.15 if hot else 0.04, lw=0)
+            ax.plot(order, shift, "-", color=colour, lw=1.4 if hot else 0.6, label=robot if hot else None,
+                    zorder=3 if hot else 2)
+            ax.set_xticks(order)
+        ax.set_title(f"{name}: change since the first recording", fontsize=9)
+        ax.set_xlabel("recording", fontsize=8)
         ax.tick_params(labelsize=7)
         if k:
             ax.legend(fontsize=6, loc="best")
@@ -146,8 +148,8 @@ def write_fleet_report(result: Any, path: str | os.PathLike[str]) -> Path:
                 figure_html(
                     _overview_figure(drift, overview, {(t.robot, t.parameter) for t in drift.flagged}),
                     title="tested parameters over time, every robot",
-                    caption="Each robot's value relative to its first recording, with +-2 sd bands; flagged "
-                    "robots in colour, the others grey.",
+                    caption="Each robot's value minus its value in its first recording (SI units), with +-2 sd "
+                    "bands; flagged robots in colour, the others grey.",
                 )
             )
         outliers = drift.fleet_outliers
@@ -167,11 +169,16 @@ def write_fleet_report(result: Any, path: str | os.PathLike[str]) -> Path:
             f"{drift.alpha:g}.</p>"
         )
         body.append(heading("How the tests read the standard deviations", "inflation"))
+        inflated = [[k, v] for k, v in drift.inflation.items() if v > 1.0]
         body.append(
-            '<p class="note">Variance factor per parameter, measured on the fleet (median over robots of the '
-            "constancy statistic over its median under no change, at least 1).</p>"
+            '<p class="note">Each parameter\'s variances are multiplied by a factor measured on the fleet (the '
+            "median over robots of the constancy statistic over its median under no change, at least 1): "
+            + ("the spread between recordings is within the identifications' own for every parameter (factor 1)."
+               if not inflated else "factors above 1 below; every other parameter's is 1.")
+            + "</p>"
         )
-        body.append(html_table(["parameter", "factor"], [[k, v] for k, v in drift.inflation.items()]))
+        if inflated:
+            body.append(html_table(["parameter", "factor"], inflated))
     if result.errors:
         body.append(heading("Refused recordings", "errors"))
         body.append(html_table(["path", "why"], [[r["path"], r["error"]] for r in result.errors], text_columns=2))
