@@ -202,3 +202,9 @@ def test_a_refused_recording_is_reported_and_the_fleet_goes_on(fleet, tmp_path):
     assert [bool(r["error"]) for r in result.rows] == [False, False, True]
     assert "q_" in result.rows[2]["error"] or "column" in result.rows[2]["error"]
     assert result.drift is None and result.column("fc1")[2] != result.column("fc1")[2]  # NaN: no parameters
+
+
+def test_the_diagnosis_needs_held_out_data(fleet):
+    recordings = find_recordings(fleet["pattern"])[:1]
+    with pytest.raises(UsageError, match=r"the diagnosis needs held-out data"):
+        identify_fleet("ur5", recordings, serial=True, diagnose=True, holdout=0.0, **OPTIONS)

@@ -419,7 +419,7 @@ def identify_fleet(
     UsageError
         No recording matches, a manifest without a recording, an unknown option, no scheduler at the address.
     DataError
-        No recording could be identified (each one's sentence is in the message's first).
+        No recording could be identified (the message quotes the first recording's sentence).
     """
     from dynid._cluster import cluster_client
 
