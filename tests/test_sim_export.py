@@ -100,6 +100,33 @@ def test_mjcf_export_reloads_in_mujoco_with_the_identified_friction(ur5_model, t
     assert "dynid export (mjcf)" in out.read_text()
 
 
+def test_an_mjcf_template_is_filled_in_place(ur5_model, tmp_path, capsys):
+    """The robot's own MJCF as the template: its geoms and actuators stay, the values are the model's."""
+    mujoco = pytest.importorskip("mujoco", reason="the MJCF export needs mujoco (pip install dynid[mujoco])")
+    path, _ = ur5_model
+    model = load_model(path)
+    first = tmp_path / "first.xml"
+    export_model(model, "mjcf", first)
+    root = ET.parse(first).getroot()
+    body = next(b for b in root.iter("body") if b.get("name") == "forearm_link")
+    ET.SubElement(body, "geom", {"name": "forearm_shape", "type": "capsule", "size": "0.04 0.2", "mass": "0"})
+    actuators = ET.SubElement(root, "actuator")
+    ET.SubElement(actuators, "motor", {"name": "elbow_motor", "joint": "elbow_joint"})
+    template = tmp_path / "robot.xml"
+    ET.ElementTree(root).write(template)
+    out = tmp_path / "filled.xml"
+    assert main(["export", "--model", str(path), "--format", "mjcf", "--template", str(template), "--out", str(out)]) == 0
+    m = mujoco.MjModel.from_xml_path(str(out))
+    assert m.ngeom == 1 and m.nu == 1
+    assert "visual and collision geometry" not in capsys.readouterr().out
+    _one_line_error(
+        capsys,
+        ["export", "--model", str(path), "--format", "urdf", "--template", str(template), "--out", str(tmp_path / "x.urdf")],
+        "a URDF is written from a URDF",
+        tmp_path / "x.urdf",
+    )
+
+
 def test_panda_with_locked_fingers_keeps_them(panda, tmp_path):
     mujoco = pytest.importorskip("mujoco", reason="the MJCF export needs mujoco (pip install dynid[mujoco])")
     path, _ = _identified(panda, tmp_path, "panda")

@@ -29,9 +29,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--template",
-        metavar="robot.urdf",
-        help="URDF to copy (visuals, collisions, meshes and limits are kept; default: the robot description "
-        "the model was identified on); the MJCF is built from it by MuJoCo",
+        metavar="robot.urdf|robot.xml",
+        help="robot description to copy (visuals, collisions, meshes and limits are kept; default: the one the "
+        "model was identified on): a URDF (for mjcf MuJoCo builds the MJCF from it) or, for mjcf, the robot's "
+        "own MJCF (filled in place through MuJoCo's MjSpec)",
     )
     parser.add_argument("--out", required=True, metavar="FILE", help="file to write (.urdf, or .xml for mjcf)")
     parser.add_argument(
@@ -49,10 +50,12 @@ def run(args: argparse.Namespace) -> int:
 
     if args.format not in _SUFFIX:
         raise UsageError(f"--format is '{args.format}'; choose urdf or mjcf")
-    if args.template is not None and Path(args.template).suffix.lower() != ".urdf":
+    suffix = None if args.template is None else Path(args.template).suffix.lower()
+    if suffix is not None and suffix != ".urdf" and not (args.format == "mjcf" and suffix in (".xml", ".mjcf")):
+        wanted = "URDF" if args.format == "urdf" else "URDF or MuJoCo .xml"
         raise UsageError(
-            f"--template '{args.template}' is not a .urdf file; give the robot's URDF (the MJCF is built from it "
-            "by MuJoCo)"
+            f"--template '{args.template}' is not a {wanted} file; give the robot's {wanted} (a URDF is written "
+            "from a URDF)"
         )
     check_outputs(
         [

@@ -264,6 +264,8 @@ def export_model(
     if fmt not in FORMATS:
         raise UsageError(f"unknown format {fmt!r}; choose one of {', '.join(FORMATS)}")
     robot = model.robot
+    if template is not None and Path(template).suffix.lower() in (".xml", ".mjcf"):
+        return _export_into_mjcf(model, fmt, Path(out), Path(template), model_name, reference_weight, heldout)
     if template is None and Path(str(robot.source)).suffix.lower() == ".toml":
         # a modified-DH table has no URDF: one is written from the robot's canonical tree
         with tempfile.TemporaryDirectory() as folder:
@@ -291,18 +293,7 @@ def export_model(
 
         text = build_mjcf(text, robot, params, comment)
     out = Path(out)
-    with atomic_path(out) as tmp:
-        tmp.write_text(text, encoding="utf-8")
-        checks = [check_urdf(tmp, model, params)] if fmt == "urdf" else check_mjcf(tmp, model, params)
-        failed = [c for c in checks if not c["passed"]]
-        if failed:
-            what = "; ".join(
-                f"{c['check']}: error {c.get('relative_error', 'see joints')}" for c in failed
-            )
-            raise IdentificationError(
-                f"the exported {fmt.upper()} does not reproduce the identified model when reloaded ({what}); "
-                f"nothing was written to {out}: report this with the model file"
-            )
+    checks = _write_checked(out, fmt, text, model, params)
     return ExportResult(
         path=out,
         format=fmt,
@@ -312,4 +303,47 @@ def export_model(
         not_carried=items,
         locked=list(match.locked),
         heldout=shares,
+    )
+
+
+def _write_checked(out: Path, fmt: str, text: str, model, params: SimParameters) -> list[dict[str, Any]]:
+    """Write ``text`` to ``out`` only if the reload checks pass (see :func:`export_model`)."""
+    with atomic_path(out) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+        checks = [check_urdf(tmp, model, params)] if fmt == "urdf" else check_mjcf(tmp, model, params)
+        failed = [c for c in checks if not c["passed"]]
+        if failed:
+            what = "; ".join(f"{c['check']}: error {c.get('relative_error', 'see joints')}" for c in failed)
+            raise IdentificationError(
+                f"the exported {fmt.upper()} does not reproduce the identified model when reloaded ({what}); "
+                f"nothing was written to {out}: report this with the model file"
+            )
+    return checks
+
+
+def _export_into_mjcf(model, fmt, out: Path, template: Path, model_name, reference_weight, heldout) -> ExportResult:
+    """An MJCF template filled through MuJoCo's MjSpec (:func:`dynid.simmodel.mjcf.write_into_mjcf`)."""
+    from dynid.simmodel.mjcf import write_into_mjcf
+    from dynid.symbolic.robot import load_robot
+
+    if fmt != "mjcf":
+        raise UsageError(
+            f"--template '{template}' is an MJCF; a URDF is written from a URDF template: give the robot's URDF, "
+            "or --format mjcf"
+        )
+    if not template.is_file():
+        raise UsageError(f"the template '{template}' does not exist; give the robot's MuJoCo .xml")
+    robot = model.robot
+    reference = robot.with_params(load_robot(template).params)
+    params = simulator_parameters(model, reference, reference_weight=reference_weight)
+    shares = None
+    if heldout is not None:
+        from dynid.simmodel.shares import heldout_shares
+
+        shares = heldout_shares(model, params, fmt, heldout)
+    items = _shares(model, params.not_carried, "mjcf-template", params, shares)
+    text = write_into_mjcf(template, robot, params, _comment(model_name, fmt, params, items, []))
+    checks = _write_checked(out, fmt, text, model, params)
+    return ExportResult(
+        path=out, format=fmt, template=template, params=params, checks=checks, not_carried=items, heldout=shares
     )

@@ -8,6 +8,11 @@ the compiled ``mjModel`` (``dof_armature``, ``dof_damping``, ``dof_frictionloss`
 placements, inertials and the joint parameters are then written again from the ``mjModel`` at full
 precision (the reload check needs 1e-6 relative).  ``mujoco`` is an optional dependency
 (``pip install dynid[mujoco]``).
+
+An MJCF template (:func:`write_into_mjcf`) is changed in place through MuJoCo's ``MjSpec`` instead, so
+its meshes, geoms, actuators and defaults stay: each moving joint's body gets the identified body (the
+joint frame is the body frame moved to the joint's ``pos``; bodies welded below it lose their mass, as
+Pinocchio merges them), each joint its armature, damping and frictionloss.
 """
 
 from __future__ import annotations
@@ -20,7 +25,7 @@ import numpy as np
 
 from dynid.exceptions import UsageError
 
-__all__ = ["build_mjcf", "import_mujoco"]
+__all__ = ["build_mjcf", "import_mujoco", "write_into_mjcf"]
 
 
 def import_mujoco():
@@ -128,3 +133,130 @@ def build_mjcf(urdf_text: str, robot, params, comment: str) -> str:
     out.insert(0, ET.Comment(comment))
     ET.indent(out, space="  ")
     return ET.tostring(out, encoding="unicode") + "\n"
+
+
+def _welded(body) -> list:
+    """Bodies welded to ``body`` (no joint of their own), recursively."""
+    out = []
+    for child in body.bodies:
+        if len(child.joints) == 0:
+            out.append(child)
+            out.extend(_welded(child))
+    return out
+
+
+def write_into_mjcf(template, robot, params, comment: str) -> str:
+    """The identified values written into an MJCF template (see the module docstring).
+
+    Parameters
+    ----------
+    template : str or Path
+        The MJCF to copy; its moving joints must be the model's (names, kinematics).
+    robot : RobotModel
+        The model's robot.
+    params : SimParameters
+        The values to write.
+    comment : str
+        Text of the comment put first inside ``<mujoco>``.
+
+    Returns
+    -------
+    str
+        The MJCF text.
+
+    Raises
+    ------
+    UsageError
+        A template MuJoCo cannot read, another robot, a body with several joints.
+    """
+    from dynid.symbolic.robot import load_robot
+
+    mujoco = import_mujoco()
+    try:
+        spec = mujoco.MjSpec.from_file(str(template))
+    except ValueError as err:
+        raise UsageError(f"MuJoCo cannot read the template '{template}' ({err}); give a MuJoCo .xml") from None
+    other = load_robot(template)
+    if other.joint_names != robot.joint_names:
+        raise UsageError(
+            f"the template '{template}' has the moving joints {', '.join(other.joint_names)}; the model has "
+            f"{', '.join(robot.joint_names)}; give the MJCF of the robot the model was identified for"
+        )
+    for a, b in zip(robot.joints, other.joints, strict=True):
+        off = max(float(np.abs(a.rotation - b.rotation).max()), float(np.abs(a.translation - b.translation).max()))
+        if off > 1e-6 or a.parent != b.parent:
+            raise UsageError(
+                f"the joint '{a.name}' sits elsewhere in the template '{template}' than in the model (placement "
+                f"differs by {off:.3g}): the template describes another robot; give the MJCF of the same robot"
+            )
+    folder = os.path.dirname(os.path.abspath(str(template)))
+    for attr in ("meshdir", "texturedir"):  # the copy is written elsewhere: its assets by absolute paths
+        value = getattr(spec, attr, "") or ""
+        setattr(spec, attr, os.path.normpath(os.path.join(folder, value)))
+    if spec.compiler.inertiafromgeom == mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_TRUE:
+        spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_AUTO
+    for i, name in enumerate(robot.joint_names):
+        joint = spec.joint(name)
+        body = joint.parent
+        if len(body.joints) != 1:
+            raise UsageError(
+                f"the body '{body.name}' of the template holds {len(body.joints)} joints; dynid writes one body "
+                "per joint: give each joint a body of its own"
+            )
+        v = params.standard[10 * i : 10 * i + 10]
+        m = float(v[0])
+        c = v[1:4] / m
+        Io = np.array([[v[4], v[5], v[7]], [v[5], v[6], v[8]], [v[7], v[8], v[9]]])
+        Ic = Io - m * (float(c @ c) * np.eye(3) - np.outer(c, c))
+        w, V = np.linalg.eigh(0.5 * (Ic + Ic.T))
+        if np.linalg.det(V) < 0:
+            V[:, 0] *= -1
+        quat = np.zeros(4)
+        mujoco.mju_mat2Quat(quat, V.flatten())
+        body.explicitinertial = True
+        body.mass = m
+        body.ipos = c + np.asarray(joint.pos, dtype=float)
+        body.iquat = quat
+        body.inertia = w
+        for welded in _welded(body):
+            welded.explicitinertial = True
+            welded.mass = 0.0
+            welded.inertia = [0.0, 0.0, 0.0]
+        joint.armature = float(params.armature[i])
+        damping = np.array(joint.damping, dtype=float).ravel()  # MuJoCo 4: [linear, higher orders...]
+        if damping.size > 1 and np.any(damping[1:] != 0):
+            raise UsageError(
+                f"the joint '{name}' of the template has nonlinear damping {damping.tolist()}; dynid writes a "
+                "linear viscous coefficient: set the joint's damping to one value"
+            )
+        damping[0] = float(params.damping[i])
+        joint.damping = damping if damping.size > 1 else float(damping[0])
+        joint.frictionloss = float(params.frictionloss[i])
+    try:
+        model = spec.compile()
+    except ValueError as err:
+        raise UsageError(f"MuJoCo cannot compile the template with the identified values ({err})") from None
+    root = ET.fromstring(spec.to_xml())
+    for body in root.iter("body"):  # full precision again, from the compiled model
+        name = body.get("name")
+        if name is None or mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name) < 0:
+            continue
+        bid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
+        inertial = body.find("inertial")
+        if inertial is not None:
+            inertial.set("pos", _nums(model.body_ipos[bid]))
+            inertial.set("quat", _nums(model.body_iquat[bid]))
+            inertial.set("mass", _nums(model.body_mass[bid]))
+            inertial.set("diaginertia", _nums(model.body_inertia[bid]))
+            inertial.attrib.pop("fullinertia", None)
+    for joint in root.iter("joint"):
+        name = joint.get("name")
+        if name in robot.joint_names:
+            i = robot.joint_names.index(name)
+            joint.set("armature", _nums(params.armature[i]))
+            joint.set("damping", _nums(params.damping[i]))
+            joint.set("frictionloss", _nums(params.frictionloss[i]))
+    for old in [c for c in list(root) if c.tag is ET.Comment and "dynid export" in (c.text or "")]:
+        root.remove(old)
+    root.insert(0, ET.Comment(comment))
+    return ET.tostring(root, encoding="unicode") + "\n"
