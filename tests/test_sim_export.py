@@ -61,6 +61,24 @@ def test_urdf_export_reloads_in_pinocchio_and_keeps_the_template(ur5_model, tmp_
     assert {it["what"] for it in result.not_carried} >= {"friction offset", "armature"}
 
 
+def test_an_unconstrained_fit_gets_the_closest_consistent_bodies(ur5, tmp_path):
+    """Without stored consistent bodies the export computes the closest ones (Mahalanobis) and says so."""
+    rng = np.random.default_rng(3)
+    cols = column_set(ur5, friction=True, armature=True)
+    x = true_parameters(cols, rng)
+    ds = synthetic_dataset(cols, x, random_fourier(ur5, rng, periods=1, base_freq=0.2), rate=200, rng=rng, noise=0.5)
+    model = identify(ur5, ds, method="ols", friction="linear", gmm="off", physical=False)
+    assert "consistency" not in model.info
+    result = export_model(model, "urdf", tmp_path / "ur5.urdf")
+    p = result.params
+    assert p.source == "closest consistent set" and is_consistent(p.standard).all()
+    assert result.checks[0]["passed"]
+    # the projection moves the base parameters by at most a few standard deviations of their estimate
+    assert 0 < p.projection["mahalanobis"] < 10  # this estimate was not consistent: it moved
+    rel = p.projection["relative"]
+    assert 0 <= rel < 0.05
+
+
 def test_a_file_that_does_not_hold_the_values_fails_the_check(ur5_model, tmp_path):
     path, _ = ur5_model
     model = load_model(path)
