@@ -5,6 +5,9 @@
 // symbols.  Every result is written as a named casadi::Function (Function::save) that the Python
 // casadi module loads.  Built once per environment by dynid/symbolic/build.py.
 //
+// Two translation units that compile in parallel, about equally long: this file (the specification,
+// the regressor, inverse dynamics, gravity and kinematics) and gen_mass.cpp (mass matrix, forward dynamics).
+//
 // Usage: dynid-generator SPEC_FILE OUT_DIR
 //
 // Specification (whitespace separated, one record per line):
@@ -15,16 +18,11 @@
 //   armature VALUE                                       (of the last joint)
 //   tool NAME PARENT R00 .. R22 px py pz                 (placement of the tool frame in joint PARENT)
 // TYPE is one of RX RY RZ PX PY PZ RU PU (RU / PU: unaligned axis a).
-#include <pinocchio/autodiff/casadi.hpp>
+#include "generator.hpp"
 
-#include <pinocchio/multibody.hpp>
-#include <pinocchio/algorithm/aba.hpp>
-#include <pinocchio/algorithm/crba.hpp>
 #include <pinocchio/algorithm/kinematics.hpp>
 #include <pinocchio/algorithm/regressor.hpp>
 #include <pinocchio/algorithm/rnea.hpp>
-
-#include <casadi/casadi.hpp>
 
 #include <fstream>
 #include <iostream>
@@ -32,14 +30,6 @@
 #include <stdexcept>
 #include <string>
 #include <vector>
-
-namespace pin = pinocchio;
-using SX = ::casadi::SX;
-using ModelD = pin::ModelTpl<double>;
-using ModelS = pin::ModelTpl<SX>;
-using DataS = pin::DataTpl<SX>;
-using VecS = Eigen::Matrix<SX, Eigen::Dynamic, 1>;
-using MatS = Eigen::Matrix<SX, Eigen::Dynamic, Eigen::Dynamic>;
 
 namespace {
 
@@ -135,11 +125,7 @@ VecS symbols(const std::string & name, long n, SX & flat) {
   return v;
 }
 
-SX to_sx(const MatS & m) {
-  SX out(m.rows(), m.cols());
-  pin::casadi::copy(m, out);
-  return out;
-}
+}  // namespace
 
 void save(const std::string & dir, const std::string & name, const std::vector<SX> & in,
           const std::vector<std::string> & in_names, const std::vector<SX> & out,
@@ -148,7 +134,30 @@ void save(const std::string & dir, const std::string & name, const std::vector<S
   f.save(dir + "/" + name + ".casadi");
 }
 
-}  // namespace
+
+void generate_regressor(const ModelS & model, DataS & data, const Symbols & s, const std::string & dir) {
+  // Joint-torque regressor Y(q, dq, ddq), n x 10n, Pinocchio's parameter order per joint:
+  // m, m c_x, m c_y, m c_z, Ixx, Ixy, Iyy, Ixz, Iyz, Izz about the joint frame.
+  pin::computeJointTorqueRegressor(model, data, s.q, s.dq, s.ddq);
+  save(dir, "regressor", {s.q_, s.dq_, s.ddq_}, {"q", "dq", "ddq"}, {to_sx(data.jointTorqueRegressor)}, {"Y"});
+}
+
+void generate_rnea_gravity(const ModelS & model, DataS & data, const Symbols & s, const std::string & dir) {
+  // Inverse dynamics with the model's own inertias and armature.
+  pin::rnea(model, data, s.q, s.dq, s.ddq);
+  save(dir, "rnea", {s.q_, s.dq_, s.ddq_}, {"q", "dq", "ddq"}, {to_sx(data.tau)}, {"tau"});
+
+  pin::computeGeneralizedGravity(model, data, s.q);
+  save(dir, "gravity", {s.q_}, {"q"}, {to_sx(data.g)}, {"g"});
+}
+
+void generate_fk(const ModelS & model, DataS & data, const Symbols & s, const std::string & dir,
+                 pin::JointIndex parent, const pin::SE3 & placement) {
+  // Forward kinematics of the tool frame: position (3) and rotation matrix (3 x 3) in the base.
+  pin::forwardKinematics(model, data, s.q);
+  const pin::SE3Tpl<SX> oMt = data.oMi[parent] * placement.cast<SX>();
+  save(dir, "fk", {s.q_}, {"q"}, {to_sx(oMt.translation()), to_sx(oMt.rotation())}, {"p", "R"});
+}
 
 int main(int argc, char ** argv) {
   if (argc != 3) {
@@ -163,37 +172,18 @@ int main(int argc, char ** argv) {
     DataS data(model);
     const long n = model.nv;
 
-    SX q_, dq_, ddq_, tau_;
-    const VecS q = symbols("q", n, q_);
-    const VecS dq = symbols("dq", n, dq_);
-    const VecS ddq = symbols("ddq", n, ddq_);
-    const VecS tau = symbols("tau", n, tau_);
+    Symbols s;
+    s.q = symbols("q", n, s.q_);
+    s.dq = symbols("dq", n, s.dq_);
+    s.ddq = symbols("ddq", n, s.ddq_);
+    s.tau = symbols("tau", n, s.tau_);
 
-    // Joint-torque regressor Y(q, dq, ddq), n x 10n, Pinocchio's parameter order per joint:
-    // m, m c_x, m c_y, m c_z, Ixx, Ixy, Iyy, Ixz, Iyz, Izz about the joint frame.
-    pin::computeJointTorqueRegressor(model, data, q, dq, ddq);
-    save(dir, "regressor", {q_, dq_, ddq_}, {"q", "dq", "ddq"}, {to_sx(data.jointTorqueRegressor)},
-         {"Y"});
-
-    // Inverse dynamics with the model's own inertias and armature.
-    pin::rnea(model, data, q, dq, ddq);
-    save(dir, "rnea", {q_, dq_, ddq_}, {"q", "dq", "ddq"}, {to_sx(data.tau)}, {"tau"});
-
-    pin::computeGeneralizedGravity(model, data, q);
-    save(dir, "gravity", {q_}, {"q"}, {to_sx(data.g)}, {"g"});
-
-    pin::crba(model, data, q, pin::Convention::WORLD);
-    MatS M = data.M;
-    M.triangularView<Eigen::StrictlyLower>() = M.transpose().triangularView<Eigen::StrictlyLower>();
-    save(dir, "mass_matrix", {q_}, {"q"}, {to_sx(M)}, {"M"});
-
-    pin::aba(model, data, q, dq, tau, pin::Convention::WORLD);
-    save(dir, "aba", {q_, dq_, tau_}, {"q", "dq", "tau"}, {to_sx(data.ddq)}, {"ddq"});
-
-    // Forward kinematics of the tool frame: position (3) and rotation matrix (3 x 3) in the base.
-    pin::forwardKinematics(model, data, q);
-    const pin::SE3Tpl<SX> oMt = data.oMi[tool.parent] * tool.placement.cast<SX>();
-    save(dir, "fk", {q_}, {"q"}, {to_sx(oMt.translation()), to_sx(oMt.rotation())}, {"p", "R"});
+    // The same algorithms in the same order on the same data as a single file would run them.
+    generate_regressor(model, data, s, dir);
+    generate_rnea_gravity(model, data, s, dir);
+    generate_mass_matrix(model, data, s, dir);
+    generate_aba(model, data, s, dir);
+    generate_fk(model, data, s, dir, tool.parent, tool.placement);
   } catch (const std::exception & e) {
     std::cerr << "dynid-generator: " << e.what() << "\n";
     return 1;
