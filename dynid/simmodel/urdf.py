@@ -18,8 +18,8 @@ are set aside, have the model's names, order, placements and axes (to 1e-9).
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -56,6 +56,7 @@ def read_template(path: str | Path) -> ET.Element:
     return root
 
 
+@dataclass(frozen=True, eq=False)
 class TemplateMatch:
     """How a template's links and joints hold a robot model's bodies.
 
@@ -77,8 +78,13 @@ class TemplateMatch:
         The template's armature as Pinocchio reads it (zero for a URDF).
     """
 
-    def __init__(self, **kw: Any) -> None:
-        self.__dict__.update(kw)
+    joint_elements: list[ET.Element]
+    child_links: list[str]
+    fixed_links: list[list[str]]
+    locked: list[str]
+    locked_share: NDArray[np.float64]
+    template_params: NDArray[np.float64]
+    template_armature: NDArray[np.float64]
 
 
 def _links_by_parent(root: ET.Element) -> dict[str, list[ET.Element]]:
