@@ -15,6 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from dynid.identify.consistent import pseudo_inertia
+
 pytestmark = pytest.mark.realdata
 REPO = Path(__file__).resolve().parents[1]
 
@@ -139,11 +141,18 @@ def panda_defaults(shared_data):
 def test_panda_defaults_beat_the_published_model_with_physical_layers_that_stand_alone(panda_defaults):
     model, rms = panda_defaults
     assert np.all(rms["full"] < rms["ref"]), rms  # Gaz et al.'s URDF + Table I friction, all 7 joints
-    assert np.all(rms["phys"] <= 1.1 * rms["ols"]), rms  # link + friction alone: a good model by itself
+    # link + friction alone: a good model by itself.  1.1x before the links were kept consistent; real
+    # bodies cost joint 4 12 % held out (0.161 -> 0.180 N m against 0.161 unconstrained, whatever the
+    # projection's metric, margin or pull toward the URDF), the price of a model a simulator accepts
+    assert np.all(rms["phys"] <= 1.15 * rms["ols"]), rms
+    assert np.sum(rms["phys"] <= 1.1 * rms["ols"]) >= 6, rms
     assert np.all(rms["full"] <= 1.02 * rms["phys"]), rms  # the correction never makes it worse
     kinds = np.asarray(model.columns.kinds)
     assert np.all(model.params[np.isin(kinds, ("armature", "coulomb", "viscous"))] >= 0)
-    assert model.info["bounds"]["physical"] and "ia3" in model.info["bounds"]["active"]
+    assert model.info["bounds"]["physical"]
+    # the links are real bodies (the unconstrained fit's are not: 7.8 std from the nearest consistent set)
+    J = pseudo_inertia(model.standard_params)
+    assert np.all(np.linalg.eigvalsh(J).min(axis=1) > 0) and model.info["consistency"]["mahalanobis"] > 1
     pre = model.preprocessing
     assert pre["cutoff_rule"].startswith("from the data") and 5.0 < pre["cutoff_hz"] < 20.0
     assert pre["dq_evidence"].startswith("measured dq used") and pre["dq"].startswith("measured")
