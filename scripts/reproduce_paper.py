@@ -23,10 +23,11 @@ than the identification's (a random feasible one over the same part of the works
 Methods, as in Table 2 / section 5 of the paper:
 
 * OLS: least squares on ``tau = [H_b H_f] delta`` with linear friction (the paper's baseline:
-  Coulomb and viscous, plus an offset, per joint, identified with the base parameters);
-* IRLS: the same model, iteratively reweighted by the joint-noise covariance;
+  Coulomb and viscous, plus an offset, per joint, identified with the base parameters), unconstrained;
+* IRLS: the same model, iteratively reweighted by the joint-noise covariance, unconstrained;
 * full: the three layers (IRLS links, the paper's friction, GMM correction), fitted together
-  (``rounds=2``); and the same in the paper's sequence (``rounds=0``) for comparison.
+  (``rounds=2``) with dynid's defaults (non-negative armature and friction, consistent links); and the
+  same in the paper's sequence (``rounds=0``) for comparison.
 
 Condition numbers, as in Table 2 (exact cond of the noise-weighted base regressor of all the
 trajectories designed, friction excluded), from :mod:`dynid.optim.excitation`:
@@ -178,9 +179,11 @@ def main(quick: bool = False, seed: int = 7, progress=print) -> dict:
 
     # 3. Identification (paper section 4) and the held-out residual RMS of each method.
     pre = Preprocessing(cutoff=20.0)  # 5th-order Butterworth, central differences
+    # The paper's OLS and IRLS are plain least squares: unconstrained (physical=False), not dynid's default
+    # physical fit (non-negative armature and friction, consistent links), which would move the baseline.
     methods = {
-        "ols": {"method": "ols", "friction": "linear", "gmm": "off"},
-        "irls": {"method": "irls", "friction": "linear", "gmm": "off"},
+        "ols": {"method": "ols", "friction": "linear", "gmm": "off", "physical": False},
+        "irls": {"method": "irls", "friction": "linear", "gmm": "off", "physical": False},
         "full": {"method": "irls", "friction": "seed", "gmm": "auto"},
         "full_sequence": {"method": "irls", "friction": "seed", "gmm": "auto", "rounds": 0},
     }
