@@ -124,6 +124,7 @@ _FRICTION_ITEMS = (
     "direction-dependent Coulomb friction",
     "nonlinear viscous friction",
     "sigmoid friction shape",
+    "negative Coulomb or viscous coefficient",
 )
 
 
@@ -161,6 +162,8 @@ def _shares(
         measured = None if heldout is None else _measured(heldout, item)
         if measured is not None:
             item["share"] = measured
+        elif heldout is not None:
+            item["share"] = "none on the held-out data (its torque there is zero to rounding)"
         elif item["what"] == "GMM correction" and "gmm" in layers and "friction" in layers:
             before = np.asarray(layers["friction"], dtype=float)
             after = np.asarray(layers["gmm"], dtype=float)
