@@ -18,6 +18,7 @@ from dynid.diagnosis.field_cases import (
     FIELD_ENCODER_BITS,
     FIELD_NOISE_TIME,
     field_case,
+    injected_noise,
     min_jerk_motion,
     true_noise_std,
 )
@@ -26,7 +27,7 @@ from dynid.validation.noise import detect_period
 
 @pytest.fixture(scope="module")
 def case(ur5):
-    return field_case(ur5, ["stribeck@3:2"], level=1.0, seed=3)
+    return field_case(ur5, ["stribeck@3:2"], level=1.0, seed=3, heldout_seconds=15.0)
 
 
 def test_training_is_periodic_and_the_heldout_run_is_not(case) -> None:
@@ -41,15 +42,18 @@ def test_training_is_periodic_and_the_heldout_run_is_not(case) -> None:
 
 def test_the_torque_noise_is_white_plus_ar1_of_100_ms(case) -> None:
     run = case.heldout_run
-    noise = case.heldout_noise
     # It is the noise the simulator added: the measured torque is the drive torque plus it, to the
     # current sensor's step.
     lsb = run.noise.current_lsb * run.truth.scales.torque
-    assert np.all(np.abs(run.tau - run.tau_drive - noise) <= 0.5 * lsb + 1e-9)
-    z = (noise - noise.mean(axis=0)) / noise.std(axis=0)
+    assert np.all(np.abs(run.tau - run.tau_drive - case.heldout_noise) <= 0.5 * lsb + 1e-9)
+    assert np.all(
+        np.abs(case.train_run.tau - case.train_run.tau_drive - injected_noise(case.train_run))
+        <= 0.5 * lsb + 1e-9
+    )
+    zs = [(v - v.mean(axis=0)) / v.std(axis=0) for v in (case.heldout_noise, injected_noise(case.train_run))]
 
     def acf(lag: int) -> float:
-        return float(np.mean(z[lag:] * z[:-lag]))
+        return float(np.mean(np.concatenate([z[lag:] * z[:-lag] for z in zs])))
 
     lag = round(FIELD_NOISE_TIME * run.rate)
     # White and coloured parts of equal variance: half the variance is correlated at one tick ...
