@@ -15,7 +15,7 @@ costs about 10 s a recording.  The drift tests (:mod:`dynid.fleet.drift`) then n
 
 Printed: the flagged robots with their parameters and recording of change against the truth; false
 flags among the unchanged robots; wall time of the identification on a LocalCluster of ``--workers``
-single-thread workers (default 2; warm: each worker has loaded the robot once) against the same
+single-thread workers (default 2; warm: each worker and this process have identified one recording first) against the same
 function run serially in this process; both tables compared; peak memory (``ru_maxrss``) of each
 worker and of this process.
 
@@ -54,14 +54,11 @@ def changed_robots(robots: int, recordings: int):
     return dict(zip(picks, kinds, strict=True))
 
 
-def _warm(robot_name: str) -> bool:
-    from dynid.identify.columns import column_set
-    from dynid.symbolic.export import compiled_functions
-    from dynid.symbolic.robot import load_robot
+def _warm(recording, options) -> bool:
+    """One identification, so that the process has loaded the robot's functions and their caches (2-3 s once)."""
+    from dynid.fleet.core import FleetSettings, identify_recording
 
-    robot = load_robot(robot_name)
-    compiled_functions(robot)
-    column_set(robot)
+    identify_recording("ur5", recording, FleetSettings(**options))
     return True
 
 
@@ -113,7 +110,7 @@ def main() -> None:
         )
         print(f"simulated on the cluster in {time.perf_counter() - start:.1f} s", flush=True)
         recordings = find_recordings(str(data / "**" / "*.csv"))
-        client.run(_warm, "ur5")
+        client.run(_warm, recordings[0], options)
         cpu0 = client.run(_cpu_seconds)
         load0 = os.getloadavg()[0]
         start = time.perf_counter()
@@ -122,7 +119,7 @@ def main() -> None:
         cpu_parallel = sum(client.run(_cpu_seconds).values()) - sum(cpu0.values())
         load1 = os.getloadavg()[0]
         memory = worker_peak_memory(client)
-    _warm("ur5")
+    _warm(recordings[0], options)
     cpu0_serial = _cpu_seconds()
     start = time.perf_counter()
     serial = identify_fleet("ur5", recordings, serial=True, **options)
