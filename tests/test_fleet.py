@@ -208,3 +208,39 @@ def test_the_diagnosis_needs_held_out_data(fleet):
     recordings = find_recordings(fleet["pattern"])[:1]
     with pytest.raises(UsageError, match=r"the diagnosis needs held-out data"):
         identify_fleet("ur5", recordings, serial=True, diagnose=True, holdout=0.0, **OPTIONS)
+
+
+def test_ros2_bags_go_through_the_same_reader_and_give_the_csv_rows(fleet, tmp_path):
+    """A robot's recordings as rosbag2 folders named by their date: found, read and identified as the CSVs."""
+    rosbag2 = pytest.importorskip("rosbags.rosbag2", reason="ROS 2 recordings are read with rosbags")
+    from rosbags.typesys import Stores, get_typestore
+
+    import dynid
+    from dynid.identify.dataset import load_dataset
+
+    store = get_typestore(Stores.LATEST)
+    types, kind = store.types, "sensor_msgs/msg/JointState"
+    names = list(dynid.load_robot("ur5").joint_names)
+    csv_rows = [r for r in fleet["serial"].rows if r["robot"] == "robot_00"]
+    for row in csv_rows:
+        ds = load_dataset(row["path"], 6)
+        folder = tmp_path / "bags" / "robot_00" / row["time"]
+        folder.parent.mkdir(parents=True, exist_ok=True)
+        with rosbag2.Writer(folder, version=9, storage_plugin=rosbag2.StoragePlugin.MCAP) as writer:
+            conn = writer.add_connection("/joint_states", kind, typestore=store)
+            for k in range(ds.m):
+                ns = 1_700_000_000 * 10**9 + round(float(ds.t[k]) * 1e9)
+                msg = types[kind](
+                    header=types["std_msgs/msg/Header"](
+                        stamp=types["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9), frame_id=""
+                    ),
+                    name=names, position=ds.q[k], velocity=np.zeros(0), effort=ds.tau[k],
+                )
+                writer.write(conn, ns, store.serialize_cdr(msg, kind))
+    bags = identify_fleet("ur5", str(tmp_path / "bags" / "**" / "*"), serial=True, drift=False, **OPTIONS)
+    assert [(r["robot"], r["time"], r["error"]) for r in bags.rows] == [
+        ("robot_00", r["time"], "") for r in csv_rows
+    ]
+    for bag_row, csv_row in zip(bags.rows, csv_rows, strict=True):
+        for p in fleet["serial"].parameters:
+            np.testing.assert_allclose(bag_row[p["name"]], csv_row[p["name"]], rtol=1e-6, atol=1e-9)
