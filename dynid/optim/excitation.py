@@ -101,6 +101,7 @@ import casadi as ca
 import numpy as np
 import scipy.linalg
 
+from dynid._threads import one_blas_thread
 from dynid.exceptions import ExcitationError, UsageError
 from dynid.optim.trajectory import FourierTrajectory
 from dynid.symbolic.robot import RobotModel
@@ -1236,13 +1237,28 @@ def _random_pool(
 
 
 def _greedy_baseline(
-    pool_H: list[np.ndarray], count: int, criterion: str, data: _CriterionData, gravity: np.ndarray
+    pool_H: list[np.ndarray],
+    count: int,
+    criterion: str,
+    data: _CriterionData,
+    gravity: np.ndarray,
+    alone: list[dict[str, float]] | None = None,
 ) -> float:
-    """Best value of ``criterion`` over stacks of ``count`` pool trajectories, chosen one at a time."""
+    """Best value of ``criterion`` over stacks of ``count`` pool trajectories, chosen one at a time.
+
+    ``alone``: the :func:`exact_figures` of each pool trajectory by itself (the first step's values),
+    when already computed.
+    """
     stack = np.zeros((0, pool_H[0].shape[1]))
     best = math.inf
-    for _ in range(count):
-        values = [exact_figures(np.vstack([stack, H]), criterion, data, gravity)["objective"] for H in pool_H]
+    for step in range(count):
+        if step == 0 and alone is not None:
+            key = "cond" if criterion == "cond" else "objective"
+            values = [fig[key] if math.isfinite(fig["cond"]) else math.inf for fig in alone]
+        else:
+            values = [
+                exact_figures(np.vstack([stack, H]), criterion, data, gravity)["objective"] for H in pool_H
+            ]
         k = int(np.argmin(values))
         stack = np.vstack([stack, pool_H[k]])
         best = values[k]
@@ -1259,6 +1275,7 @@ def _parallel(n_jobs: int, backend: str | None):
     return joblib.Parallel(n_jobs=n_jobs, backend=backend)
 
 
+@one_blas_thread
 def design_excitation(
     problem: ExcitationProblem,
     *,
@@ -1335,8 +1352,10 @@ def design_excitation(
     pool = _random_pool(problem, functions, np.random.default_rng([seed, 0, 1]), baseline)
     pool_H = [problem.regressor(traj) for traj in pool]
     data = _criterion_data(np.vstack(pool_H), gravity)
-    baseline_cond = _greedy_baseline(pool_H, trajectories, "cond", data, gravity)
-    baseline_objective = _greedy_baseline(pool_H, trajectories, criterion, data, gravity)
+    # every pool trajectory's exact figures once (three SVDs each), for both greedy stacks' first step
+    alone = [exact_figures(H, criterion, data, gravity) for H in pool_H]
+    baseline_cond = _greedy_baseline(pool_H, trajectories, "cond", data, gravity, alone)
+    baseline_objective = _greedy_baseline(pool_H, trajectories, criterion, data, gravity, alone)
 
     batch = max(1, joblib.effective_n_jobs(n_jobs))
     parallel = _parallel(n_jobs, backend)
