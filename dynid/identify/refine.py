@@ -47,6 +47,9 @@ corrections as often as harmful ones, and was dropped.)
 
 from __future__ import annotations
 
+import copy
+import hashlib
+import weakref
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -261,8 +264,7 @@ def _refine(
     for _ in range(max(1, int(rounds))):
         link = C.torque(x_sel)
         if layer2:
-            layer = FrictionLayer(model=friction).fit(prep.dq, tau - link - corr, prepared=prep, around=layer)
-            Fb = [prep.filter(B)[rows] for B in layer.basis(prep.dq)]
+            layer, Fb = _friction_step(system, friction, prep, tau - link - corr, layer)
             fric = np.column_stack([B @ mdl.linear_coef() for B, mdl in zip(Fb, layer.models_, strict=True)])
         if gmm != "off":
             r3 = tau - link - fric
@@ -305,6 +307,35 @@ def _refine(
         rms_layers={"link": _rms(tau - link), "friction": _rms(tau - link - fric), "gmm": _rms(resid)},
         info=info,
     )
+
+
+_FRICTION_MEMO: weakref.WeakKeyDictionary[LinearSystem, dict[bytes, tuple[FrictionLayer, list]]] = (
+    weakref.WeakKeyDictionary()
+)
+
+
+def _friction_step(system: LinearSystem, friction: str, prep, F, around: FrictionLayer | None):
+    """Friction fitted on ``F`` (with a search near ``around``), and its filtered columns at the kept rows.
+
+    A first round (no ``around``) is remembered per system and residual: the default identification
+    refines twice from the same layer-1 estimate (with and without the mixtures, see
+    :class:`dynid.identify.model.ThreeLayerModel`), and both first rounds fit the same friction to the
+    same residual; the second one takes a copy of the first's result (a quarter of the friction
+    searches of a default identification).
+    """
+    rows = prep.rows
+    memo = _FRICTION_MEMO.setdefault(system, {}) if around is None else None
+    key = b""
+    if memo is not None:
+        key = friction.encode() + hashlib.sha256(np.ascontiguousarray(F).tobytes()).digest()
+        if key in memo:
+            layer, Fb = memo[key]
+            return copy.deepcopy(layer), Fb
+    layer = FrictionLayer(model=friction).fit(prep.dq, F, prepared=prep, around=around)
+    Fb = [prep.filter(B)[rows] for B in layer.basis(prep.dq)]
+    if memo is not None:
+        memo[key] = (copy.deepcopy(layer), Fb)
+    return layer, Fb
 
 
 _SELECT_SAMPLES = 20_000  # training rows of the per-joint regressions that choose the mixture sizes
