@@ -1,0 +1,239 @@
+"""Speed where a user waits: the first-run build, one excitation design, the default identification.
+
+Prints three figures on this machine, each against a named baseline, with wall and CPU time and the
+load of the machine (``os.getloadavg``) before and after each part:
+
+``build``
+    The symbolic generator built from an empty cache (a temporary ``DYNID_CACHE_DIR``), as the first
+    ``dynid demo`` builds it: two translation units compiled in parallel at -O0, Pinocchio's
+    algorithms instantiated for the joint types dynid uses only.  Baseline: the issue's quoted 221 s
+    (previous recipe, one translation unit at -O1 with Pinocchio's 25 joint types, idle 2-core
+    machine); ``--build-baseline`` also rebuilds the previous recipe in this script (its source from
+    git history, ``git show 9121d39:dynid/symbolic/_generator/generator.cpp``; about 3.5 minutes of
+    CPU) and checks that both generators write byte-identical Functions for the UR5.
+``excite``
+    One UR5 design with the paper's criterion (``dynid excite --robot ur5 --criterion seed``: seed 0,
+    100 random baseline trajectories, 2 parallel tries): wall time, CPU time of the process and its
+    workers, and the cond ratio (cond / best random cond).  Baseline: the issue's quoted 93 s wall
+    (80 s without the random baseline), 156 s of CPU, cond ratio 0.34.
+``identify``
+    ``identify(robot, data)`` with default flags on the whole TX40 recording (45,000 rows, needs
+    ``../shared/data``), against OLS with linear friction in the same process; FIGAROH 0.2.4's 9.0 s on
+    the same recording is quoted from the issue.
+
+Run::
+
+    OMP_NUM_THREADS=1 python benchmarks/speed_benchmark.py [--part build excite identify] [--repeat N]
+        [--build-baseline]
+
+The machine may be shared: every time is printed with the CPU time beside it and the load averages.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import filecmp  # noqa: E402
+import resource  # noqa: E402
+import shutil  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+import warnings  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+ISSUE_BUILD_S = 221.0
+ISSUE_EXCITE_S = (80.0, 93.0, 156.0, 0.34)  # wall without / with baseline, CPU, cond ratio
+FIGAROH_TX40_S = 9.0
+OLD_GENERATOR = "9121d39:dynid/symbolic/_generator/generator.cpp"
+
+
+def load() -> str:
+    one, five, fifteen = os.getloadavg()
+    return f"load {one:.1f} {five:.1f} {fifteen:.1f}"
+
+
+def children_cpu() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def self_cpu() -> float:
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
+
+
+def workers_cpu() -> float:
+    """CPU time (s) of the live child processes (joblib's workers), 0 without psutil."""
+    try:
+        import psutil
+    except ImportError:
+        return 0.0
+    total = 0.0
+    for child in psutil.Process().children(recursive=True):
+        try:
+            t = child.cpu_times()
+            total += t.user + t.system
+        except psutil.Error:
+            pass
+    return total
+
+
+def part_build(repeat: int, baseline: bool) -> None:
+    from dynid.symbolic import build
+
+    print(
+        f"\n== build of the symbolic generator from an empty cache ({build.build_jobs()} parallel compilers)"
+    )
+    for k in range(repeat):
+        with tempfile.TemporaryDirectory() as cache:
+            os.environ["DYNID_CACHE_DIR"] = cache
+            print(f"  [{load()}]")
+            c0, t0 = children_cpu(), time.perf_counter()
+            exe = build.generator_path(progress=None)
+            wall, cpu = time.perf_counter() - t0, children_cpu() - c0
+            print(f"  run {k + 1}: {wall:.1f} s wall, {cpu:.1f} s CPU (compilers)  [{load()}]")
+            if baseline and k == 0:
+                _build_baseline(exe)
+        os.environ.pop("DYNID_CACHE_DIR", None)
+    print(f"  baseline: the issue's quoted {ISSUE_BUILD_S:.0f} s (previous recipe, idle 2-core machine)")
+
+
+def _build_baseline(new_exe: Path) -> None:
+    """Build the previous recipe (one unit, -O1, every joint type) and compare the UR5's Functions."""
+    from dynid.symbolic import build, load_robot
+
+    repo = Path(__file__).resolve().parents[1]
+    try:
+        source = subprocess.run(
+            ["git", "-C", str(repo), "show", OLD_GENERATOR], capture_output=True, text=True, check=True
+        ).stdout
+    except (OSError, subprocess.CalledProcessError):
+        print("  previous recipe: its source is not in this checkout's git history; skipped")
+        return
+    prefix, casadi_dir = build._prefixes()
+    lib_dirs = [prefix / "lib", casadi_dir]
+    with tempfile.TemporaryDirectory() as work:
+        src = Path(work) / "generator.cpp"
+        src.write_text(source)
+        exe = Path(work) / "old-generator"
+        cmd = [
+            build.find_compiler("c++"),
+            "-std=c++17",
+            "-O1",
+            "-w",
+            *(f"-D{d}" for d in build._DEFINES),
+            f"-I{prefix / 'include'}",
+            f"-I{casadi_dir / 'include'}",
+            f"-I{casadi_dir / 'include' / 'eigen3'}",
+            str(src),
+            "-o",
+            str(exe),
+            *(f"-L{d}" for d in lib_dirs),
+            "-lpinocchio_default",
+            "-lcasadi",
+            *(f"-Wl,-rpath,{d}" for d in lib_dirs),
+        ]
+        c0, t0 = children_cpu(), time.perf_counter()
+        subprocess.run(cmd, check=True)
+        wall, cpu = time.perf_counter() - t0, children_cpu() - c0
+        print(f"  previous recipe, built here: {wall:.1f} s wall, {cpu:.1f} s CPU  [{load()}]")
+        spec = Path(work) / "ur5.spec"
+        spec.write_text(load_robot("ur5").spec)
+        same = True
+        for label, program in (("old", exe), ("new", new_exe)):
+            out = Path(work) / label
+            out.mkdir()
+            t0 = time.perf_counter()
+            subprocess.run([str(program), str(spec), str(out)], check=True)
+            print(f"  {label} generator: UR5 functions in {time.perf_counter() - t0:.2f} s")
+        names = sorted(p.name for p in (Path(work) / "old").glob("*.casadi"))
+        for name in names:
+            same &= filecmp.cmp(Path(work) / "old" / name, Path(work) / "new" / name, shallow=False)
+        print(f"  UR5 Functions of both generators byte-identical: {same} ({len(names)} files)")
+
+
+def part_excite(repeat: int) -> None:
+    from dynid.optim.excitation import ExcitationProblem, design_excitation
+    from dynid.symbolic import load_robot
+
+    print("\n== one UR5 excitation design, criterion seed (dynid excite defaults: seed 0, 2 parallel tries)")
+    robot = load_robot("ur5")
+    for k in range(repeat):
+        problem = ExcitationProblem(robot=robot, criterion="seed")
+        print(f"  [{load()}]")
+        c0, t0 = self_cpu() + children_cpu(), time.perf_counter()
+        result = design_excitation(problem, seed=0, n_jobs=2)
+        wall = time.perf_counter() - t0
+        cpu = self_cpu() + children_cpu() - c0 + workers_cpu()
+        stage = result.stages[0]
+        print(
+            f"  run {k + 1}: {wall:.1f} s wall, {cpu:.1f} s CPU (process and workers), cond {result.cond:.4g}, "
+            f"random baseline {result.baseline_cond:.4g}, ratio {result.cond / result.baseline_cond:.3f}; "
+            f"{stage.tries} tries, kept #{stage.kept + 1}  [{load()}]"
+        )
+    wall0, wall1, cpu0, ratio0 = ISSUE_EXCITE_S
+    print(
+        f"  baseline: the issue's quoted {wall1:.0f} s wall with the random baseline ({wall0:.0f} s without), "
+        f"{cpu0:.0f} s CPU, ratio {ratio0:.2f} (previous settings, idle 2-core machine)"
+    )
+
+
+def part_identify(repeat: int) -> None:
+    from dynid.identify.adapters import load_recording, recording_model_path
+    from dynid.identify.model import identify
+    from dynid.symbolic import load_robot
+
+    print("\n== default identification of the TX40 recording (45,000 rows) against OLS")
+    warnings.simplefilter("ignore")
+    try:
+        data = load_recording("tx40")
+    except Exception as exc:  # the shared recordings are not everywhere
+        print(f"  skipped: {exc}")
+        return
+    robot = load_robot(str(recording_model_path("tx40")))
+    identify(robot, data.select_rows(np.arange(2000)), method="ols", friction="linear", gmm="off")  # warm-up
+    for k in range(repeat):
+        print(f"  [{load()}]")
+        figures = []
+        for label, options in (
+            ("default", {}),
+            ("ols", {"method": "ols", "friction": "linear", "gmm": "off", "physical": False}),
+        ):
+            c0, t0 = self_cpu(), time.perf_counter()
+            identify(robot, data, **options)
+            figures.append(f"{label} {time.perf_counter() - t0:.2f} s wall / {self_cpu() - c0:.2f} s CPU")
+        print(f"  run {k + 1}: " + ", ".join(figures) + f"  [{load()}]")
+    print(f"  reference: FIGAROH 0.2.4 {FIGAROH_TX40_S:.1f} s on the same recording (quoted from the issue)")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
+    parser.add_argument(
+        "--part", nargs="+", choices=("build", "excite", "identify"), default=["build", "excite", "identify"]
+    )
+    parser.add_argument("--repeat", type=int, default=1, help="runs of each part (default 1)")
+    parser.add_argument(
+        "--build-baseline", action="store_true", help="also build the previous recipe here (minutes of CPU)"
+    )
+    args = parser.parse_args()
+    print(
+        f"{os.cpu_count()} cores, {load()}, python {sys.version.split()[0]}, compiler {shutil.which('c++')}"
+    )
+    if "build" in args.part:
+        part_build(args.repeat, args.build_baseline)
+    if "excite" in args.part:
+        part_excite(args.repeat)
+    if "identify" in args.part:
+        part_identify(args.repeat)
+
+
+if __name__ == "__main__":
+    main()
