@@ -1,5 +1,6 @@
 """``dynid diagnose``: where an identified model's held-out error lies, which effect causes it, how far adding it
-shrinks the gap."""
+shrinks the gap.  A simulator's description (URDF, MuJoCo .xml) is diagnosed as its nominal model, and
+``--out`` then writes the description corrected from the data (:mod:`dynid.simmodel.correct`)."""
 
 from __future__ import annotations
 
@@ -25,7 +26,11 @@ HELP = "diagnose the sim-to-real gap of a model: gap map, the effect behind it, 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "--model", required=True, metavar="M.json", help="model file written by 'dynid identify'"
+        "--model",
+        required=True,
+        metavar="M.json",
+        help="model file written by 'dynid identify', or a simulator's robot description (.urdf, MuJoCo .xml) "
+        "diagnosed as its nominal model: rigid body, armature, damping and Coulomb friction from the file",
     )
     parser.add_argument(
         "--data", required=True, metavar="D.csv", help="the training data the model was identified on"
@@ -60,7 +65,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--out",
         metavar="M2.json",
         help="write the model refitted on --data with the accepted effects added as model terms, and show "
-        "both models' held-out error",
+        "both models' held-out error; for a description (--model robot.urdf|robot.xml): the description "
+        "corrected from --data (link bodies, armature, damping, frictionloss; same format), reload-checked",
     )
     add_json_argument(parser)
 
@@ -71,9 +77,13 @@ def run(args: argparse.Namespace) -> int:
     from dynid.diagnosis.report import write_diagnosis_report
     from dynid.exceptions import UsageError
     from dynid.identify.model import load_model
+    from dynid.simmodel.nominal import description_model, is_description
     from dynid.validation.html_page import check_report_path
 
+    described = is_description(args.model)
     report = check_report_path(args.report, pdf=False) if args.report else None
+    if described and args.out:
+        _check_description_out(args)
     check_outputs(
         [
             output("report", args.report, (".html", ".htm")),
@@ -84,7 +94,9 @@ def run(args: argparse.Namespace) -> int:
                 (".json",),
                 also=model_files(args.out)[1:] if args.out else (),
                 hint="the model is JSON; its arrays go beside it as .npz",
-            ),
+            )
+            if not described
+            else output("out", args.out, _description_suffixes(args.model), hint="the format of --model"),
         ],
         {"model": args.model, "data": args.data, "heldout": args.heldout, "robot": robot_file(args)},
     )
@@ -95,12 +107,24 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--alpha is {args.alpha}; give a probability between 0 and 1, e.g. 0.05.")
     robot = None
     if args.robot is not None:
+        if described:
+            raise UsageError(
+                f"--robot is given with the description '{args.model}', which is the robot itself; leave --robot out"
+            )
         from dynid.symbolic.robot import load_robot
 
         robot = load_robot(args.robot)
-    model = load_model(args.model, robot=robot)
-    names = model.robot.joint_names
-    train = read_dataset(args.data, degrees=args.degrees, topic=args.topic, joint_names=names)
+    if described:
+        from dynid.symbolic.robot import load_robot
+
+        names = load_robot(args.model).joint_names
+        train = read_dataset(args.data, degrees=args.degrees, topic=args.topic, joint_names=names)
+        # nothing identified: the file as the simulator reads it, seen through the training data's filter
+        model = description_model(args.model, train)
+    else:
+        model = load_model(args.model, robot=robot)
+        names = model.robot.joint_names
+        train = read_dataset(args.data, degrees=args.degrees, topic=args.topic, joint_names=names)
     heldout = read_dataset(args.heldout, degrees=args.degrees, topic=args.topic, joint_names=names)
     check_data_fits_model(model, train, model_path=args.model, data_option="data")
     check_data_fits_model(model, heldout, model_path=args.model, data_option="heldout")
@@ -128,7 +152,11 @@ def run(args: argparse.Namespace) -> int:
         for line in settle["commands"]:
             print("  " + line)
     context = {}
-    if args.out:
+    if described:
+        figures["correction"] = _correct_description(args, result, train, heldout)
+        if args.out and figures["correction"].get("out"):
+            context["corrected description"] = f"{args.out} (held-out RMS per joint in the JSON figures)"
+    elif args.out:
         refit = _write_refit(model, train, heldout, result, args.out)
         figures["refit"] = refit
         if refit.get("written"):
@@ -151,6 +179,85 @@ def run(args: argparse.Namespace) -> int:
         )
         print(f"report written to {report}")
     return 0
+
+
+def _description_suffixes(path: str) -> tuple[str, ...]:
+    """The suffixes a corrected description may take: those of its own format."""
+    from pathlib import Path
+
+    return (".urdf",) if Path(path).suffix.lower() == ".urdf" else (".xml", ".mjcf")
+
+
+def _check_description_out(args) -> None:
+    """A corrected description is written in the format it was read in; an MJCF needs mujoco to be checked."""
+    from pathlib import Path
+
+    from dynid.exceptions import UsageError
+
+    wanted = _description_suffixes(args.model)
+    if Path(args.out).suffix.lower() not in wanted:
+        fmt = "URDF" if wanted == (".urdf",) else "MuJoCo MJCF"
+        raise UsageError(
+            f"--out '{args.out}' is not a {fmt}; the corrected description keeps the format of --model "
+            f"'{args.model}': give --out ending in {' or '.join(wanted)}"
+        )
+    if wanted != (".urdf",):
+        from dynid.simmodel.mjcf import import_mujoco
+
+        import_mujoco()
+
+
+def _correct_description(args, result, train, heldout) -> dict:
+    """The description's values corrected from the training data: which group separates the file from the
+    robot on held-out data, and with --out the corrected file (reload-checked)."""
+    import numpy as np
+
+    from dynid.simmodel.correct import correct_description
+
+    dec = result.decomposition
+    rm, rr, floor = (np.sqrt(np.asarray(dec[k], dtype=float)) for k in ("mse_model", "mse_refit", "noise"))
+    print(
+        "\nthe file as it stands is the starting gap; re-identifying its parameters on --data (what the "
+        "diagnosis' refit does) closes the parametric part"
+    )
+    print("held-out RMS (N m)  joint    file  refit   noise floor")
+    for j in range(len(rm)):
+        print(f"{'':<19} {j + 1:>5}  {rm[j]:6.3g} {rr[j]:6.3g}  {floor[j]:6.3g}")
+    corr = correct_description(args.model, train, heldout, out=args.out, floor=floor)
+    print(corr.finding())
+    print(
+        f"held-out RMS (N m, cut-off {corr.cutoff_hz:.3g} Hz as in the diagnosis), one group of the file corrected "
+        "at a time:"
+    )
+    groups = [g for g in corr.groups if g["applies"]]
+    print(f"{'joint':>5}  {'file':>7} " + " ".join(f"{g['group']:>12}" for g in groups) + f" {'corrected':>10}")
+    for j in range(len(corr.rms_nominal)):
+        print(
+            f"{j + 1:>5}  {corr.rms_nominal[j]:7.3g} "
+            + " ".join(f"{g['rms'][j]:12.3g}" for g in groups)
+            + f" {corr.rms_corrected[j]:10.3g}"
+        )
+    print(f"{'file':>12} " + " ".join(f"{'j' + str(j + 1):>8}" for j in range(len(corr.rms_nominal))))
+    for key in ("mass", "armature", "damping", "frictionloss"):
+        if key == "armature" and corr.format == "urdf":
+            continue
+        print(f"{key:>12} " + " ".join(f"{v:8.3g}" for v in corr.nominal[key]))
+        print(f"{'-> ' + key:>12} " + " ".join(f"{v:8.3g}" for v in corr.corrected[key]))
+    own = corr.rms_validate
+    print(
+        f"as 'dynid validate --model FILE' scores them (cut-off {own['cutoff_hz']:.3g} Hz chosen on the held-out "
+        f"data): mean RMS {np.mean(own['nominal']):.4g} -> {np.mean(own['corrected']):.4g} N m"
+    )
+    if corr.export is None:
+        if args.out is None:
+            print("give --out corrected" + _description_suffixes(args.model)[0] + " to write the corrected file")
+    else:
+        checks = ", ".join(c["check"] for c in corr.export.checks)
+        print(f"wrote {corr.export.path} (reload checks passed: {checks})")
+        for it in corr.not_carried:
+            joints = ",".join(str(j) for j in it.get("joints", []))
+            print(f"  not carried: {it['what']} (joints {joints or '-'})")
+    return corr.figures()
 
 
 def _settling_commands(args, model, heldout, result) -> dict | None:

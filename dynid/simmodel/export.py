@@ -178,7 +178,7 @@ def _shares(
                 "--heldout data to measure it"
             )
         out.append(item)
-    if fmt == "urdf":
+    if fmt == "urdf" and np.any(params.armature > 0):
         arm = {
             "what": "armature",
             "joints": [j + 1 for j in range(len(params.armature)) if params.armature[j] > 0],
