@@ -5,7 +5,8 @@ what a simulator cannot carry), :mod:`dynid.simmodel.urdf` (a copy of the robot'
 :mod:`dynid.simmodel.mjcf` (the MJCF MuJoCo builds from that URDF), :mod:`dynid.simmodel.checks` (the
 reload checks) and :mod:`dynid.simmodel.export` (:func:`export_model`, what ``dynid export`` calls) and
 :mod:`dynid.simmodel.nominal` (a URDF or MJCF as the model under test, what ``dynid validate --model
-robot.urdf`` scores).
+robot.urdf`` scores) and :mod:`dynid.simmodel.correct` (the description corrected from data, what ``dynid
+diagnose --model robot.urdf --out corrected.urdf`` writes).
 The submodules are imported on first use (``mujoco`` is optional).
 """
 
@@ -21,6 +22,7 @@ _EXPORTS = {
     "check_urdf": "checks",
     "check_mjcf": "checks",
     "description_model": "nominal",
+    "correct_description": "correct",
 }
 
 __all__, __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
