@@ -6,8 +6,10 @@ than one thread does (measured: QR of a 2,000 x 178 block, 0.1-1.7 s threaded ag
 
 from __future__ import annotations
 
+import contextlib
 import functools
-from collections.abc import Callable
+import threading
+from collections.abc import Callable, Iterator
 from typing import Any, TypeVar
 
 __all__ = ["one_blas_thread", "single_blas_thread"]
@@ -15,11 +17,34 @@ __all__ = ["one_blas_thread", "single_blas_thread"]
 F = TypeVar("F", bound=Callable[..., Any])
 
 
-def single_blas_thread():
-    """Context manager limiting BLAS to one thread (threadpoolctl)."""
-    from threadpoolctl import threadpool_limits
+_LOCK = threading.Lock()
+_DEPTH = 0
+_LIMITER: Any = None
 
-    return threadpool_limits(limits=1, user_api="blas")
+
+@contextlib.contextmanager
+def single_blas_thread() -> Iterator[None]:
+    """Context manager limiting BLAS to one thread (threadpoolctl).
+
+    Nested and concurrent uses share one limit, set by the first to enter and lifted by the last to
+    leave: setting a limit inspects every loaded library (about 3-10 ms), and a default identification
+    enters this context about a hundred times, mostly inside another one.
+    """
+    global _DEPTH, _LIMITER
+    with _LOCK:
+        if _DEPTH == 0:
+            from threadpoolctl import threadpool_limits
+
+            _LIMITER = threadpool_limits(limits=1, user_api="blas")
+        _DEPTH += 1
+    try:
+        yield
+    finally:
+        with _LOCK:
+            _DEPTH -= 1
+            if _DEPTH == 0:
+                _LIMITER.restore_original_limits()
+                _LIMITER = None
 
 
 def one_blas_thread(func: F) -> F:
