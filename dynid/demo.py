@@ -262,7 +262,7 @@ def run_demo(
 
         if first_build:
             say(
-                "first run in this environment: building the symbolic generator once (1-2 minutes on 2 cores, "
+                "first run in this environment: building the symbolic generator once (about 45 s on 2 idle cores, "
                 f"more on a slow machine), cached in {cache_dir()}; later runs skip this"
             )
         funcs = robot_functions(robot, progress=say)
