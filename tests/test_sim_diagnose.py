@@ -167,3 +167,58 @@ def test_bad_inputs_end_in_one_sentence(ur5_urdf, tmp_path, capsys):
         assert code == 2 and message in err and "Traceback" not in err, err
         assert err.strip().count("\n") == 0, err
     assert not list(tmp_path.glob("c.*"))
+
+
+def test_mujoco_tracks_a_trajectory_as_dynids_simulator_does(ur5, tmp_path):
+    """The same commanded motion, controller and robot in MuJoCo and in dynid's simulator.
+
+    With viscous friction both integrate the same semi-implicit Euler with the velocity terms implicit:
+    they agree to rounding.  With Coulomb friction (MuJoCo's frictionloss constraint against dynid's smoothed
+    sign) the drive torques agree to a few % of their RMS (the reversals).
+    """
+    pytest.importorskip("mujoco", reason="the forward check needs mujoco (pip install dynid[mujoco])")
+    from dynid.sim.effects import TruthFriction
+    from dynid.sim.truth import build_truth
+    from dynid.simmodel.mjcf import build_mjcf
+    from dynid.simmodel.parameters import SimParameters
+    from dynid.simmodel.rollout import forward_agreement
+
+    n = ur5.n
+    robot = ur5.with_params(armature=ARMATURE)
+    traj = random_fourier(robot, np.random.default_rng(1), periods=1, base_freq=0.2)
+    zero = np.zeros(n)
+    figures = {}
+    for kind, coulomb in (("viscous", zero), ("coulomb", COULOMB)):
+        friction = TruthFriction("linear", coulomb, coulomb, VISCOUS, zero, zero, zero, zero)
+        truth = build_truth(robot, friction=friction)
+        params = SimParameters(
+            standard=robot.params,
+            armature=ARMATURE,
+            damping=VISCOUS,
+            frictionloss=coulomb,
+            identified=np.zeros(0),
+            source="truth",
+        )
+        path = tmp_path / f"{kind}.xml"
+        path.write_text(build_mjcf(default_template(ur5).read_text(), robot, params, " truth "), encoding="utf-8")
+        figures[kind] = forward_agreement(truth, traj, path, duration=2.0)
+    viscous, coulomb = figures["viscous"], figures["coulomb"]
+    assert max(viscous["torque_relative"]) < 1e-9
+    assert max(viscous["tracking_difference_rms"]) < 1e-12
+    assert max(coulomb["torque_relative"]) < 0.05
+    # the tracking errors differ by a small part of their size
+    diff = np.array(coulomb["tracking_difference_rms"]) / np.array(coulomb["tracking_rms_dynid"])
+    assert diff.max() < 0.2
+    # the check can fail: a plant with 10 % more armature than the truth is seen in the torque
+    wrong = tmp_path / "wrong.xml"
+    params = SimParameters(
+        standard=robot.params,
+        armature=1.1 * ARMATURE,
+        damping=VISCOUS,
+        frictionloss=zero,
+        identified=np.zeros(0),
+        source="wrong",
+    )
+    wrong.write_text(build_mjcf(default_template(ur5).read_text(), robot, params, " wrong "), encoding="utf-8")
+    truth = build_truth(robot, friction=TruthFriction("linear", zero, zero, VISCOUS, zero, zero, zero, zero))
+    assert max(forward_agreement(truth, traj, wrong, duration=2.0)["torque_relative"]) > 1e-3

@@ -6,7 +6,8 @@ what a simulator cannot carry), :mod:`dynid.simmodel.urdf` (a copy of the robot'
 reload checks) and :mod:`dynid.simmodel.export` (:func:`export_model`, what ``dynid export`` calls) and
 :mod:`dynid.simmodel.nominal` (a URDF or MJCF as the model under test, what ``dynid validate --model
 robot.urdf`` scores) and :mod:`dynid.simmodel.correct` (the description corrected from data, what ``dynid
-diagnose --model robot.urdf --out corrected.urdf`` writes).
+diagnose --model robot.urdf --out corrected.urdf`` writes) and :mod:`dynid.simmodel.rollout` (a
+trajectory tracked in MuJoCo by dynid's controller, against dynid's simulator).
 The submodules are imported on first use (``mujoco`` is optional).
 """
 
@@ -23,6 +24,8 @@ _EXPORTS = {
     "check_mjcf": "checks",
     "description_model": "nominal",
     "correct_description": "correct",
+    "mujoco_tracking": "rollout",
+    "forward_agreement": "rollout",
 }
 
 __all__, __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
