@@ -57,7 +57,10 @@ def simulated_case(base: Path) -> Case:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         full = identify(robot, data, method="consistent", friction="seed", gmm=2, preprocessing=pre)
-        ols = identify(robot, data, method="ols", friction="linear", gmm="off", preprocessing=pre)
+        # the plain OLS baseline: unconstrained (no bounds, links not made consistent)
+        ols = identify(
+            robot, data, method="ols", friction="linear", gmm="off", preprocessing=pre, physical=False
+        )
     save_model(full, folder / "M.json")
     save_model(ols, folder / "M_ols.json")
     return Case(
