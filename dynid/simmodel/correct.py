@@ -106,10 +106,10 @@ class Correction:
 
     def finding(self) -> str:
         """One sentence: the group that closes most of the gap alone, and what the corrected file closes."""
-        best = max(self.groups, key=lambda g: g["closure"] if np.isfinite(g["closure"]) else -np.inf)
-        rest = ", ".join(
-            f"{g['group']} {100 * g['closure']:.0f} %" for g in self.groups if g is not best and g["applies"]
-        )
+        groups = [g for g in self.groups if g["applies"]]
+        best = max(groups, key=lambda g: g["closure"] if np.isfinite(g["closure"]) else -np.inf)
+        # round before printing, so that a closure of -0.001 reads 0 %, not -0 %
+        rest = ", ".join(f"{g['group']} {round(100 * g['closure']) + 0:d} %" for g in groups if g is not best)
         return (
             f"What separates the file from the robot: its {best['group']} (corrected alone, they close "
             f"{100 * best['closure']:.0f} % of the held-out gap{'; ' + rest if rest else ''}); every group corrected "
