@@ -109,11 +109,11 @@ class Correction:
         groups = [g for g in self.groups if g["applies"]]
         best = max(groups, key=lambda g: g["closure"] if np.isfinite(g["closure"]) else -np.inf)
         # round before printing, so that a closure of -0.001 reads 0 %, not -0 %
-        rest = ", ".join(f"{g['group']} {round(100 * g['closure']) + 0:d} %" for g in groups if g is not best)
+        rest = ", ".join(f"{g['group']} {_percent(g['closure'])}" for g in groups if g is not best)
         return (
             f"What separates the file from the robot: its {best['group']} (corrected alone, they close "
-            f"{100 * best['closure']:.0f} % of the held-out gap{'; ' + rest if rest else ''}); every group corrected "
-            f"closes {100 * self.closure_overall:.0f} % (mean RMS {np.mean(self.rms_nominal):.4g} -> "
+            f"{_percent(best['closure'])} of the held-out gap{'; ' + rest if rest else ''}); every group corrected "
+            f"closes {_percent(self.closure_overall)} (mean RMS {np.mean(self.rms_nominal):.4g} -> "
             f"{np.mean(self.rms_corrected):.4g} N m)."
         )
 
@@ -138,6 +138,11 @@ class Correction:
             "rms_validate": self.rms_validate,
             "pull": self.pull,
         }
+
+
+def _percent(share: float) -> str:
+    """A share as a whole percentage ("-" when undefined: no gap over the floor)."""
+    return f"{round(100 * share) + 0:d} %" if np.isfinite(share) else "-"
 
 
 def _values(standard, armature, damping, loss, n) -> dict[str, list[float]]:
