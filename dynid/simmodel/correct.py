@@ -254,7 +254,8 @@ def correct_description(
         with np.errstate(divide="ignore", invalid="ignore"):
             per = np.where(gap > 0.05 * np.maximum(fl**2, 1e-300), (rms_nom**2 - r**2) / gap, np.nan)
         scale = 1.0 / np.maximum(fl, 1e-12) ** 2 if np.all(fl > 0) else 1.0 / np.maximum(rms_nom, 1e-12) ** 2
-        total = float(np.sum((rms_nom**2 - r**2) * scale) / np.sum(np.maximum(rms_nom**2 - fl**2, 0.0) * scale))
+        den = float(np.sum(np.maximum(rms_nom**2 - fl**2, 0.0) * scale))
+        total = float(np.sum((rms_nom**2 - r**2) * scale)) / den if den > 0 else float("nan")
         return per, total
 
     groups = []
