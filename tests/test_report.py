@@ -189,7 +189,7 @@ def test_report_without_gmm_or_consistent_fit_says_so(case, tmp_path):
     doc = parse(report.html)
     assert len(doc.images) == len(FIGURES)
     assert "no model here has a GMM layer" in report.html
-    assert "No model here was identified with the physically consistent method" in report.html
+    assert "No model here carries physically consistent link parameters" in report.html
     path = report.write(tmp_path / "ols.html")
     assert path.read_text(encoding="utf-8") == report.html
 

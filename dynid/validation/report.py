@@ -12,7 +12,8 @@ What it shows, for the first model (the one validated) and the others (compared 
 * the residual before and after the GMM layer, against the noise floor;
 * friction torque against velocity with each model's friction law over the data (the paper's figure 6);
 * condition numbers, the base parameters with their relative standard deviation, and the physically
-  consistent link parameters (when a model was identified with ``method="consistent"``).
+  consistent link parameters (every physical fit, the default, and ``method="consistent"``; not an
+  ``--unconstrained`` one).
 
 Every number in the tables carries its exact value in a ``data-value`` attribute, and the figures of
 ``--json`` are embedded verbatim (``<script type="application/json" id="dynid-figures">``), so a
@@ -296,9 +297,9 @@ def _consistent_section(results: Sequence[ValidationResult]) -> str:
     r = next((r for r in results if "consistency" in r.model.info), None)
     if r is None:
         return (
-            '<p class="note">No model here was identified with the physically consistent method '
-            "(<code>--method consistent</code>), so there are no link parameters to show: base parameters are "
-            "combinations of them.</p>"
+            '<p class="note">No model here carries physically consistent link parameters (it was identified '
+            "with <code>--unconstrained</code>, or by an older dynid), so there are none to show: base "
+            "parameters are combinations of them.</p>"
         )
     c = r.model.info["consistency"]
     std = np.asarray(c["standard_params"], dtype=float)
