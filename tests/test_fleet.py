@@ -76,6 +76,7 @@ def test_the_table_holds_parameters_with_their_spread_and_the_held_out_error(fle
     # the held-out error is the last 20 %: 1.2 s of a 6 s recording
     assert np.allclose(result.column("heldout_s"), 1.2, atol=0.01)
     assert np.all(result.column("heldout_rms_mean") < 1.0)
+    assert all(isinstance(r["warnings"], str) for r in result.rows)  # dynid's warnings per recording, if any
 
 
 def test_a_friction_jump_is_flagged_at_its_recording_and_the_unchanged_robots_are_not(fleet):

@@ -14,7 +14,8 @@ task handed to Dask (``client.map``) on the client of :func:`dynid._cluster.clus
 runs the same function in this process, so both give the same table.
 
 The table has one row per recording: ``path, robot, time, order``, ``error`` (empty, or the sentence
-that refused the recording: one bad recording does not stop the fleet), the samples used, ``cond``,
+that refused the recording: one bad recording does not stop the fleet), ``warnings`` (dynid's warnings
+on the recording, joined by `` | ``), the samples used, ``cond``,
 every layer-1 parameter ``<name>`` with its standard deviation ``<name>_std`` (base parameters,
 armature ``ia<j>``, Coulomb ``fc<j>``, viscous ``fv<j>`` and offset ``fo<j>`` friction, SI units), the
 refitted friction coefficients ``friction.<coef><j>`` when layer 2 refits them, the held-out RMS per
@@ -179,9 +180,10 @@ def identify_recording(robot: Any, recording: Recording, settings: FleetSettings
         "error": "",
     }
     started = time.perf_counter()
+    caught: list[warnings.WarningMessage] = []
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
             extra = {} if settings.topic is None else {"topic": settings.topic}
             data = load_dataset(recording.path, robot.n, robot=robot, degrees=settings.degrees, **extra)
             train, held = _split(data, settings.holdout)
@@ -213,10 +215,20 @@ def identify_recording(robot: Any, recording: Recording, settings: FleetSettings
                 row["verdict"] = "+".join(diagnose(model, train, held).verdict)
     except DynidError as exc:
         row["error"] = str(exc)
+        row["warnings"] = _warning_text(caught)
         row["elapsed_s"] = time.perf_counter() - started
         return {"row": row, "parameters": None}
+    row["warnings"] = _warning_text(caught)
     row["elapsed_s"] = time.perf_counter() - started
     return {"row": row, "parameters": parameter_table(model)}
+
+
+def _warning_text(caught: list[warnings.WarningMessage]) -> str:
+    """dynid's own warnings of one recording, each once, joined by `` | `` (others, from libraries, left out)."""
+    from dynid.exceptions import DynidWarning
+
+    texts = [str(w.message) for w in caught if issubclass(w.category, DynidWarning)]
+    return " | ".join(dict.fromkeys(texts))
 
 
 def run_fleet(
