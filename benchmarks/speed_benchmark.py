@@ -27,6 +27,18 @@ Run::
         [--build-baseline]
 
 The machine may be shared: every time is printed with the CPU time beside it and the load averages.
+
+Measured on a shared 2-core machine (load 3-10, so the CPU times are the comparable figures):
+
+- build: 85-88 s of CPU (146 s wall at load 6, 229 s at load 10); the previous recipe rebuilt here
+  198-210 s of CPU (215 s wall at load 3-5, 586 s at load 10); byte-identical UR5 Functions.  On
+  2 idle cores the two units take about 45 s (each about 43 s of CPU).
+- excite: 154-155 s of CPU, 158 s wall at load 4 (375 s at load 10), ratio 0.353, 44 tries: the
+  tries cost what they did (IPOPT's limited-memory back-solves are most of a try).  What changed is
+  the designing process (one BLAS thread): the baseline and one try took 49-97 s wall before, 7.5 s
+  after, at load 9.
+- identify: default 9.3-9.6 s of CPU (13.8-17.9 s wall at load 6) against 12.2-12.6 s before on the
+  same code otherwise (identical parameters to the bit); OLS 0.7 s.
 """
 
 from __future__ import annotations
