@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from dynid.cli import main
+from dynid.diagnosis.field_cases import min_jerk_motion
 from dynid.exceptions import DataWarning
 
 RATE = 100.0
@@ -28,48 +29,6 @@ TRAIN_SECONDS = 25.0
 HELD_SECONDS = 37.0
 GAP_SECONDS = 0.5
 VARIANTS = ("uniform", "jittered", "duplicated", "gap")
-
-
-def min_jerk_motion(robot, rng: np.random.Generator, duration: float, *, rate: float = 1000.0):
-    """Minimum-jerk moves between random waypoints around the robot's case posture, with random rests.
-
-    Each move lasts long enough for half of the speed and acceleration limits, times a random factor in
-    [1, 1.6); after 40 % of the moves the arm rests for 0.3-1.2 s.  Nothing repeats.
-    """
-    from dynid.optim.trajectory import SampledTrajectory
-    from dynid.sim.cases import case_centre
-
-    centre = case_centre(robot)
-    if centre is None:
-        centre = 0.5 * (robot.q_min + robot.q_max)
-    half = np.minimum(0.8, 0.4 * (robot.q_max - robot.q_min))
-    vmax, amax = 0.5 * robot.dq_max, 0.5 * robot.ddq_max
-    knots_t, knots_q = [0.0], [centre]
-    t, q = 0.0, centre
-    while t < duration:
-        target = rng.uniform(centre - half, centre + half)
-        d = np.abs(target - q)
-        span = max(np.max(1.875 * d / vmax), np.max(np.sqrt(5.774 * d / amax)), 0.3)
-        t += span * rng.uniform(1.0, 1.6)
-        knots_t.append(t)
-        knots_q.append(target)
-        q = target
-        if rng.random() < 0.4:
-            t += rng.uniform(0.3, 1.2)
-            knots_t.append(t)
-            knots_q.append(target)
-    kt, kq = np.asarray(knots_t), np.asarray(knots_q)
-    tt = np.arange(round(duration * rate) + 1) / rate
-    k = np.clip(np.searchsorted(kt, tt, side="right") - 1, 0, len(kt) - 2)
-    span = (kt[k + 1] - kt[k])[:, None]
-    s = (tt[:, None] - kt[k][:, None]) / span
-    step = kq[k + 1] - kq[k]
-    return SampledTrajectory(
-        tt,
-        kq[k] + step * (10 * s**3 - 15 * s**4 + 6 * s**5),
-        step * (30 * s**2 - 60 * s**3 + 30 * s**4) / span,
-        step * (60 * s - 180 * s**2 + 120 * s**3) / span**2,
-    )
 
 
 def write_csv(path: Path, t: np.ndarray, q: np.ndarray, tau: np.ndarray) -> Path:
