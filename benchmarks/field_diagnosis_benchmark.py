@@ -29,8 +29,8 @@ Run::
         [--seeds 2] [--robots ur5,panda] [--only stribeck,cogging] [--none 4] [--n-jobs 2] [--json out.json]
 
 ``--quick``: one seed, three effects (stribeck, cogging, delay) at 3x, two effect-free cases and the
-unknown effect at 3x per robot (12 cases, about 6 CPU-minutes: a UR5 case takes about 20 s of CPU, a
-Panda case about twice that; the wall time is what the machine's load makes of it).  ``--encoder-bits 18``
+unknown effect at 3x per robot (12 cases, about 5 CPU-minutes: a UR5 case takes about 20 s of CPU, a
+Panda case about 30 s; the wall time is what the machine's load makes of it).  ``--encoder-bits 18``
 records the angles at the lab benchmark's resolution instead of 14 bits (the rest stays field-like).  Seeds start at 1
 (effect-free cases 101 and up); the diagnosis' thresholds were set on seeds 1000 and up.
 """
