@@ -199,6 +199,9 @@ def atomic_dir(path: str | os.PathLike[str]) -> Iterator[Path]:
     """
     path = Path(path)
     _check_folder(path)
+    cwd, target = os.path.realpath(Path.cwd()), os.path.realpath(path)
+    if cwd == target or cwd.startswith(target.rstrip(os.sep) + os.sep):
+        raise ValueError(f"the folder '{path}' holds the current folder and cannot be replaced; write elsewhere.")
     work = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp"))
     try:
         yield work

@@ -292,6 +292,14 @@ CASES = {
         ["export-c", "--robot", "{d}/arm/arm.toml", "--out", "{d}/arm"],
         [r"is replaced as a whole, and it holds the --robot file", "another folder"],
     ),
+    "export-c-out-holds-other-files": (
+        ["export-c", "--robot", "ur5", "--out", "{d}"],
+        [r"is replaced as a whole, and it holds files this command did not write", "new or empty folder"],
+    ),
+    "export-c-out-is-the-working-folder": (
+        ["export-c", "--robot", "ur5", "--out", "."],
+        [r"is replaced as a whole, and it holds the current folder"],
+    ),
     "demo-out-file": (["demo", "--out", "{d}/D.csv"], [r"is a file"]),
     "demo-json-txt": (["demo", "--out", "{d}/demo", "--json", "{d}/F.txt"], [r"has the extension '.txt'"]),
     "demo-json-is-its-file": (
@@ -522,3 +530,23 @@ def test_degrees_reach_the_dataset_reader(folder, tmp_path, capsys):
     in_degrees = json.loads((tmp_path / "F.json").read_text())["rms"]
     in_rad = json.loads((tmp_path / "R.json").read_text())["rms"]
     np.testing.assert_allclose(in_degrees, in_rad, rtol=1e-6)
+
+
+def test_a_replaced_folder_holding_other_files_is_refused_and_kept(folder, tmp_path, capsys):
+    """dynid fleet replaces its --out folder as a whole: a folder of the user's is refused, not emptied."""
+    import shutil
+
+    robot_dir = tmp_path / "recordings" / "arm_a"
+    robot_dir.mkdir(parents=True)
+    shutil.copy(folder / "D.csv", robot_dir / "1.csv")
+    results = tmp_path / "results"
+    results.mkdir()
+    (results / "precious.txt").write_text("keep me")
+    run_refused(
+        ["fleet", "--robot", "ur5", "--data", str(tmp_path / "recordings" / "*" / "*.csv"), "--serial", "--out",
+         str(results)],
+        results,
+        capsys,
+        r"is replaced as a whole, and it holds files this command did not write \(e.g. 'precious.txt'\)",
+    )
+    assert (results / "precious.txt").read_text() == "keep me"

@@ -229,7 +229,10 @@ class Output:
     folder : bool
         Whether the output is a folder.
     replace : bool
-        Whether that folder is replaced as a whole (it must then hold no input).
+        Whether that folder is replaced as a whole (it must then hold no input, and, when it exists, be
+        empty or a folder this command wrote before: one holding ``marker``).
+    marker : str
+        For a replaced folder: the file name by which an earlier run of the command is recognised.
     also : tuple of Path
         Other files it writes beside ``path`` (a model's ``.npz``, a dataset's ``.truth.json``).
     hint : str
@@ -243,6 +246,7 @@ class Output:
     replace: bool = False
     also: tuple[Path, ...] = ()
     hint: str = ""
+    marker: str = ""
 
     @property
     def writes(self) -> tuple[Path, ...]:
@@ -258,6 +262,7 @@ def output(
     replace: bool = False,
     also: Sequence[str | os.PathLike[str]] = (),
     hint: str = "",
+    marker: str = "",
 ) -> Output | None:
     """An :class:`Output` for :func:`check_outputs`, or None when the option was not given."""
     if path is None:
@@ -270,6 +275,7 @@ def output(
         replace,
         tuple(Path(a) for a in also),
         hint,
+        marker,
     )
 
 
@@ -309,6 +315,22 @@ def _probe(folder: Path, option: str, target: Path) -> None:
         ) from None
     os.close(fd)
     Path(name).unlink(missing_ok=True)
+
+
+def _check_replaced_folder(out: Output) -> None:
+    """A folder replaced as a whole must not hold the working folder, nor files this command did not write."""
+    path, option = out.path, out.option
+    if _inside(Path.cwd(), path):
+        raise UsageError(
+            f"--{option} '{path}' is replaced as a whole, and it holds the current folder; give a new folder, "
+            f"e.g. --{option} {path.name if path.name not in ('', '.', '..') else 'out'}/results."
+        )
+    entries = sorted(p.name for p in path.iterdir())
+    if entries and not (out.marker and (path / out.marker).is_file()):
+        raise UsageError(
+            f"--{option} '{path}' is replaced as a whole, and it holds files this command did not write "
+            f"(e.g. '{entries[0]}'); give a new or empty folder."
+        )
 
 
 def _check_one(out: Output) -> None:
@@ -382,6 +404,8 @@ def check_outputs(
                         f"--{out.option} '{out.path}' would overwrite the --{option} file '{source}'{also}; "
                         "give the output another name."
                     )
+        if out.folder and out.replace and out.path.is_dir():
+            _check_replaced_folder(out)
     seen: dict[str, Output] = {}
     for out in given:
         for written in out.writes:

@@ -25,7 +25,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from dynid.symbolic.export import DEFAULT_EXPORT, export_c
 
-    check_outputs([output("out", args.out, folder=True, replace=True)], {"robot": robot_file(args)})
+    check_outputs([output("out", args.out, folder=True, replace=True, marker="manifest.json")], {"robot": robot_file(args)})
     robot = robot_from_args(args)
     functions = (
         DEFAULT_EXPORT if args.functions is None else tuple(f.strip() for f in args.functions.split(","))
