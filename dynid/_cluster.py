@@ -84,6 +84,12 @@ def cluster_client(
         finally:
             cluster.close()
         return
+    if str(scheduler).endswith(".json") and not os.path.isfile(scheduler):
+        # distributed waits for a scheduler file to appear, with no time limit
+        raise UsageError(
+            f"the scheduler file '{scheduler}' does not exist; give the file a running scheduler wrote "
+            "(dask scheduler --scheduler-file), its address (tcp://HOST:8786), or leave --scheduler out."
+        )
     kwargs = {"scheduler_file": scheduler} if str(scheduler).endswith(".json") else {"address": scheduler}
     try:
         client = distributed.Client(**kwargs, timeout=timeout)

@@ -9,6 +9,7 @@ benchmark does.
 from __future__ import annotations
 
 import csv
+import json
 import os
 from dataclasses import replace
 
@@ -61,6 +62,10 @@ def test_a_local_cluster_of_two_workers_gives_the_serial_table(fleet, tmp_path):
         rows = list(csv.DictReader(f))
     assert [float(r["fc3_std"]) for r in rows] == list(on_cluster.column("fc3_std"))
     assert "robot_01" in (out / "report.html").read_text(encoding="utf-8")
+    summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))  # the JSON's per-recording rows
+    assert [r["path"] for r in summary["rows"]] == [r["path"] for r in on_cluster.rows]
+    assert [r["fc3"] for r in summary["rows"]] == list(on_cluster.column("fc3"))
+    on_cluster.write(out)  # its own earlier folder is replaced
 
 
 def test_the_table_holds_parameters_with_their_spread_and_the_held_out_error(fleet):
@@ -190,6 +195,16 @@ def test_a_scheduler_that_does_not_answer_is_refused_after_the_timeout():
 
     with pytest.raises(UsageError, match=r"no Dask scheduler answered at 'tcp://127.0.0.1:9' within 1s"):
         with cluster_client("tcp://127.0.0.1:9", timeout="1s"):
+            pass
+
+
+def test_a_missing_scheduler_file_is_refused_at_once(tmp_path):
+    """distributed waits for a scheduler file to appear with no time limit; dynid refuses a missing one."""
+    from dynid._cluster import cluster_client
+
+    missing = tmp_path / "scheduler.json"
+    with pytest.raises(UsageError, match=r"the scheduler file '.*scheduler.json' does not exist"):
+        with cluster_client(str(missing), timeout="1s"):
             pass
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import importlib.util
 
 from dynid.commands.common import (
     add_degrees_argument,
@@ -125,9 +126,16 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--workers is {args.workers}; give at least 1 worker.")
     if args.serial and args.scheduler:
         raise UsageError("--serial and --scheduler exclude each other; give one of them.")
+    # The table is written through pyarrow, and the cluster needs distributed: say so before any work.
+    for module, needed in (("pyarrow", True), ("distributed", not args.serial)):
+        if needed and importlib.util.find_spec(module) is None:
+            raise UsageError(
+                f"dynid fleet needs the package {module}, which is not installed; install it with "
+                "pip install 'dynid[fleet]'."
+            )
     recordings = find_recordings(args.data, args.manifest)
     check_outputs(
-        [output("out", args.out, folder=True, replace=True), output("json", args.json, (".json",))],
+        [output("out", args.out, folder=True, replace=True, marker="summary.json"), output("json", args.json, (".json",))],
         {"data": [r.path for r in recordings], "manifest": args.manifest, "robot": robot_file(args)},
     )
     settings = FleetSettings(

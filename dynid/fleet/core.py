@@ -150,6 +150,19 @@ def parameter_table(model: Any) -> list[dict[str, Any]]:
     ]
 
 
+def _failed_row(recording: Recording, error: str) -> dict[str, Any]:
+    """The row of a recording that gave no model (``error`` says why; empty while it is being identified)."""
+    return {
+        "path": recording.path,
+        "robot": recording.robot,
+        "time": recording.time,
+        "order": recording.order,
+        "error": error,
+        "warnings": "",
+        "elapsed_s": 0.0,
+    }
+
+
 def identify_recording(robot: Any, recording: Recording, settings: FleetSettings) -> dict[str, Any]:
     """Identify one recording (the task Dask runs): its row of the fleet table.
 
@@ -172,13 +185,8 @@ def identify_recording(robot: Any, recording: Recording, settings: FleetSettings
     from dynid.validation.validate import validate
 
     robot = _resolve_robot(robot)
-    row: dict[str, Any] = {
-        "path": recording.path,
-        "robot": recording.robot,
-        "time": recording.time,
-        "order": recording.order,
-        "error": "",
-    }
+    row = _failed_row(recording, "")
+    del row["warnings"], row["elapsed_s"]
     started = time.perf_counter()
     caught: list[warnings.WarningMessage] = []
     try:
@@ -213,8 +221,8 @@ def identify_recording(robot: Any, recording: Recording, settings: FleetSettings
                 from dynid.diagnosis import diagnose
 
                 row["verdict"] = "+".join(diagnose(model, train, held).verdict)
-    except DynidError as exc:
-        row["error"] = str(exc)
+    except Exception as exc:  # one bad recording does not stop the fleet: its row carries the reason
+        row["error"] = str(exc) if isinstance(exc, DynidError) else f"{type(exc).__name__}: {exc}"
         row["warnings"] = _warning_text(caught)
         row["elapsed_s"] = time.perf_counter() - started
         return {"row": row, "parameters": None}
@@ -256,7 +264,13 @@ def run_fleet(
         return [identify_recording(robot, rec, settings) for rec in recordings]
     robot_ref = client.scatter(robot, broadcast=True) if not isinstance(robot, str | os.PathLike) else str(robot)
     futures = client.map(identify_recording, [robot_ref] * len(recordings), list(recordings), [settings] * len(recordings), pure=False)
-    return client.gather(futures)
+    out = []
+    for rec, future in zip(recordings, futures, strict=True):
+        try:
+            out.append(future.result())
+        except Exception as exc:  # a worker lost (out of memory, killed): that recording's row says so
+            out.append({"row": _failed_row(rec, f"{type(exc).__name__}: {exc}"), "parameters": None})
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -344,6 +358,7 @@ class FleetResult:
             "recordings": len(self.rows),
             "robots": self.robots,
             "errors": [{"path": r["path"], "error": r["error"]} for r in self.errors],
+            "rows": self.rows,
             "drift": None if self.drift is None else self.drift.figures(),
         }
 
@@ -359,11 +374,11 @@ class FleetResult:
         -------
         Path
         """
+        table = self.to_arrow()  # says in one sentence when pyarrow is missing
         import pyarrow.parquet as pq
 
         from dynid.fleet.report import write_fleet_report
 
-        table = self.to_arrow()
         with atomic_dir(out_dir) as work:
             with atomic_path(work / "fleet.parquet") as tmp:
                 pq.write_table(table, tmp)
