@@ -622,6 +622,13 @@ def test_cli_runs_three_periods_by_default(robot, tmp_path, capsys):
         assert code == 0
         t = np.loadtxt(out, delimiter=",", skiprows=1, usecols=0)
         assert t[-1] == pytest.approx(periods / 5.0)
+    # A trajectory saved with more periods keeps them.
+    five = FourierTrajectory(a=short.a, b=short.b, c=short.c, base_freq=5.0, periods=5)
+    five.save(tmp_path / "t5.json")
+    code = main(["simulate", "--robot", "ur5", "--trajectory", str(tmp_path / "t5.json"), "--rate", "100",
+                 "--out", str(tmp_path / "d5.csv")])  # fmt: skip
+    assert code == 0
+    assert np.loadtxt(tmp_path / "d5.csv", delimiter=",", skiprows=1, usecols=0)[-1] == pytest.approx(1.0)
     code = main(["simulate", "--robot", "ur5", "--trajectory", str(path), "--periods", "0", "--out",
                  str(tmp_path / "d0.csv")])  # fmt: skip
     assert code == 2 and "--periods is 0; give a whole number of at least 1" in capsys.readouterr().err

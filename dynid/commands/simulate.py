@@ -60,10 +60,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--periods",
         type=int,
-        default=3,
+        default=None,
         metavar="N",
-        help="periods of a Fourier trajectory to run when --duration is not given (default 3: the diagnosis "
-        "measures the noise floor from the spread across repeated periods)",
+        help="periods of a Fourier trajectory to run when --duration is not given (default: the trajectory's "
+        "own, at least 3: the diagnosis measures the noise floor from the spread across repeated periods)",
     )
     parser.add_argument(
         "--perturb",
@@ -103,11 +103,12 @@ def run(args: argparse.Namespace) -> int:
     robot = robot_from_args(args)
     trajectory = load_trajectory(args.trajectory)
     duration = args.duration
-    if args.periods < 1:
+    if args.periods is not None and args.periods < 1:
         raise UsageError(f"--periods is {args.periods}; give a whole number of at least 1 (default 3).")
     if duration is None and isinstance(trajectory, FourierTrajectory):
         # Repeated periods are what the noise floor, the periodic averaging and the diagnosis need.
-        duration = args.periods / trajectory.base_freq
+        periods = max(3, int(trajectory.periods)) if args.periods is None else args.periods
+        duration = periods / trajectory.base_freq
     result = simulate(
         robot,
         trajectory,
