@@ -13,7 +13,7 @@ HELP = "export a robot's regressors as C source, header, compiled library and ex
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_robot_arguments(parser)
-    parser.add_argument("--out", required=True, metavar="DIR", help="folder to write (replaced if it exists)")
+    parser.add_argument("--out", required=True, metavar="DIR", help="folder to write: new, empty, or an earlier export (replaced); a folder holding other files is refused")
     parser.add_argument(
         "--functions",
         default=None,

@@ -112,7 +112,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--out", required=True, metavar="DIR",
-        help="folder to write (replaced): fleet.parquet, fleet.csv, drift.csv, report.html, summary.json",
+        help="folder to write: new, empty, or an earlier fleet run (replaced); fleet.parquet, fleet.csv, drift.csv, report.html, summary.json",
     )
     add_json_argument(parser)
 
