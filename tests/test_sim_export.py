@@ -61,6 +61,24 @@ def test_urdf_export_reloads_in_pinocchio_and_keeps_the_template(ur5_model, tmp_
     assert {it["what"] for it in result.not_carried} >= {"friction offset", "armature"}
 
 
+def test_a_relative_mesh_path_still_points_at_the_template_s_mesh(ur5_model, tmp_path):
+    path, _ = ur5_model
+    model = load_model(path)
+    root = ET.parse(default_template(model.robot)).getroot()
+    meshes = list(root.iter("mesh"))
+    assert meshes
+    meshes[0].set("filename", "meshes/base.stl")
+    (tmp_path / "tpl").mkdir()
+    (tmp_path / "out").mkdir()
+    template = tmp_path / "tpl" / "ur5.urdf"
+    ET.ElementTree(root).write(template)
+    out = tmp_path / "out" / "ur5.urdf"
+    export_model(model, "urdf", out, template=template)
+    names = [m.get("filename") for m in ET.parse(out).getroot().iter("mesh")]
+    assert names[0] == str((tmp_path / "tpl" / "meshes" / "base.stl").resolve())
+    assert names[1:] == [m.get("filename") for m in meshes[1:]]  # package:// and absolute names stay
+
+
 def test_an_unconstrained_fit_gets_the_closest_consistent_bodies(ur5, tmp_path):
     """Without stored consistent bodies the export computes the closest ones (Mahalanobis) and says so."""
     rng = np.random.default_rng(3)

@@ -53,6 +53,11 @@ def read_template(path: str | Path) -> ET.Element:
             f"the template '{path}' has the root element <{root.tag}>, not <robot>: it is not a URDF; give the "
             "robot's URDF (an MJCF is written from a URDF with --format mjcf)"
         )
+    # A mesh named relative to the template must still be found from wherever the copy is written.
+    for mesh in root.iter("mesh"):
+        name = mesh.get("filename", "")
+        if name and "://" not in name and not Path(name).is_absolute():
+            mesh.set("filename", str((path.parent / name).resolve()))
     return root
 
 
