@@ -291,7 +291,8 @@ def _settling_commands(args, model, heldout, result) -> dict | None:
             f"--out heldout_excitation.json --csv {csv} --rate {rate:.6g} --periods {periods}",
             f"# play {csv} on the robot (it rests 2 s at home at both ends); log t, q_i, tau_i to heldout.csv",
             f"dynid diagnose --model {shlex.quote(args.model)} --data {shlex.quote(args.data)} "
-            "--heldout heldout.csv",
+            "--heldout heldout.csv" + (" --degrees" if getattr(args, "degrees", False) else "")
+            + (f" --topic {shlex.quote(args.topic)}" if getattr(args, "topic", None) else ""),
         ],
     }
 
