@@ -243,3 +243,14 @@ def test_every_unfitted_estimator_raises_the_one_not_fitted_error(ur5) -> None:
             call()
         assert isinstance(info.value, DynidError)  # the command line's catch
     assert issubclass(NotFittedError, IdentificationError) and issubclass(NotFittedError, UsageError)
+
+
+@pytest.mark.parametrize("shape", [(5000, 9), (40, 60), (3, 2), (0, 4)])
+def test_r_factor_is_scipys_triangular_factor_to_the_bit(shape) -> None:
+    from dynid.identify._qr import fortran_stack, r_factor
+
+    rng = np.random.default_rng(shape[0])
+    A = rng.standard_normal(shape)
+    ref = scipy.linalg.qr(A, mode="r", check_finite=False)[0][: min(shape)]
+    assert np.array_equal(r_factor(A), ref)
+    assert np.array_equal(r_factor(fortran_stack(A[:, :1], A[:, 1:]), overwrite=True), ref)

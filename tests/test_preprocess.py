@@ -289,3 +289,20 @@ def test_trim_and_decimate_run_by_run(rng: np.random.Generator) -> None:
     assert decimated.meta["decimated"] == 3
     with pytest.raises(DataError, match="trimming 60 samples from both ends leaves 0 of run 0"):
         pp.trim(joined, 0.6)
+
+
+@pytest.mark.parametrize("order", [1, 2, 5, 8])
+def test_filtfilt_rows_is_scipys_sosfiltfilt_to_the_bit(order: int) -> None:
+    from scipy.signal import sosfiltfilt
+
+    rng = np.random.default_rng(order)
+    sos = pp.butter_sos(35.0, 5000.0, order)
+    for length in (40, 3000):
+        x = rng.standard_normal((length, 5)).cumsum(axis=0)
+        assert np.array_equal(pp.filtfilt_rows(sos, x.T).T, sosfiltfilt(sos, x, axis=0))
+
+
+def test_filtfilt_rows_refuses_a_signal_shorter_than_its_padding() -> None:
+    sos = pp.butter_sos(35.0, 5000.0, 5)
+    with pytest.raises(DataError, match="too short for an order-6 zero-phase filter"):
+        pp.filtfilt_rows(sos, np.ones((2, 10)))

@@ -40,15 +40,15 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Any, ClassVar, Self
 
 import numpy as np
-import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares, lsq_linear, nnls
 from scipy.special import expit
 
 from dynid._threads import one_blas_thread
 from dynid.exceptions import DataError, ModelFileError, UsageError
+from dynid.identify._qr import r_factor
 from dynid.identify.checks import check_is_fitted
-from dynid.identify.preprocess import lowpass
+from dynid.identify.preprocess import butter_sos, filtfilt_rows
 
 __all__ = [
     "FRICTION_MODELS",
@@ -95,9 +95,17 @@ def _compress(
     A: NDArray[np.float64], b: NDArray[np.float64]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
     """(R, Q^T b, ||b||^2 - ||Q^T b||^2): ``||A x - b||^2 = ||R x - Q^T b||^2 + rest``."""
-    R = scipy.linalg.qr(np.column_stack([A, b]), mode="r", check_finite=False)[0]
     k = A.shape[1]
-    R = R[: k + 1]
+    Ab = np.empty((k + 1, len(b)))  # [A b] transposed: a Fortran-ordered [A b] for the QR, no copy
+    Ab[:k] = A.T
+    Ab[k] = b
+    return _compress_rows(Ab)
+
+
+def _compress_rows(Ab: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """:func:`_compress` of ``[A b]`` given transposed, ``Ab`` (k + 1, m), C order (overwritten)."""
+    k = Ab.shape[0] - 1
+    R = r_factor(Ab.T, overwrite=True)
     if R.shape[0] < k + 1:
         R = np.vstack([R, np.zeros((k + 1 - R.shape[0], k + 1))])
     return R[:k, :k], R[:k, k], float(R[k, k] ** 2)
@@ -111,8 +119,9 @@ class _Sampling:
     """How one joint's model columns at full rate become comparable with the filtered residual.
 
     ``full(A)``: filter the full-rate columns ``A`` (M, k) like the torque, take the kept rows (m, k).
-    ``search(A_window)``: the same on the search window only (columns given on ``window`` rows),
-    returning the kept rows inside it away from its edges, to compare with ``F[search_rows]``.
+    ``search_into(At_window, out)``: the same on the search window only (columns given transposed, on
+    ``window`` rows), writing the kept rows inside it away from its edges, to compare with
+    ``F[search_rows]``.
     """
 
     def __init__(self, prepared: Any, window: int = _SEARCH_WINDOW) -> None:
@@ -135,17 +144,24 @@ class _Sampling:
             inside = np.ones(len(rows), dtype=bool)
         self.search_rows = np.flatnonzero(inside)
         self._local = rows[inside] - (start if self.window is not None else 0)
+        s = prepared.settings
+        self._sos = butter_sos(s["cutoff_hz"], prepared.fs, s["order"]) if prepared.parallel_filter else None
 
     def full(self, A: NDArray[np.float64]) -> NDArray[np.float64]:
         return self.prepared.filter(A)[self.prepared.rows]
 
-    def search(self, A: NDArray[np.float64]) -> NDArray[np.float64]:
+    def search_into(self, At: NDArray[np.float64], out: NDArray[np.float64]) -> None:
+        """``search`` of columns given transposed, ``At`` (k, len(window)), written into ``out`` (k, m_s).
+
+        The window's columns filtered as :func:`dynid.identify.preprocess.lowpass` filters them (one run,
+        the same arithmetic), in the transposed layout the QR of the search takes without a copy.
+        """
         if self.window is None:
-            return self.full(A)
-        if not self.prepared.parallel_filter:
-            return A[self._local]
-        s = self.prepared.settings
-        return lowpass(A, fs=self.prepared.fs, cutoff=s["cutoff_hz"], order=s["order"])[self._local]
+            out[:] = self.full(At.T).T
+        elif not self.prepared.parallel_filter:
+            out[:] = At[:, self._local]
+        else:
+            out[:] = filtfilt_rows(self._sos, At)[:, self._local]
 
     def window_of(self, dq: NDArray[np.float64]) -> NDArray[np.float64]:
         return dq if self.window is None else dq[self.window]
@@ -297,7 +313,13 @@ def bounded_lsq(
     rss : float
         Residual sum of squares at ``c``.
     """
-    R, qtb, rest = _compress(A, F)
+    return _bounded_solve(*_compress(A, F), bounds)
+
+
+def _bounded_solve(
+    R: NDArray[np.float64], qtb: NDArray[np.float64], rest: float, bounds: tuple[float, ...]
+) -> tuple[NDArray[np.float64], float]:
+    """:func:`bounded_lsq` on the compressed problem ``(R, Q^T b, rest)`` of :func:`_compress`."""
     lb = np.asarray(bounds, dtype=np.float64)
     if np.all(lb == 0):
         coef, res = nnls(R, qtb, maxiter=50 * R.shape[1])
@@ -415,21 +437,43 @@ def _seed_columns(dq: NDArray[np.float64], lam: float) -> NDArray[np.float64]:
     Written with whole-array ``np.where`` (the same values as per-region assignments, several times
     faster: the shape search evaluates it about a thousand times in a default identification).
     """
-    a = np.abs(dq)
-    pos, neg = dq > 0, dq < 0
-    high = a >= lam  # lam > 0: a high-speed sample moves
-    r = a / lam
-    pl, nl = pos & ~high, neg & ~high
+    return np.ascontiguousarray(_seed_rows(_SeedSpeeds(dq), lam).T)
+
+
+class _SeedSpeeds:
+    """What the seed model's columns need of ``dq`` at any threshold, computed once per search."""
+
+    def __init__(self, dq: NDArray[np.float64]) -> None:
+        self.dq = dq
+        self.a = np.abs(dq)
+        self.pos, self.neg = dq > 0, dq < 0
+        self.dqa = dq * self.a
+        self.dq3 = dq**3
+
+
+def _seed_rows(s: _SeedSpeeds, lam: float) -> NDArray[np.float64]:
+    """:func:`_seed_columns` transposed, (7, len(dq)): the same values, written row by row."""
+    high = s.a >= lam  # lam > 0: a high-speed sample moves
+    r = s.a / lam
+    low = ~high
+    pl, nl = s.pos & low, s.neg & low
     # low speed: a straight line from the static level (at 0+) to the high-speed curve (at +-lam)
-    signed = np.where(nl, -r, np.where(pl, r, 0.0))
-    A = np.empty((len(dq), 7))
-    A[:, 0] = np.where(pos & high, 1.0, np.where(pl, r, 0.0))
-    A[:, 1] = np.where(neg & high, -1.0, np.where(nl, -r, 0.0))
-    A[:, 2] = np.where(high, dq, signed * lam)
-    A[:, 3] = np.where(high, dq * a, signed * lam**2)
-    A[:, 4] = np.where(high, dq**3, signed * lam**3)
-    A[:, 5] = np.where(pl, 1.0 - r, 0.0)
-    A[:, 6] = np.where(nl, -(1.0 - r), 0.0)
+    signed = np.zeros(len(r))
+    np.copyto(signed, r, where=pl)
+    neg_r = -r
+    np.copyto(signed, neg_r, where=nl)
+    A = np.zeros((7, len(r)))
+    np.copyto(A[0], r, where=pl)
+    A[0][s.pos & high] = 1.0
+    np.copyto(A[1], neg_r, where=nl)
+    A[1][s.neg & high] = -1.0
+    for k, (fast, power) in enumerate(((s.dq, lam), (s.dqa, lam**2), (s.dq3, lam**3)), start=2):
+        np.multiply(signed, power, out=A[k])
+        np.copyto(A[k], fast, where=high)
+    one_minus = 1.0 - r
+    np.copyto(A[5], one_minus, where=pl)
+    np.negative(one_minus, out=one_minus)
+    np.copyto(A[6], one_minus, where=nl)
     return A
 
 
@@ -481,9 +525,14 @@ class _ShapedFriction(_Friction):
                 return bounded_lsq(columns(d_s, shape), F_s, bounds)[1]
         else:
             d_w, F_w = sampling.window_of(dq), F[sampling.search_rows]
+            speeds = self._speeds(d_w)
+            k = len(bounds)
 
             def cost(shape):
-                return bounded_lsq(sampling.search(columns(d_w, shape)), F_w, bounds)[1]
+                Ab = np.empty((k + 1, len(F_w)))  # the filtered columns and F_w, transposed
+                sampling.search_into(self._rows(speeds, shape), Ab[:k])
+                Ab[k] = F_w
+                return _bounded_solve(*_compress_rows(Ab), bounds)[1]
 
         shape, sse = _shape_search(cost, cands, refine=self._refine)
         coef, rss = self._fit_columns(lambda v: columns(v, shape), dq, F, sampling, bounds)
@@ -493,6 +542,14 @@ class _ShapedFriction(_Friction):
 
     def _basis(self, dq):
         return self._columns(dq, self.coef_[-1])
+
+    def _speeds(self, dq: NDArray[np.float64]) -> Any:
+        """What :meth:`_rows` needs of the search window's velocities (computed once per search)."""
+        return dq
+
+    def _rows(self, speeds: Any, shape: float) -> NDArray[np.float64]:
+        """The columns at ``shape`` on the search window, transposed: (k, len(window))."""
+        return np.ascontiguousarray(self._columns(speeds, shape).T)
 
 
 class SeedFriction(_ShapedFriction):
@@ -538,6 +595,8 @@ class SeedFriction(_ShapedFriction):
         self.quantiles = quantiles
 
     _columns = staticmethod(_seed_columns)
+    _speeds = staticmethod(_SeedSpeeds)  # type: ignore[assignment]
+    _rows = staticmethod(_seed_rows)  # type: ignore[assignment]
 
 
 class StribeckFriction(_ShapedFriction):
