@@ -116,3 +116,40 @@ def test_periodic_inputs_are_validated_on_unseen_phases(rng) -> None:
     np.testing.assert_array_equal(mask[:3000], mask[3000:6000])  # the same phases in every period
     assert period_of(rng.normal(size=(5000, 3))) is None
     assert "time blocks" in validation_mask(rng.normal(size=(5000, 3)), 20, 0.25)[1]
+
+
+def _broad(rng, margin: float) -> tuple[GMRCorrection, np.ndarray]:
+    """A one-component mixture of a linear torque of q on q in [-1.3, 1.3] rad (its widest gate)."""
+    t = np.arange(6000) * 0.01
+    q, dq = motion(t, 0.0)
+    y = 0.8 * q + 0.02 * rng.normal(size=q.shape)
+    u = np.hstack([q, dq])
+    return GMRCorrection(n_components=1, range_margin=margin).fit(u, y), u
+
+
+def test_the_correction_fades_beyond_the_training_range(rng) -> None:
+    gmr, u = _broad(rng, 1.0)
+    assert gmr.active_.all()
+    inside = np.sqrt(np.mean(gmr.predict(u) ** 2, axis=0))
+    # inside the training range the fade does nothing: the same mixture without it predicts the same
+    plain = GMRCorrection.from_arrays({**gmr.to_arrays(), **{f"gmr_{i}_range_margin": np.inf for i in range(2)}})
+    np.testing.assert_allclose(gmr.predict(u), plain.predict(u), rtol=1e-12, atol=1e-12)
+    far = u + np.array([5.0, 5.0, 0.0, 0.0])  # 2.4-5 rad beyond the training angles, at the training speeds
+    outside = np.sqrt(np.mean(gmr.predict(far) ** 2, axis=0))
+    assert np.all(outside < 0.05 * inside), (outside, inside)
+    # the broad mixture's own density gate (components four times as wide) holds most of the edge value
+    held = np.sqrt(np.mean(plain.predict(far) ** 2, axis=0))
+    assert np.all(held > 0.3 * inside), (held, inside)
+    # a step just beyond the range keeps most of the correction
+    near = np.sqrt(np.mean(gmr.predict(u + np.array([0.1, 0.1, 0.0, 0.0])) ** 2, axis=0))
+    assert np.all(near > 0.7 * inside), (near, inside)
+
+
+def test_files_written_before_the_range_fade_keep_their_predictions(rng) -> None:
+    gmr, u = _broad(rng, 1.0)
+    arrays = {k: v for k, v in gmr.to_arrays().items() if not k.endswith("_range_margin")}
+    old = GMRCorrection.from_arrays(arrays)
+    far = u + np.array([5.0, 5.0, 0.0, 0.0])
+    again = GMRCorrection.from_arrays(gmr.to_arrays())
+    np.testing.assert_array_equal(again.predict(far), gmr.predict(far))
+    assert np.all(np.abs(old.predict(far)).max(axis=0) > 10 * np.abs(gmr.predict(far)).max(axis=0))

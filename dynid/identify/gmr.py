@@ -74,6 +74,10 @@ _FLOOR_QUANTILE = 0.01  # the density gate is 1 above this quantile of the train
 # 0.070 at 3, 0.049 at 4, 0.051 at 6 (0.051 without the gate); the correction 3 rad away below 5 % of its
 # size inside at 2, 4 and 6.  A lower floor quantile (0.001, or the least training density) gave 0.076.
 _GATE_WIDTH = 4.0
+# Beyond the training range of an input, the gate also fades as a Gaussian tail of this many of the input's
+# standard deviations: the wide density above keeps a broad mixture (one or two components) near 1 far
+# outside the states it saw.
+_RANGE_MARGIN = 1.0
 
 
 def conditional_mean(
@@ -165,8 +169,13 @@ def density_gate(mdl: dict[str, Any], u: NDArray[np.float64]) -> NDArray[np.floa
     validation windows between components and the size selection chose too few; at twice the widths it
     doubled the held-out error of a joint whose new motion went slightly beyond the training angles).  The gate is 1 where that density is at least its ``log_floor`` (its 1 %
     quantile over the training inputs), ``p(u) / p_floor`` below it: outside the states the mixture was
-    fitted on, its correction fades to zero like a Gaussian tail instead of holding its edge value.  A
-    mixture without a floor (files written before the gate) is not gated.
+    fitted on, its correction fades to zero like a Gaussian tail instead of holding its edge value.
+    Beyond the training range of any input, the density is also multiplied by a Gaussian tail in the
+    distance beyond it, ``exp(-d^2 / (2 margin^2))`` with ``d`` in the input's standard deviations and
+    ``margin`` the mixture's ``range_margin`` (1 by default): a broad mixture of one or two components
+    keeps a wide density near its floor far outside its states, and held a third of its correction
+    3 rad beyond the training angles without it.  A mixture without a floor (files written before the
+    gate) is not gated, and one without a ``range_margin`` has no range fade.
 
     Parameters
     ----------
@@ -183,6 +192,11 @@ def density_gate(mdl: dict[str, Any], u: NDArray[np.float64]) -> NDArray[np.floa
     us = (u[:, inp] - mdl["mean"][:n_in]) / mdl["scale"][:n_in]
     covs = _GATE_WIDTH**2 * mdl["covariances"][:, :n_in, :n_in]
     logp = _log_density(us, mdl["weights"], mdl["means"][:, :n_in], covs)
+    margin = float(mdl.get("range_margin", np.inf))
+    if np.isfinite(margin):
+        # beyond the training range of any input, by how many of its standard deviations
+        beyond = np.maximum(mdl["lo"] - u[:, inp], u[:, inp] - mdl["hi"]).clip(min=0.0) / mdl["scale"][:n_in]
+        logp = logp - 0.5 * np.einsum("md,md->m", beyond, beyond) / margin**2
     return np.exp(np.minimum(logp - floor, 0.0))
 
 
@@ -253,6 +267,11 @@ class GMRCorrection:
         Added to the covariance diagonals (inputs and outputs are standardised first).
     random_state : int
         Seed of EM's initialisation.
+    range_margin : float
+        Beyond the training range of an input, the correction also fades as a Gaussian tail of this many
+        of the input's standard deviations (:func:`density_gate`); ``inf`` turns that off.  The mixtures
+        tried on the validation samples never fade this way: those samples lie inside the states the
+        final mixture is fitted on, even where they lie beyond the range of the others.
 
     Attributes
     ----------
@@ -282,6 +301,7 @@ class GMRCorrection:
         max_samples: int = 10_000,
         reg_covar: float = 1e-4,
         random_state: int = 0,
+        range_margin: float = _RANGE_MARGIN,
     ) -> None:
         self.n_components = n_components
         self.max_components = max_components
@@ -292,6 +312,7 @@ class GMRCorrection:
         self.max_samples = max_samples
         self.reg_covar = reg_covar
         self.random_state = random_state
+        self.range_margin = range_margin
 
     def __repr__(self) -> str:
         return f"GMRCorrection(n_components={self.n_components!r}, mode={self.mode!r})"
@@ -350,8 +371,11 @@ class GMRCorrection:
                 max_iter=200,
             ).fit(data)
 
-    def _model(self, X: NDArray[np.float64], n_in: int, K: int, inp, out) -> dict[str, Any]:
-        """A mixture fitted by EM on X = [u_in, y] (standardised inside), as a dict of arrays."""
+    def _model(
+        self, X: NDArray[np.float64], n_in: int, K: int, inp, out, *, margin: float | None = None
+    ) -> dict[str, Any]:
+        """A mixture fitted by EM on X = [u_in, y] (standardised inside), as a dict of arrays; ``margin``
+        overrides :attr:`range_margin`."""
         mean = X.mean(axis=0)
         scale = X.std(axis=0)
         scale[scale <= 0] = 1.0
@@ -372,6 +396,7 @@ class GMRCorrection:
             "means": gm.means_,
             "covariances": gm.covariances_,
             "log_floor": np.array(np.quantile(density, _FLOOR_QUANTILE)),
+            "range_margin": np.array(float(self.range_margin if margin is None else margin)),
         }
 
     # ------------------------------------------------------------------ fit / predict
@@ -415,7 +440,7 @@ class GMRCorrection:
             X = np.hstack([u[:, inp], y[:, out]])
             best, scores, worse = None, [], 0
             for K in sizes:
-                mdl = self._model(X[train_idx], len(inp), K, inp, out)
+                mdl = self._model(X[train_idx], len(inp), K, inp, out, margin=np.inf)
                 pred = self._predict_model(mdl, u[val_idx])
                 score = float(np.sqrt(np.mean((y[val_idx][:, out] - pred) ** 2) * len(out)))
                 scores.append((K, score))
@@ -654,6 +679,8 @@ class GMRCorrection:
             for i, mdl in enumerate(out.models_):  # files written before the gate: no gate
                 key = f"{prefix}_{i}_log_floor"
                 mdl["log_floor"] = np.asarray(arrays[key] if key in arrays else -np.inf, dtype=np.float64)
+                key = f"{prefix}_{i}_range_margin"  # files written before the range fade: none
+                mdl["range_margin"] = np.asarray(arrays[key] if key in arrays else np.inf, dtype=np.float64)
             out.active_ = np.asarray(arrays[f"{prefix}_active"], dtype=bool)
         except (KeyError, ValueError, TypeError) as err:
             raise ModelFileError(

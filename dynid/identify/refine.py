@@ -58,6 +58,7 @@ import scipy.linalg
 from numpy.typing import NDArray
 
 from dynid._threads import single_blas_thread
+from dynid.identify._qr import r_factor
 from dynid.identify.estimators import bounded_triangular, long_run_factor
 from dynid.identify.friction import FrictionLayer, bounded_lsq
 from dynid.identify.gmr import GMRCorrection, validation_mask
@@ -246,7 +247,10 @@ def _refine(
     n, m = system.n, system.m
     layer2 = friction not in ("none", "linear")
     mask = cols.link_mask | (cols.friction_mask if friction == "linear" else False)
-    C = _Columns(system, mask)
+    key = ("refine-columns", mask.tobytes())
+    C = system.derived.get(key)
+    if C is None:  # the two refinements of a default identification take the same columns
+        C = system.derived[key] = _Columns(system, mask)
     low = None if lower is None else np.asarray(lower, dtype=np.float64)[C.sel]
     tau = np.column_stack(C.tau)
     x_sel = np.asarray(x0, dtype=np.float64)[C.sel].copy()
@@ -390,9 +394,10 @@ def _select_mixtures(C, tau, Fb, u_kept, u_full, r3, gmm, mode, random_state, pr
     stale = 0
     scores: list[list[tuple[int, float]]] = [[] for _ in range(n)]
     for K in sizes:
-        trial = GMRCorrection(mode=mode, random_state=random_state, max_samples=_EM_SAMPLES).fit_mixtures(
-            u_kept[train], r3[train], [K] * _mixtures(mode, n)
-        )
+        # no range fade on the trials: the validation rows are inside the final mixture's states
+        trial = GMRCorrection(
+            mode=mode, random_state=random_state, max_samples=_EM_SAMPLES, range_margin=np.inf
+        ).fit_mixtures(u_kept[train], r3[train], [K] * _mixtures(mode, n))
         G = [prep.filter(D)[rows] for D in trial.design(u_full)]
         score = _joint_validation(C, tau, Fb, G, weights, train, vrows)
         better = score < best
@@ -495,15 +500,17 @@ def _link_step(C: _Columns, tau, Fb, Gb, weights, rows=None, lower=None) -> _Lin
         proj = _eliminator(N, _ridges(Fb[j], Gb[j]))
         A = proj(C.W[j] if rows is None else C.W[j][rows])
         b = proj(tau[:, j])
-        Rj = scipy.linalg.qr(np.sqrt(weights[j]) * np.column_stack([A, b]), mode="r", check_finite=False)[0]
         k = len(C.idx[j])
-        Rj = Rj[: k + 1]
+        Ab = np.empty((len(b), k + 1), order="F")  # the weighted [A b], in the QR's layout
+        np.multiply(np.sqrt(weights[j]), A, out=Ab[:, :k])
+        np.multiply(np.sqrt(weights[j]), b, out=Ab[:, k])
+        Rj = r_factor(Ab, overwrite=True)
         full = np.zeros((len(Rj), p_sel + 1))
         full[:, C.idx[j]] = Rj[:, :k]
         full[:, p_sel] = Rj[:, k]
         blocks.append(full)
         projected.append((C.idx[j], Rj[:k, :k] if Rj.shape[0] >= k else Rj[:, :k]))
-    R = scipy.linalg.qr(np.vstack(blocks), mode="r", check_finite=False)[0][:p_sel]
+    R = r_factor(np.vstack(blocks), overwrite=True)[:p_sel]
     if lower is None:
         x_sel = scipy.linalg.lstsq(R[:, :p_sel], R[:, p_sel], cond=1e-13, check_finite=False)[0]
     else:
