@@ -193,7 +193,10 @@ def main() -> None:
     )
     check = fig.get("physical_check")
     if check:
-        print(f"physical check: {check['kept']}; ratios {np.round(check['ratio'], 2).tolist()}")
+        print(
+            f"physical check: {check['kept']}; ratios {np.round(check['ratio'], 2).tolist()}, "
+            f"shares {np.round(check.get('share', []), 3).tolist()}"
+        )
     print(f"bounds held at 0: {fig.get('bounds', {}).get('active')}")
     cons = fig.get("consistency")
     if cons:

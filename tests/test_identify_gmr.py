@@ -132,7 +132,9 @@ def test_the_correction_fades_beyond_the_training_range(rng) -> None:
     assert gmr.active_.all()
     inside = np.sqrt(np.mean(gmr.predict(u) ** 2, axis=0))
     # inside the training range the fade does nothing: the same mixture without it predicts the same
-    plain = GMRCorrection.from_arrays({**gmr.to_arrays(), **{f"gmr_{i}_range_margin": np.inf for i in range(2)}})
+    plain = GMRCorrection.from_arrays(
+        {**gmr.to_arrays(), **{f"gmr_{i}_range_margin": np.inf for i in range(2)}}
+    )
     np.testing.assert_allclose(gmr.predict(u), plain.predict(u), rtol=1e-12, atol=1e-12)
     far = u + np.array([5.0, 5.0, 0.0, 0.0])  # 2.4-5 rad beyond the training angles, at the training speeds
     outside = np.sqrt(np.mean(gmr.predict(far) ** 2, axis=0))

@@ -89,6 +89,7 @@ from dynid.identify.refine import refine
 __all__ = [
     "METHODS",
     "TAKEOVER",
+    "TAKEOVER_SHARE",
     "IdentifiedModel",
     "ThreeLayerModel",
     "identify",
@@ -103,6 +104,14 @@ Set between what was measured: a mixture that took over physical torque shows 12
 filtered at 6 Hz, the whole TX40 recording); a joint fit that generalises well shows up to 5.7 (the
 identification benchmark's UR5 with a smooth position-dependent torque, whose held-out error is 0.26x
 OLS with the joint fit kept and 0.84x with the physical layers first)."""
+
+TAKEOVER_SHARE = 0.03
+"""Largest share of a joint's measured torque power that the mixture may take from the physical layers.
+
+Per joint, ``(rms_joint**2 - rms_alone**2) / mean(tau**2)``: the power the physical layers leave in
+the joint fit beyond what they leave fitted alone, over the measured torque's power (filtered as the
+fit sees it).  Measured: the whole TX40 recording's joint 2, 0.103 (ratio 5.0: link + friction 10.8
+N m in the joint fit, 2.2 N m alone); the identification benchmark's UR5, at most 0.008."""
 METHODS = (*ESTIMATORS, "consistent")
 """Layer-1 methods: ``ols``, ``wls``, ``gls``, ``irls``, ``consistent``."""
 FORMAT = "dynid-model"
@@ -800,7 +809,9 @@ class ThreeLayerModel:
 
         The physical layers are also fitted alone (link and friction refitted together, no mixture).
         If, in the joint fit, link + friction leave more than :data:`TAKEOVER` times the RMS they leave
-        alone on some joint, the mixture has taken over physical torque (on the Panda at 6 Hz, a
+        alone on some joint, or leave more than :data:`TAKEOVER_SHARE` of that joint's torque power
+        beyond it (the whole TX40 recording: ratio 5, but a tenth of joint 2's power, its gravity),
+        the mixture has taken over physical torque (on the Panda at 6 Hz, a
         position mixture carried joint 2's gravity: link + friction 1.15 N m against 0.1 alone, and
         1.2 N m on held-out data); then the physical layers fitted alone are kept and the mixture is
         fitted on what they leave, validated as in :class:`GMRCorrection`.  A correction that only adds
@@ -826,13 +837,18 @@ class ThreeLayerModel:
         alone = np.asarray(phys.rms_layers["friction"], dtype=np.float64)
         joint = np.asarray(out.rms_layers["friction"], dtype=np.float64)
         ratio = joint / np.maximum(alone, 1e-300)
+        power = np.mean(prep.tau_reference**2, axis=0)
+        share = (joint**2 - alone**2) / np.maximum(power, 1e-300)
         check = {
             "physical_alone_rms": alone.tolist(),
             "physical_in_joint_fit_rms": joint.tolist(),
             "ratio": ratio.tolist(),
             "limit": TAKEOVER,
+            "share": share.tolist(),
+            "share_limit": TAKEOVER_SHARE,
         }
-        if np.all(ratio <= TAKEOVER):
+        taken = (ratio > TAKEOVER) | (share > TAKEOVER_SHARE)
+        if not taken.any():
             info["physical_check"] = {**check, "kept": "joint fit"}
             return out
         u = np.hstack([prep.q, prep.dq])
@@ -847,7 +863,7 @@ class ThreeLayerModel:
         phys.gmr = gmr
         phys.residual = resid
         phys.rms_layers = {**phys.rms_layers, "gmm": _rms(resid)}
-        over = ", ".join(str(j + 1) for j in np.flatnonzero(ratio > TAKEOVER))
+        over = ", ".join(str(j + 1) for j in np.flatnonzero(taken))
         info["physical_check"] = {
             **check,
             "kept": f"physical layers first (the mixture took over physical torque on joints {over})",
