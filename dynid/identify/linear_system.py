@@ -35,10 +35,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 from numpy.typing import NDArray
-from scipy.signal import sosfiltfilt
 
 from dynid._threads import single_blas_thread
 from dynid.exceptions import DataError, IdentificationError, ShapeError
+from dynid.identify._qr import r_factor
 from dynid.identify.columns import (
     CHUNK_SAMPLES,
     EXTRA_KINDS,
@@ -50,6 +50,7 @@ from dynid.identify.columns import (
 from dynid.identify.dataset import Dataset
 from dynid.identify.effect_terms import EffectColumns
 from dynid.identify.preparation import AUTO_CUTOFF_HZ, Prepared, Preprocessing, prepare, still_joints
+from dynid.identify.preprocess import filtfilt_rows
 
 __all__ = [
     "AUTO_CUTOFF_HZ",
@@ -122,6 +123,9 @@ class LinearSystem:
         Identified parameter of each column of ``Z``; -1 for the torque columns.
     Z : ndarray, shape (M, c) or None
         The (filtered) data matrix at full rate, kept until :meth:`release` for per-sample residuals.
+    derived : dict
+        Arrays taken from ``Z`` by the later layers, kept for reuse until :meth:`release` (e.g. the
+        refined parameters' columns per joint, which both refinements of a default identification use).
     """
 
     columns: ColumnSet
@@ -130,6 +134,7 @@ class LinearSystem:
     z_joint: NDArray[np.intp]
     z_param: NDArray[np.intp]
     Z: NDArray[np.float64] | None = field(default=None, repr=False)
+    derived: dict = field(default_factory=dict, repr=False)
 
     @property
     def m(self) -> int:
@@ -149,6 +154,7 @@ class LinearSystem:
     def release(self) -> None:
         """Drop the full data matrix (the compressed factor stays; per-sample methods stop working)."""
         self.Z = None
+        self.derived.clear()
 
     # -------------------------------------------------------------- weighted solves
     def stacked(self, whitener: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -184,7 +190,7 @@ class LinearSystem:
             ``L^-1`` with ``Omega = L L^T`` the joint-noise covariance (identity for OLS).
         """
         p = self.p
-        R_aug = scipy.linalg.qr(self.stacked(whitener), mode="r", check_finite=False)[0][: p + 1]
+        R_aug = r_factor(self.stacked(whitener), overwrite=True)[: p + 1]
         if R_aug.shape[0] < p + 1:  # fewer stacked rows than columns (tiny data): pad
             R_aug = np.vstack([R_aug, np.zeros((p + 1 - R_aug.shape[0], p + 1))])
         return R_aug[:p, :p], R_aug[:p, p], float(R_aug[p, p] ** 2)
@@ -328,7 +334,7 @@ def _filter_in_place(Z: NDArray[np.float64], prepared: Prepared) -> None:
             )
         for a in range(0, Z.shape[1], _FILTER_COLUMNS):
             cols = slice(a, min(a + _FILTER_COLUMNS, Z.shape[1]))
-            Z[run, cols] = sosfiltfilt(sos, Z[run, cols], axis=0)
+            Z[run, cols] = filtfilt_rows(sos, Z[run, cols].T).T
 
 
 def _qr_rows(Z: NDArray[np.float64], rows: NDArray[np.intp]) -> NDArray[np.float64]:
@@ -337,7 +343,7 @@ def _qr_rows(Z: NDArray[np.float64], rows: NDArray[np.intp]) -> NDArray[np.float
     R = np.zeros((0, c))
     for a in range(0, len(rows), CHUNK_SAMPLES):
         block = np.vstack([R, Z[rows[a : a + CHUNK_SAMPLES]]])
-        R = scipy.linalg.qr(block, mode="r", overwrite_a=True, check_finite=False)[0][:c]
+        R = r_factor(block, overwrite=True)[:c]
     if R.shape[0] < c:
         R = np.vstack([R, np.zeros((c - R.shape[0], c))])
     return R
