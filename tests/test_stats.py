@@ -11,6 +11,7 @@ from scipy import stats as sps
 from dynid.diagnosis.stats import (
     default_lag,
     diebold_mariano,
+    excess_test,
     holm,
     ljung_box,
     newey_west_variance,
@@ -183,3 +184,35 @@ def test_ljung_box_edge_cases():
     assert ljung_box([1.0, 3.0, 2.0, 5.0, 4.0, 6.0], lags=20) == ljung_box(
         [1.0, 3.0, 2.0, 5.0, 4.0, 6.0], lags=4
     )
+
+
+# ---------------------------------------------------------------------------- excess test
+def test_the_capped_excess_test_finds_an_excess_that_sits_in_a_few_blocks(rng):
+    """A friction effect seen on a few moves of an aperiodic run: most blocks half a noise variance above
+    the level, two a thousand above.  The plain test's variance is swamped by those few blocks; block means
+    capped at 20 above the level keep a lower mean (still a valid test) and find it."""
+    block, count = 50, 200
+    loss = 2.0 + rng.chisquare(3, size=block * count) / 3.0 * 0.5
+    for b in rng.choice(count, size=2, replace=False):
+        loss[b * block : (b + 1) * block] += 1000.0
+    assert excess_test(loss, 2.0, block=block) > 0.05
+    assert excess_test(loss, 2.0, block=block, cap=20.0) < 1e-6
+
+
+def test_the_capped_excess_test_keeps_its_size_under_the_null():
+    rng = np.random.default_rng(5)
+    block = 20
+    hits = 0
+    for _ in range(300):
+        z = rng.standard_normal(block * 60)
+        hits += excess_test(z**2, 1.0, block=block, cap=20.0) < 0.05
+    assert hits / 300 <= 0.07  # at most the test's level (a capped mean is never above the true one)
+
+
+def test_the_excess_test_takes_a_level_per_sample(rng):
+    # Samples that do not count (mask 0) have loss 0 and level 0: the mean excess is that of the rest.
+    mask = (np.arange(4000) % 400 < 300).astype(float)
+    loss = mask * (1.0 + 0.01 * rng.normal(size=4000))
+    assert excess_test(loss, 1.0 * mask, block=10) == pytest.approx(excess_test(loss - mask, 0.0, block=10))
+    assert excess_test(loss, 1.0, block=10) > 0.99  # the old constant level: a quarter of the rows below it
+    assert excess_test(loss + 0.05 * mask, 1.0 * mask, block=10) < 1e-6
