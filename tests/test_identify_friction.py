@@ -107,6 +107,12 @@ def test_seed_model_fitted_through_the_torque_filter_finds_the_threshold(rng) ->
     pred = prep.filter(filtered.predict(prep.dq))[prep.rows]
     expect = prep.filter(truth.predict(prep.dq))[prep.rows]
     assert np.sqrt(np.mean((pred - expect) ** 2)) < 0.02
+    # the fit's own filtered columns are the filtered basis, to the bit, handed out once
+    again = [prep.filter(B)[prep.rows] for B in filtered.basis(prep.dq)]
+    first = filtered.filtered_basis(prep)
+    assert first is not None and all(np.array_equal(a, b) for a, b in zip(first, again, strict=True))
+    assert not hasattr(filtered, "_filtered_basis")
+    assert all(np.array_equal(a, b) for a, b in zip(filtered.filtered_basis(prep), again, strict=True))
 
 
 def test_linear_part_round_trips_through_basis_and_set_linear(rng) -> None:

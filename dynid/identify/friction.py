@@ -277,6 +277,8 @@ class _Friction:
     ) -> tuple[NDArray[np.float64], float]:
         """Bounded least squares of F on the (filtered) columns ``columns(dq)``: (coef, rss)."""
         A = columns(dq) if sampling is None else sampling.full(columns(dq))
+        if sampling is not None:  # the filtered basis at the fitted shape (see FrictionLayer.filtered_basis)
+            self._filtered_basis = A
         return bounded_lsq(A, F, bounds)
 
     def to_dict(self) -> dict[str, Any]:
@@ -769,6 +771,8 @@ class FrictionLayer:
         around : FrictionLayer, optional
             An earlier fit of the same model: each joint's shape parameter is searched near its value.
         """
+        dq_in = dq
+        self.__dict__.pop("_filtered_basis", None)
         dq = np.atleast_2d(np.asarray(dq, dtype=np.float64))
         F = np.atleast_2d(np.asarray(F, dtype=np.float64))
         sampling = None
@@ -804,7 +808,26 @@ class FrictionLayer:
         self.models_ = models
         self.rms_ = np.array([mdl.rms_ for mdl in models])
         self.filtered_ = prepared is not None
+        kept = [mdl.__dict__.pop("_filtered_basis", None) for mdl in models]
+        if prepared is not None and dq_in is prepared.dq and all(a is not None for a in kept):
+            self._filtered_basis = (prepared, kept)
         return self
+
+    def filtered_basis(self, prepared: Any) -> list[NDArray[np.float64]]:
+        """``basis(prepared.dq)`` filtered like the torque and taken at ``prepared.rows``: list of (m, k_j).
+
+        A layer just fitted on ``prepared.dq`` with ``prepared`` filtered these columns for its final
+        coefficients already: the first call returns those (the same values) and lets them go.
+
+        Parameters
+        ----------
+        prepared : Prepared
+            The preprocessing of the data (:func:`dynid.identify.preparation.prepare`).
+        """
+        kept = self.__dict__.pop("_filtered_basis", None)
+        if kept is not None and kept[0] is prepared:
+            return kept[1]
+        return [prepared.filter(B)[prepared.rows] for B in self.basis(prepared.dq)]
 
     def basis(self, dq: ArrayLike) -> list[NDArray[np.float64]]:
         """Per joint, the columns of its linear coefficients at the fitted shapes: list of (m, k_j).

@@ -360,7 +360,7 @@ def _friction_step(system: LinearSystem, friction: str, prep, F, around: Frictio
             layer, Fb = memo[key]
             return copy.deepcopy(layer), Fb
     layer = FrictionLayer(model=friction).fit(prep.dq, F, prepared=prep, around=around)
-    Fb = _filtered(prep, layer.basis(prep.dq))
+    Fb = layer.filtered_basis(prep)  # the fit filtered them already
     if memo is not None:
         memo[key] = (copy.deepcopy(layer), Fb)
     return layer, Fb
