@@ -279,3 +279,96 @@ def test_unreachable_floor_is_infeasible(ur5, tmp_path, capsys):
 def test_unknown_criterion_is_refused(ur5):
     with pytest.raises(UsageError, match="criterion is 'aopt'; choose one of seed, cond, logdet"):
         ExcitationProblem(robot=ur5, criterion="aopt")
+
+
+# ---------------------------------------------------------------------------- interrupts
+def _children(pid: int) -> list[int]:
+    """Process ids whose parent is ``pid`` (Linux /proc; empty elsewhere)."""
+    from pathlib import Path
+
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            out.append(int(stat.parent.name))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    from pathlib import Path
+
+    try:  # a zombie has ended
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.parametrize(
+    ("n_jobs", "signame"),
+    [("1", "SIGTERM"), ("2", "SIGTERM"), ("2", "SIGINT")],
+    ids=["in-process-sigterm", "workers-sigterm", "workers-ctrl-c"],
+)
+def test_a_signal_during_the_design_ends_it_at_once_with_one_line(tmp_path, n_jobs, signame):
+    """IPOPT runs the tries: the signal stops it within seconds, exit 130, one line, no file, no worker left.
+
+    CasADi swallows a KeyboardInterrupt raised while IPOPT runs; before the fix the design went on to the
+    end and wrote its files (exit 0).  Ctrl-C reaches the whole process group (the workers too).
+    """
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "T.json"
+    argv = [
+        sys.executable, "-m", "dynid.cli", "excite", "--robot", "ur5", "--criterion", "seed", "--n-jobs", n_jobs,
+        "--baseline", "5", "--patience", "60", "--out", str(out), "--csv", str(tmp_path / "T.csv"), "--json",
+        str(tmp_path / "F.json"),
+    ]  # fmt: skip
+    proc = subprocess.Popen(
+        argv,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,  # a process group of its own: Ctrl-C reaches it and its workers only
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL) and None,  # a background shell ignores it
+    )
+    try:
+        assert "seed criterion" in proc.stdout.readline()  # printed just before the design starts
+        # The 5-trajectory baseline takes under a second; with up to 60 tries the search runs for minutes:
+        # at 4 s IPOPT is at work (in this process with n_jobs 1, in the workers otherwise).
+        time.sleep(4.0)
+        workers = _children(proc.pid)
+        assert proc.poll() is None, "the design ended before the signal"
+        t0 = time.monotonic()
+        if signame == "SIGINT":
+            os.killpg(proc.pid, signal.SIGINT)
+        else:
+            proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+        elapsed = time.monotonic() - t0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    name = "" if signame == "SIGINT" else f" by {signame}"
+    assert lines[0] == f"dynid excite: interrupted{name}; no file was left half written"
+    assert elapsed < 10.0
+    assert list(tmp_path.iterdir()) == []
+    deadline = time.monotonic() + 10.0
+    while any(_alive(pid) for pid in workers) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not [pid for pid in workers if _alive(pid)], "a worker outlived the command"

@@ -93,7 +93,8 @@ from __future__ import annotations
 import math
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -217,6 +218,68 @@ CV_MEAN_FLOOR = 1e-3
 
 
 Progress = Callable[[str], None]
+
+
+# ---------------------------------------------------------------------------- interrupts
+_STOP: list[str] = []
+"""Name of the signal that interrupted the design in this process (empty while none did).
+
+CasADi checks for signals while IPOPT runs and swallows the ``KeyboardInterrupt`` that Ctrl-C or
+dynid's SIGTERM handler raises there (a warning, and the solve goes on): the design would carry on
+for minutes.  :func:`_interruptible` records the signal here before the handler raises, the solver's
+iteration callback (:class:`_StopCallback`) then ends IPOPT at its next iteration, and the try raises
+``KeyboardInterrupt`` again once the solver has returned."""
+
+_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
+_DEPTH = [0]
+_SOLVING: set[int] = set()
+"""Threads inside IPOPT.  A signal there is only recorded: raised inside the objective's callback, the
+exception would be printed with its traceback by CasADi and the solve would go on."""
+
+
+@contextmanager
+def _interruptible() -> Iterator[None]:
+    """Record SIGINT, SIGTERM and SIGHUP in :data:`_STOP`, then run the handler that was in place.
+
+    Only handlers that are Python callables are wrapped (Ctrl-C's default, dynid's command line):
+    a signal left at its default action still ends the process as before.  Outside the main thread
+    (where signals cannot be set) nothing changes.
+    """
+    import signal
+
+    if _DEPTH[0]:  # inside a design (a try run in the designing process): its guard is in place
+        yield
+        return
+    _STOP.clear()
+    _DEPTH[0] += 1
+    previous: dict[int, Callable] = {}
+    if threading.current_thread() is threading.main_thread():
+        for name in _SIGNALS:
+            sig = getattr(signal, name, None)
+            handler = None if sig is None else signal.getsignal(sig)
+            if callable(handler):
+                previous[sig] = handler
+
+                def record(signum: int, frame: object, handler: Callable = handler) -> None:
+                    _STOP.append(signal.Signals(signum).name)
+                    if threading.get_ident() not in _SOLVING:  # see _SOLVING
+                        handler(signum, frame)
+
+                signal.signal(sig, record)
+    try:
+        yield
+        _check_stop()
+    finally:
+        _DEPTH[0] -= 1
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def _check_stop() -> None:
+    """Raise ``KeyboardInterrupt`` (with the signal's name) when a signal came during the design."""
+    if _STOP:
+        name = _STOP[0]
+        raise KeyboardInterrupt(*(() if name == "SIGINT" else (name,)))
 
 
 # ---------------------------------------------------------------------------- problem
@@ -821,6 +884,33 @@ class _CriterionJacobian(ca.Callback):
         return [dA.reshape(1, -1, order="F"), dw.reshape(1, -1), ds.reshape(1, -1)]
 
 
+class _StopCallback(ca.Callback):
+    """IPOPT's iteration callback: returns 1 (IPOPT stops: User_Requested_Stop) once a signal came."""
+
+    def __init__(self, name: str, nx: int, ng: int, npar: int) -> None:
+        ca.Callback.__init__(self)
+        self._sizes = {"x": nx, "lam_x": nx, "g": ng, "lam_g": ng, "lam_p": npar, "f": 1}
+        self.construct(name, {})
+
+    def get_n_in(self) -> int:
+        return ca.nlpsol_n_out()
+
+    def get_n_out(self) -> int:
+        return 1
+
+    def get_name_in(self, i: int) -> str:
+        return ca.nlpsol_out(i)
+
+    def get_name_out(self, i: int) -> str:
+        return "ret"
+
+    def get_sparsity_in(self, i: int) -> ca.Sparsity:
+        return ca.Sparsity.dense(self._sizes.get(ca.nlpsol_out(i), 0), 1)
+
+    def eval(self, arg):
+        return [1 if _STOP else 0]
+
+
 # ---------------------------------------------------------------------------- the NLP
 class _Nlp:
     """IPOPT on the decision vector y for one problem; built once per process and reused."""
@@ -874,17 +964,19 @@ class _Nlp:
         options = dict(_IPOPT_OPTIONS)
         if self.cart_axes.size:
             options["jac_d_constant"] = "no"
-        nlp = {"x": y, "p": par, "f": f, "g": constraints(y)}
-        self.solver = ca.nlpsol(
-            "excitation", "ipopt", nlp, {"ipopt": options, "print_time": False, "error_on_fail": False}
-        )
+        g = constraints(y)
+        nlp = {"x": y, "p": par, "f": f, "g": g}
+        # stops IPOPT at its next iteration once a signal came (CasADi swallows the KeyboardInterrupt)
+        self.stop = _StopCallback("excitation_stop", problem.n_free, g.shape[0], par.shape[0])
+        common = {"print_time": False, "error_on_fail": False, "iteration_callback": self.stop}
+        self.solver = ca.nlpsol("excitation", "ipopt", nlp, {"ipopt": options, **common})
         # Re-solves after tightening start from the previous solution and multipliers, with a small
         # barrier parameter: the solution moves little.
         self.warm_solver = ca.nlpsol(
             "excitation_warm",
             "ipopt",
             nlp,
-            {"ipopt": dict(options, **_WARM_OPTIONS), "print_time": False, "error_on_fail": False},
+            {"ipopt": dict(options, **_WARM_OPTIONS), **common},
         )
         self._multipliers: tuple[np.ndarray, np.ndarray] | None = None
 
@@ -910,12 +1002,19 @@ class _Nlp:
     ) -> tuple[np.ndarray, str, int]:
         """Solve from ``y0``; ``warm`` re-uses the multipliers of the previous solve."""
         lbg, ubg = self.bounds(margins)
-        if warm and self._multipliers is not None and _WARM_OPTIONS:
-            solver = self.warm_solver
-            sol = solver(x0=y0, p=par, lbg=lbg, ubg=ubg, lam_g0=self._multipliers[0], lam_x0=self._multipliers[1])
-        else:
-            solver = self.solver
-            sol = solver(x0=y0, p=par, lbg=lbg, ubg=ubg)
+        me = threading.get_ident()
+        _SOLVING.add(me)
+        try:
+            if warm and self._multipliers is not None and _WARM_OPTIONS:
+                solver = self.warm_solver
+                sol = solver(
+                    x0=y0, p=par, lbg=lbg, ubg=ubg, lam_g0=self._multipliers[0], lam_x0=self._multipliers[1]
+                )
+            else:
+                solver = self.solver
+                sol = solver(x0=y0, p=par, lbg=lbg, ubg=ubg)
+        finally:
+            _SOLVING.discard(me)
         self._multipliers = (np.asarray(sol["lam_g"]).ravel(), np.asarray(sol["lam_x"]).ravel())
         stats = solver.stats()
         return np.asarray(sol["x"]).ravel(), str(stats.get("return_status", "?")), int(stats.get("iter_count", -1))
@@ -995,6 +1094,18 @@ def _solve_try(
     max_rounds: int,
 ) -> _TryResult:
     """Optimise from one random start; tighten and re-solve while the check grid shows an overshoot."""
+    with _interruptible():
+        return _solve_try_guarded(problem, functions, par, seed, index, max_rounds)
+
+
+def _solve_try_guarded(
+    problem: ExcitationProblem,
+    functions: _Functions,
+    par: np.ndarray,
+    seed: tuple[int, ...],
+    index: int,
+    max_rounds: int,
+) -> _TryResult:
     t0 = time.perf_counter()
     rng = np.random.default_rng(list(seed))
     start = problem.random_trajectory(rng, amplitude=0.9)
@@ -1022,6 +1133,7 @@ def _solve_try(
     rounds = 0
     for rounds in range(1, max_rounds + 1):
         y, status, it = nlp.solve(y, par, margins, warm=rounds > 1)
+        _check_stop()
         iterations += it
         if not np.all(np.isfinite(y)):
             break
@@ -1328,6 +1440,34 @@ def design_excitation(
         The regressor cannot reach full rank with these harmonics and grid, no random trajectory
         meets the Cartesian limits, or no try ends feasible.
     """
+    with _interruptible():
+        return _design(
+            problem,
+            trajectories=trajectories,
+            seed=seed,
+            patience=patience,
+            max_tries=max_tries,
+            n_jobs=n_jobs,
+            backend=backend,
+            baseline=baseline,
+            max_rounds=max_rounds,
+            progress=progress,
+        )
+
+
+def _design(
+    problem: ExcitationProblem,
+    *,
+    trajectories: int,
+    seed: int,
+    patience: int,
+    max_tries: int,
+    n_jobs: int,
+    backend: str | None,
+    baseline: int,
+    max_rounds: int,
+    progress: Progress | None,
+) -> ExcitationResult:
     t_start = time.perf_counter()
     for label, value, low in (
         ("trajectories", trajectories, 1),
@@ -1371,6 +1511,7 @@ def design_excitation(
         best_fig = None
         fails = tries = feasible_tries = 0
         while fails < patience and tries < max_tries:
+            _check_stop()  # a signal CasADi swallowed in this process (baseline, a try run here)
             size = min(batch, max_tries - tries)
             jobs = (
                 joblib.delayed(_solve_try)(problem, functions, par, (seed, stage, tries + i), tries + i, max_rounds)
@@ -1395,6 +1536,7 @@ def design_excitation(
                 f"on the check grid (last IPOPT status: {res.status}); loosen the limits or the Cartesian "
                 "constraints, or allow more tries (max_tries) and rounds (max_rounds)."
             )
+        _check_stop()
         start_fig = exact_figures(np.vstack([stack_fine, problem.regressor(best.start)]), criterion, data, gravity)
         traj = best.trajectory
         kept.append(traj)
