@@ -200,7 +200,52 @@ def part_excite(repeat: int) -> None:
     )
 
 
-def part_identify(repeat: int) -> None:
+# where the default identification spends its CPU time (--stages): (label, module, owner, attribute);
+# stages nest (the refinements hold the friction fits, the mixtures, the link steps, ...); each is
+# called from one thread at a time, so the process's CPU time during its calls is its own (with what
+# its calls run in threads)
+STAGES = (
+    ("build_system (states, regressor, filter, QR)", "dynid.identify.model", None, "build_system"),
+    ("  its blocked QR of Z", "dynid.identify.linear_system", None, "_qr_rows"),
+    ("layer 1 (IRLS)", "dynid.identify.estimators", "IRLS", "fit"),
+    ("refine (two calls: with mixtures, physical alone)", "dynid.identify.model", None, "refine"),
+    ("  friction fits (shape searches)", "dynid.identify.friction", "FrictionLayer", "fit"),
+    ("  mixture EM (fit_mixtures)", "dynid.identify.gmr", "GMRCorrection", "fit_mixtures"),
+    ("  mixture designs (gates at full rate)", "dynid.identify.gmr", "GMRCorrection", "design"),
+    ("  link steps", "dynid.identify.refine", None, "_link_step"),
+    ("  nuisance steps", "dynid.identify.refine", None, "_nuisance_step"),
+    ("  consistent projection", "dynid.identify.refine", None, "_consistent_step"),
+    ("mixture fitted on the physical layers' residual", "dynid.identify.gmr", "GMRCorrection", "fit"),
+)
+
+
+def _stage_timers() -> tuple[dict[str, list[float]], list]:
+    """Wrap each stage's function to add up its calls and CPU time (all threads of the process)."""
+    import functools
+    import importlib
+
+    totals: dict[str, list[float]] = {label: [0, 0.0] for label, *_ in STAGES}
+    undo = []
+    for label, module, owner, attr in STAGES:
+        target = importlib.import_module(module)
+        if owner is not None:
+            target = getattr(target, owner)
+        func = getattr(target, attr)
+
+        def timed(*args, _func=func, _label=label, **kwargs):
+            c0 = time.process_time()
+            try:
+                return _func(*args, **kwargs)
+            finally:
+                totals[_label][0] += 1
+                totals[_label][1] += time.process_time() - c0
+
+        setattr(target, attr, functools.wraps(func)(timed))
+        undo.append((target, attr, func))
+    return totals, undo
+
+
+def part_identify(repeat: int, stages: bool = False) -> None:
     from dynid.identify.adapters import load_recording, recording_model_path
     from dynid.identify.model import identify
     from dynid.symbolic import load_robot
@@ -226,6 +271,18 @@ def part_identify(repeat: int) -> None:
             figures.append(f"{label} {time.perf_counter() - t0:.2f} s wall / {self_cpu() - c0:.2f} s CPU")
         print(f"  run {k + 1}: " + ", ".join(figures) + f"  [{load()}]")
     print(f"  reference: FIGAROH 0.2.4 {FIGAROH_TX40_S:.1f} s on the same recording (quoted from the issue)")
+    if stages:
+        totals, undo = _stage_timers()
+        c0 = time.process_time()
+        identify(robot, data)
+        cpu = time.process_time() - c0
+        for target, attr, func in undo:
+            setattr(target, attr, func)
+        print(
+            f"  CPU time by stage of one default identification ({cpu:.2f} s CPU in all; stages nest)  [{load()}]"
+        )
+        for label, (calls, seconds) in totals.items():
+            print(f"    {label:<52s} {int(calls):4d} calls {seconds:6.2f} s")
 
 
 def main() -> None:
@@ -237,6 +294,9 @@ def main() -> None:
     parser.add_argument(
         "--build-baseline", action="store_true", help="also build the previous recipe here (minutes of CPU)"
     )
+    parser.add_argument(
+        "--stages", action="store_true", help="also the CPU time of each stage of one default identification"
+    )
     args = parser.parse_args()
     print(
         f"{os.cpu_count()} cores, {load()}, python {sys.version.split()[0]}, compiler {shutil.which('c++')}"
@@ -246,7 +306,7 @@ def main() -> None:
     if "excite" in args.part:
         part_excite(args.repeat)
     if "identify" in args.part:
-        part_identify(args.repeat)
+        part_identify(args.repeat, args.stages)
 
 
 if __name__ == "__main__":
