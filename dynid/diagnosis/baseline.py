@@ -17,6 +17,7 @@ Stages, in the order :func:`dynid.diagnosis.core.diagnose` runs them:
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -41,17 +42,21 @@ __all__ = [
     "Sample",
     "Side",
     "check_training_length",
+    "crossfit_residual",
     "excess_over_floor",
     "heldout_baseline",
     "model_structure",
     "refit_baseline",
     "sample",
     "side",
+    "state_estimation_variance",
 ]
 
 _STATE_FACTOR = 2.0  # state filter cut-off over the parallel filter's in the refit
 _WEIGHT_PASSES = 6  # reweighting passes of the baseline refit, at most
 _MIN_TRAIN_SECONDS = 2.0
+_FOLDS = 5  # contiguous held-out stretches of the cross-fitted baseline
+_CAP = 20.0  # block means of the excess test above the level are capped here (noise variances)
 
 FrictionShape = Callable[[NDArray[np.float64]], NDArray[np.float64]]
 
@@ -400,6 +405,119 @@ def _estimation_weights(
     return out
 
 
+def state_estimation_variance(
+    structure: ModelStructure,
+    ds: Dataset,
+    s: Sample,
+    x: NDArray[np.float64],
+    sigma: NDArray[np.float64],
+    *,
+    seed: int = 0,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """What quantised angles add to the held-out error, per joint, in noise variances.
+
+    The encoder's step is read from the angles (:func:`dynid.validation.noise.encoder_step`).  The
+    angles' error is taken as uniform within one step, white: the angles are moved by such an error, put
+    through the same preparation (filter, central differences) and the baseline refit's torque, and the
+    change of the filtered torque at the rows used, over the noise floor, is the share of the held-out
+    error that differentiating coarse angles leaves (the error of the measured angles themselves is of
+    the same size and independent of the torque noise).  Angles that are not quantised give zeros.
+
+    Parameters
+    ----------
+    structure : ModelStructure
+    ds : Dataset
+        The held-out data as given.
+    s : Sample
+        Its prepared sample (:func:`sample`).
+    x : ndarray, shape (k0,)
+        The baseline refit's coefficients.
+    sigma : ndarray, shape (n,)
+        Noise floor (N m).
+    seed : int
+        Seed of the simulated angle error (reproducible).
+
+    Returns
+    -------
+    (variance, step) : tuple of ndarray, shape (n,)
+        Mean squared torque change over the moving rows in noise variances, and the step (rad) per joint.
+    """
+    from dataclasses import replace
+
+    from dynid.validation.noise import encoder_step
+
+    n = structure.robot.n
+    step = encoder_step(ds.q)
+    if not np.any(step > 0):
+        return np.zeros(n), step
+    rng = np.random.default_rng(seed)
+    moved = replace(ds, q=ds.q + rng.uniform(-0.5, 0.5, ds.q.shape) * step[None, :])
+    prep = prepare(moved, Preprocessing.from_settings(structure.preprocessing), n_joints=n)
+    if len(prep.rows) != len(s.prep.rows) or np.any(prep.rows != s.prep.rows):
+        return np.zeros(n), step
+    tau = prep.filter(np.einsum("mnk,k->mn", _structure_columns(structure, prep.q, prep.dq, prep.ddq), x))
+    change = tau[s.rows] - predict(s.X0, x, None, None)
+    return mse(change, s.moving) / sigma**2, step
+
+
+def crossfit_residual(
+    tr: Side | Sample,
+    weights: NDArray[np.float64],
+    ho: Side | Sample,
+    sigma: NDArray[np.float64],
+    folds: int = _FOLDS,
+) -> NDArray[np.float64]:
+    """Held-out residual of the baseline refitted on the training data and the other held-out folds.
+
+    The held-out run is cut into ``folds`` contiguous stretches; each is predicted by the baseline
+    identified (weighted least squares, the training rows with the refit's weights, the held-out rows with
+    the moving mask over the noise floor) on the training data together with the other stretches.  What
+    the baseline's own parameters can learn from held-out data (a gravity error where the held-out motion
+    leaves the training states) is then predicted; what no parameter of the baseline predicts on data it
+    was not fitted on (an unmodelled effect, noise) is left.
+
+    Parameters
+    ----------
+    tr, ho : Side or Sample
+        Training and held-out data (their filtered baseline columns ``X0`` and torque ``y``).
+    weights : ndarray, shape (m_tr, n)
+        The refit's training weights (1 / N m).
+    sigma : ndarray, shape (n,)
+        Held-out noise floor (N m).
+    folds : int
+        Contiguous held-out stretches.
+
+    Returns
+    -------
+    ndarray, shape (m_ho, n)
+        Cross-fitted held-out residual (N m).
+    """
+    m_tr, n, k = tr.X0.shape
+    m = ho.X0.shape[0]
+    A_tr = (tr.X0 * weights[:, :, None]).reshape(m_tr * n, k)
+    b_tr = (tr.y * weights).reshape(m_tr * n)
+    w_ho = ho.moving / sigma[None, :]
+    A_ho = ho.X0 * w_ho[:, :, None]
+    b_ho = ho.y * w_ho
+    scale = np.linalg.norm(A_tr, axis=0) + np.linalg.norm(A_ho.reshape(m * n, k), axis=0)
+    used = scale > 1e-12 * max(float(scale.max()), 1e-300)
+    # The training rows once, as a triangular factor: each fold's fit stacks it on the other folds' rows.
+    Q, R = np.linalg.qr(A_tr[:, used] / scale[used])
+    Qb = Q.T @ b_tr
+    edges = np.linspace(0, m, max(2, int(folds)) + 1).astype(int)
+    out = np.empty_like(ho.y)
+    for a, b in itertools.pairwise(edges):
+        keep = np.ones(m, dtype=bool)
+        keep[a:b] = False
+        A = np.vstack([R, A_ho[keep][:, :, used].reshape(-1, int(used.sum())) / scale[used]])
+        rhs = np.concatenate([Qb, b_ho[keep].reshape(-1)])
+        z, *_ = np.linalg.lstsq(A, rhs, rcond=1e-9)
+        x = np.zeros(k)
+        x[used] = z / scale[used]
+        out[a:b] = ho.y[a:b] - np.einsum("mnk,k->mn", ho.X0[a:b], x)
+    return out
+
+
 def excess_over_floor(
     fit: WeightedFit,
     ho: Side,
@@ -407,43 +525,78 @@ def excess_over_floor(
     sigma: NDArray[np.float64],
     block: int,
     settings: DiagnosisSettings,
+    *,
+    crossfit: NDArray[np.float64] | None = None,
+    state_variance: NDArray[np.float64] | None = None,
 ) -> dict[str, Any]:
     """Excess of the refit's held-out error over the noise floor, per joint, and its significance.
 
-    Per joint: is the excess above ``1 + excess_tol`` noise variances, beyond the serial correlation and
-    beyond what the refit's parameter error leaves on held-out data?  A training run that excites a
-    joint poorly leaves its parameters uncertain, and the held-out motion can see that error at many
-    times the noise floor (an effect-free UR5 run showed 12 noise variances of it on joint 1).
+    Per joint: is the excess above ``1 + excess_tol`` noise variances (plus the state estimation's share,
+    ``state_variance``), beyond the serial correlation and beyond what the baseline's own parameters
+    explain on held-out data?  A training run that excites a joint poorly leaves its parameters uncertain,
+    and the held-out motion can see that error at many times the noise floor (an effect-free UR5 run on
+    an aperiodic held-out motion showed 16 noise variances of it on joint 2, 17 times what the refit's
+    covariance allows: what the training run's noise cannot show).  With ``crossfit`` (the residual of
+    :func:`crossfit_residual`) the test runs on what a baseline that has seen the rest of the held-out run
+    still leaves; without it, the refit's parameter error is allowed for through its block covariance.
+    Block means are capped at ``_CAP`` noise variances above the level (:func:`dynid.diagnosis.stats.excess_test`).
 
     Returns
     -------
     dict
-        ``ratio`` (per joint), ``ratio_overall``, ``p_joint`` (Holm-adjusted), ``p_value``,
-        ``significant_joint``, ``significant``, ``tolerance``, ``estimation`` (the expected share of the
-        parameter error, noise variances per joint).
+        ``ratio`` (per joint: the refit's held-out MSE over the floor), ``ratio_tested`` (what the test
+        ran on: the cross-fitted residual's), ``ratio_overall``, ``p_joint`` (Holm-adjusted), ``p_value``,
+        ``significant_joint``, ``significant``, ``tolerance``, ``estimation`` (the share of the refit's
+        parameter error, noise variances per joint: expected from its covariance, or, cross-fitted, what
+        the refit on the other held-out folds removes), ``state_estimation`` (noise variances per joint),
+        ``explainable`` (the sources counted as noise-like).
     """
     mh = ho.moving
     n = mh.shape[1]
-    r_base = base.residual
     tol = settings.excess_tol
     ratio_joint = base.mse / sigma**2
     ratio_all = float(np.sum(base.loss) / np.sum(mh))
-    est_w = _estimation_weights(fit, ho.X0, mh, sigma, block)
+    state = np.zeros(n) if state_variance is None else np.asarray(state_variance, dtype=float)
+    if crossfit is None:
+        r_test = base.residual
+        est_w = _estimation_weights(fit, ho.X0, mh, sigma, block)
+        sources = ["torque noise (floor)", "the refit's parameter error (block covariance)"]
+    else:
+        r_test = crossfit
+        est_w = [np.zeros(0) for _ in range(n)]
+        sources = ["torque noise (floor)", "the baseline's parameters refitted on the other held-out folds"]
+    if np.any(state > 0):
+        sources.append("state estimation from quantised angles")
+    ratio_test = mse(r_test, mh) / sigma**2
+    share = np.mean(mh, axis=0)
     p_joint = np.array(
         [
-            st.excess_test(mh[:, j] * (r_base[:, j] / sigma[j]) ** 2, 1 + tol, est_w[j], block=block)
+            st.excess_test(
+                mh[:, j] * (r_test[:, j] / sigma[j]) ** 2,
+                (1 + tol + state[j]) * mh[:, j],
+                share[j] * est_w[j],
+                block=block,
+                cap=_CAP,
+            )
             for j in range(n)
         ]
     )
     p_joint = st.holm(p_joint)
-    sig_joint = (p_joint < settings.alpha) & (ratio_joint > 1 + tol)
+    sig_joint = (p_joint < settings.alpha) & (ratio_test > 1 + tol + state)
     return {
         "ratio": ratio_joint,
+        "ratio_tested": ratio_test,
         "ratio_overall": ratio_all,
         "p_joint": p_joint,
         "p_value": float(p_joint.min()),
         "significant_joint": sig_joint,
         "significant": bool(sig_joint.any()),
         "tolerance": tol,
-        "estimation": np.array([float(np.sum(wj)) for wj in est_w]),
+        "estimation": (
+            np.array([float(np.sum(wj)) for wj in est_w])
+            if crossfit is None
+            else np.maximum(ratio_joint - ratio_test, 0.0)
+        ),
+        "state_estimation": state,
+        "explainable": sources,
     }

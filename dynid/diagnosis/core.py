@@ -31,9 +31,14 @@ Method, in the order it runs:
    part of the gap; the continuous hyper-parameters of the others), and the screen repeats on top of
    it, up to ``max_effects``.
 5. Verdict: the accepted effects; else ``["unexplained"]`` when the excess of some joint over the
-   noise floor is significant (above ``1 + excess_tol``: state estimation and sticking leave a small
-   excess even on an effect-free robot; and above what the refit's parameter error, seen through the
-   held-out motion, adds: :func:`dynid.diagnosis.stats.excess_test`), ``["none"]`` when not.  Candidates whose columns are nearly parallel once the baseline is projected
+   noise floor is significant, ``["none"]`` when not.  The excess is tested on what the baseline cannot
+   predict even when refitted with the rest of the held-out run (contiguous folds, cross-fitted: an
+   aperiodic held-out motion that leaves the training states shows the refit's parameter error at many
+   times the floor, which its covariance does not foresee), above ``1 + excess_tol`` noise variances
+   (sticking leaves a small excess even on an effect-free robot) plus what differentiating quantised
+   angles adds (the encoder's step read from the angles and propagated through the preparation and the
+   refit's torque), with block means capped so that an excess on a few moves is not lost in its own
+   variance (:func:`dynid.diagnosis.stats.excess_test`); the sources counted as noise are listed.  Candidates whose columns are nearly parallel once the baseline is projected
    out (small principal angle) are reported as not separable with this excitation.
 6. Parametric test: identified minus nominal base parameters, with a block (HAC) covariance, against
    structured hypotheses (common drive gain, a torque gain on one joint, payload on the last link, an
@@ -176,9 +181,13 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
     base = bl.refit_baseline(tr_sample)
     tr = bl.side(tr_sample, structure, base.x)
     ho = bl.side(ho_sample, structure, base.x)
+    state_var, _ = bl.state_estimation_variance(structure, heldout, ho_sample, base.x, sigma)
     del tr_sample, ho_sample  # their full-rate columns are no longer needed
     held = bl.heldout_baseline(model, heldout, ho, base.x, sigma)
-    excess = bl.excess_over_floor(base.fit, ho, held, sigma, block, settings)
+    crossfit = bl.crossfit_residual(tr, base.weights, ho, sigma)
+    excess = bl.excess_over_floor(
+        base.fit, ho, held, sigma, block, settings, crossfit=crossfit, state_variance=state_var
+    )
 
     skip = _in_model(structure)
     groups = enumerate_candidates(tr.src, settings.effects, skip=skip, motor_inertia="armature" not in skip)

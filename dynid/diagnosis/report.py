@@ -268,7 +268,7 @@ def render_diagnosis_html(
                 "attributed",
                 "unexplained",
                 "excess (re-identified / noise)",
-                "of it expected from parameter uncertainty",
+                "of it from parameter uncertainty",
                 "closure",
             ],
             rows,

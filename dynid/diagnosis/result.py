@@ -267,10 +267,25 @@ def verdict_text(d: Diagnosis) -> str:
     if loud:
         names = ", ".join(f"{d.joint_names[j]} ({est[j]:.2g})" for j in loud)
         lines.append(
-            "The training data leave some parameters uncertain: their error alone is expected to add, in noise "
-            f"variances, {names} to the held-out error, and the tests allow for it.  An excitation designed "
-            "for identification (dynid excite) would sharpen the diagnosis there."
+            "The training data leave some parameters uncertain: their error adds, in noise variances, "
+            f"{names} to the held-out error (the baseline refitted with the rest of the held-out run predicts "
+            "it), and the tests allow for it.  An excitation designed for identification (dynid excite) "
+            "would sharpen the diagnosis there."
         )
+    state = np.asarray(d.excess.get("state_estimation", ()), dtype=float)
+    if state.size and np.any(state >= 0.25):
+        names = ", ".join(
+            f"{d.joint_names[j]} ({state[j]:.2g})" for j in range(state.size) if state[j] >= 0.25
+        )
+        lines.append(
+            "The angles are quantised (an encoder's step, read from their increments): velocities and "
+            f"accelerations differentiated from them add, in noise variances, {names} to the held-out error; "
+            "the excess test counts it as noise.  Angles logged at a finer resolution would sharpen the "
+            "diagnosis."
+        )
+    sources = d.excess.get("explainable")
+    if sources:
+        lines.append("Counted as noise in the excess test: " + "; ".join(sources) + ".")
     par = d.parametric
     if par.get("finding") not in (None, "none"):
         lines.append(par["text"])

@@ -8,6 +8,7 @@ filter's noise gain.
 
 >>> floor = measure_noise(model.prepare(heldout))      # NoiseFloor: std (N m) per joint
 >>> detect_period(prep.t, prep.q)                       # s, or None
+>>> encoder_step(heldout.q)                             # rad per joint, 0 where not quantised
 """
 
 from __future__ import annotations
@@ -22,7 +23,14 @@ from dynid.identify.periodic import period_of
 from dynid.identify.preparation import Prepared
 from dynid.validation.metrics import NoiseFloor, noise_floor
 
-__all__ = ["MIN_SPECTRAL_SAMPLES", "REPEAT_TOL", "detect_period", "filter_noise_gain", "measure_noise"]
+__all__ = [
+    "MIN_SPECTRAL_SAMPLES",
+    "REPEAT_TOL",
+    "detect_period",
+    "encoder_step",
+    "filter_noise_gain",
+    "measure_noise",
+]
 
 MIN_SPECTRAL_SAMPLES = 2048
 """Fewest samples of one run for the spectral noise floor (when the data do not repeat a period): three
@@ -143,3 +151,40 @@ def _repeats(q: NDArray[np.float64], lag: float) -> bool:
     if spread <= 0:
         return True
     return float(np.mean(np.sum((x[k:] - x[:-k]) ** 2, axis=1))) <= REPEAT_TOL * spread
+
+
+def encoder_step(q: NDArray[np.float64], *, min_moves: int = 50, tol: float = 1e-3) -> NDArray[np.float64]:
+    """The quantisation step (rad) of logged angles, per joint, read from their distinct increments.
+
+    A joint's angles come from an encoder when every non-zero increment between samples is a whole
+    multiple of the smallest one (to ``tol`` of it): a 14-bit encoder moves by multiples of
+    ``2 pi / 2^14``; unquantised angles (a filter's output, a simulator's states) move by arbitrary amounts
+    and give 0.
+
+    Parameters
+    ----------
+    q : ndarray, shape (m, n)
+        Logged angles (rad).
+    min_moves : int
+        Fewest non-zero increments for a step to be read (fewer: 0).
+    tol : float
+        Tolerance of the whole multiples, in steps.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        Step (rad) per joint; 0 where the angles do not look quantised.
+    """
+    q = np.asarray(q, dtype=float)
+    out = np.zeros(q.shape[1])
+    for j in range(q.shape[1]):
+        d = np.abs(np.diff(q[:, j]))
+        scale = max(float(np.max(np.abs(q[:, j]))), 1.0)
+        d = d[d > 1e-12 * scale]
+        if d.size < min_moves:
+            continue
+        step = float(np.min(d))
+        k = d / step
+        if np.all(np.abs(k - np.round(k)) <= tol * np.maximum(k, 1.0)):
+            out[j] = step
+    return out
