@@ -358,3 +358,25 @@ def test_commands_refuse_an_ambiguous_or_wrong_topic_in_one_sentence(files, tmp_
     code, out, err = cli(["diagnose", "--model", model, "--data", files["two_topics"], "--heldout", files["mcap"]],
                          capsys)
     assert code == 2 and "two_topics holds 2 sensor_msgs/msg/JointState topics" in err and err.count("\n") == 1
+
+
+def test_export_reads_the_held_out_topic_it_is_given(files, tmp_path, capsys):
+    """``export --heldout BAG --topic``: the topic named is the one measured (its torques doubled on the other)."""
+    model = tmp_path / "M.json"
+    code, _, err = cli(["identify", "--robot", "ur5", "--method", "ols", "--friction", "linear", "--gmm", "off",
+                        "--data", files["csv"], "--out", model], capsys)
+    assert code == 0, err
+    base = ["export", "--model", model, "--format", "urdf"]
+    code, out, err = cli([*base, "--out", tmp_path / "none.urdf", "--heldout", files["two_topics"]], capsys)
+    assert code == 2 and out == "" and err.count("\n") == 1 and "pick one with --topic NAME" in err
+    assert not (tmp_path / "none.urdf").exists()
+    rms = {}
+    for name, heldout, topic in (("csv", files["csv"], []), ("plain", files["two_topics"], ["--topic", "/joint_states"]),
+                                 ("arm", files["two_topics"], ["--topic", "/arm/joint_states"])):
+        js = tmp_path / f"{name}.json"
+        code, _, err = cli([*base, "--out", tmp_path / f"{name}.urdf", "--heldout", heldout, *topic, "--json", js],
+                           capsys)
+        assert code == 0, err
+        rms[name] = json.loads(js.read_text())["heldout"]["rms_full_mean"]
+    assert rms["plain"] == pytest.approx(rms["csv"], rel=1e-9)
+    assert rms["arm"] > 10 * rms["csv"]  # the model fits tau; the other topic carries 2 tau

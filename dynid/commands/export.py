@@ -8,6 +8,7 @@ from pathlib import Path
 from dynid.commands.common import (
     add_degrees_argument,
     add_json_argument,
+    add_topic_argument,
     check_data_fits_model,
     check_outputs,
     output,
@@ -42,6 +43,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "model file's figures where they tell it)",
     )
     add_degrees_argument(parser)
+    add_topic_argument(parser)
     add_json_argument(parser)
 
 
@@ -74,7 +76,9 @@ def run(args: argparse.Namespace) -> int:
     model = load_model(args.model)
     heldout = None
     if args.heldout is not None:
-        heldout = read_dataset(args.heldout, degrees=args.degrees, joint_names=model.robot.joint_names)
+        heldout = read_dataset(
+            args.heldout, degrees=args.degrees, topic=args.topic, joint_names=model.robot.joint_names
+        )
         check_data_fits_model(model, heldout, model_path=args.model, data_option="heldout")
     result = export_model(
         model,
