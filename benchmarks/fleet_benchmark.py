@@ -14,12 +14,18 @@ last 20 % held out), here with linear friction in layer 1 and no mixture correct
 costs about 10 s a recording.  The drift tests (:mod:`dynid.fleet.drift`) then name the flagged robots.
 
 Printed: the flagged robots with their parameters and recording of change against the truth; false
-flags among the unchanged robots; wall time of the identification on a LocalCluster of ``--workers``
-single-thread workers (default 2; warm: each worker and this process have identified one recording first) against the same
-function run serially in this process; both tables compared; peak memory (``ru_maxrss``) of each
-worker and of this process.
+flags among the unchanged robots; wall and CPU time of the identification on a LocalCluster of
+``--workers`` single-thread workers (default 2) against the same function run serially in this process
+(``dynid fleet --serial``), ``--repeat`` times each in alternating order, with the load average before
+each run (the machine may be shared: CPU time per recording is the figure its load does not change);
+both are warm (the cluster's start, printed, and one identification per process are outside the timed
+runs); both tables compared; peak memory (``ru_maxrss``) of each worker and of this process.
+``--dask-trim`` gives the workers Dask's default ``MALLOC_TRIM_THRESHOLD_=65536``, which
+:mod:`dynid._cluster` leaves out (it cost the workers about 45 % more CPU time per recording).
 
 Run:  OMP_NUM_THREADS=1 python benchmarks/fleet_benchmark.py                       # the full fleet
+      OMP_NUM_THREADS=1 python benchmarks/fleet_benchmark.py --robots 16 --out /tmp/fleet16 --repeat 3
+      OMP_NUM_THREADS=1 python benchmarks/fleet_benchmark.py --robots 16 --out /tmp/fleet16 --reuse --dask-trim
       OMP_NUM_THREADS=1 python benchmarks/fleet_benchmark.py --robots 8 --recordings 4 --duration 12
 """
 
@@ -31,7 +37,9 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import argparse  # noqa: E402
+import json  # noqa: E402
 import resource  # noqa: E402
+import statistics  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -67,6 +75,12 @@ def _cpu_seconds() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
+def _run(rep, kind, wall, cpu, result, load, **extra) -> dict:
+    """One timed run's figures: wall and CPU time (s), mean CPU time per recording, load average before it."""
+    per = result.column("cpu_s")
+    return {"rep": rep, "kind": kind, "wall": wall, "cpu": cpu, "cpu_per_rec": float(per.mean()), "load": load, **extra}
+
+
 def _right(test, change) -> bool:
     """Whether a flagged test names the change: the changed joint's friction, or a link parameter for a tool."""
     if change["kind"] == "friction":
@@ -83,6 +97,12 @@ def main() -> None:
     parser.add_argument("--friction", default="linear")
     parser.add_argument("--gmm", default="off")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--repeat", type=int, default=2, help="timed runs of each (default 2), alternating order")
+    parser.add_argument(
+        "--dask-trim", action="store_true",
+        help="give the workers Dask's default MALLOC_TRIM_THRESHOLD_=65536 (what made them slower; for comparison)",
+    )
+    parser.add_argument("--reuse", action="store_true", help="reuse the recordings of an earlier run in --out")
     parser.add_argument("--out", help="folder for the recordings and the fleet's output (default: a temporary one)")
     args = parser.parse_args()
 
@@ -102,34 +122,52 @@ def main() -> None:
         f"identification: irls, friction {args.friction}, gmm {args.gmm}, last 20 % held out",
         flush=True,
     )
-    with cluster_client(None, workers=args.workers) as client:
-        start = time.perf_counter()
-        truth = simulate_fleet(
-            "ur5", data, robots=args.robots, recordings=args.recordings, changes=changes,
-            duration=args.duration, seed=args.seed, client=client,
-        )
+    truth_file = data / "truth.json"
+    if args.reuse and truth_file.is_file():
+        truth = json.loads(truth_file.read_text(encoding="utf-8"))
+        print(f"recordings of an earlier run reused: {data}", flush=True)
+    else:
+        with cluster_client(None, workers=args.workers) as client:
+            start = time.perf_counter()
+            truth = simulate_fleet(
+                "ur5", data, robots=args.robots, recordings=args.recordings, changes=changes,
+                duration=args.duration, seed=args.seed, client=client,
+            )
         print(f"simulated on the cluster in {time.perf_counter() - start:.1f} s", flush=True)
-        recordings = find_recordings(str(data / "**" / "*.csv"))
-        client.run(_warm, recordings[0], options)
-        cpu0 = client.run(_cpu_seconds)
-        load0 = os.getloadavg()[0]
-        start = time.perf_counter()
-        parallel = identify_fleet("ur5", recordings, client=client, **options)
-        t_parallel = time.perf_counter() - start
-        cpu_parallel = sum(client.run(_cpu_seconds).values()) - sum(cpu0.values())
-        load1 = os.getloadavg()[0]
-        memory = worker_peak_memory(client)
-    _warm(recordings[0], options)
-    cpu0_serial = _cpu_seconds()
-    start = time.perf_counter()
-    serial = identify_fleet("ur5", recordings, serial=True, **options)
-    t_serial = time.perf_counter() - start
-    cpu_serial = _cpu_seconds() - cpu0_serial
-    load2 = os.getloadavg()[0]
+    recordings = find_recordings(str(data / "**" / "*.csv"))
+    if args.dask_trim:  # a trim threshold in the caller's environment reaches the workers (Dask's default)
+        os.environ["MALLOC_TRIM_THRESHOLD_"] = "65536"
+    runs = []
+    serial_warm = False
+    for rep in range(args.repeat):
+        # alternate which comes first, so that neither always runs after the other's load
+        for kind in ("cluster", "serial") if rep % 2 == 0 else ("serial", "cluster"):
+            if kind == "serial":
+                if not serial_warm:
+                    _warm(recordings[0], options)
+                    serial_warm = True
+                load0, cpu0 = os.getloadavg()[0], _cpu_seconds()
+                start = time.perf_counter()
+                serial = identify_fleet("ur5", recordings, serial=True, **options)
+                wall = time.perf_counter() - start
+                runs.append(_run(rep, kind, wall, _cpu_seconds() - cpu0, serial, load0))
+                continue
+            start = time.perf_counter()
+            with cluster_client(None, workers=args.workers) as client:
+                client.run(_warm, recordings[0], options)
+                startup = time.perf_counter() - start
+                cpu0 = client.run(_cpu_seconds)
+                load0 = os.getloadavg()[0]
+                start = time.perf_counter()
+                parallel = identify_fleet("ur5", recordings, client=client, **options)
+                wall = time.perf_counter() - start
+                cpu = sum(client.run(_cpu_seconds).values()) - sum(cpu0.values())
+                memory = worker_peak_memory(client)
+            runs.append(_run(rep, kind, wall, cpu, parallel, load0, startup=startup))
     parallel.write(root / "fleet")
 
     def strip(rows):
-        return [{k: v for k, v in r.items() if k != "elapsed_s"} for r in rows]
+        return [{k: v for k, v in r.items() if k not in ("elapsed_s", "cpu_s")} for r in rows]
 
     same = strip(parallel.rows) == strip(serial.rows)
     drift = parallel.drift
@@ -163,14 +201,31 @@ def main() -> None:
     print(f"robots that differ from the fleet: {', '.join(outliers) or 'none'}")
     print()
     print(
-        f"identification of {len(recordings)} recordings: serial {t_serial:.1f} s, LocalCluster of "
-        f"{args.workers} workers {t_parallel:.1f} s: speed-up {t_serial / t_parallel:.2f}x; tables identical: {same}"
+        f"identification of {len(recordings)} recordings (warm: the cluster's start and one identification "
+        f"per process are outside the timed runs); tables identical: {same}"
     )
     print(
-        f"CPU time: serial {cpu_serial:.1f} s in {t_serial:.1f} s wall ({cpu_serial / t_serial:.0%} of a core); "
-        f"workers {cpu_parallel:.1f} s in {t_parallel:.1f} s wall ({cpu_parallel / t_parallel / args.workers:.0%} of "
-        f"{args.workers} cores); load average {load0:.1f} / {load1:.1f} / {load2:.1f} (before / after the cluster "
-        f"run / after the serial run) on {os.cpu_count()} cores"
+        f"{'run':<4} {'where':<8} {'wall s':>7} {'CPU s':>7} {'CPU/rec s':>10} {'cores':>6} {'load':>5} "
+        f"{'start s':>8}  (CPU: the process(es) over the run; CPU/rec: mean cpu_s column)"
+    )
+    for r in runs:
+        print(
+            f"{r['rep']:<4} {r['kind']:<8} {r['wall']:>7.1f} {r['cpu']:>7.1f} {r['cpu_per_rec']:>10.3f} "
+            f"{r['cpu'] / r['wall']:>6.2f} {r['load']:>5.1f} {r.get('startup', float('nan')):>8.1f}"
+        )
+    pairs = [
+        (next(r for r in runs if r["rep"] == k and r["kind"] == "serial"),
+         next(r for r in runs if r["rep"] == k and r["kind"] == "cluster"))
+        for k in range(args.repeat)
+    ]
+    speedups = [s["wall"] / c["wall"] for s, c in pairs]
+    cpu_ratio = [c["cpu"] / s["cpu"] for s, c in pairs]
+    print(
+        f"speed-up on {args.workers} workers over serial (wall): "
+        + ", ".join(f"{x:.2f}x" for x in speedups)
+        + f"; median {statistics.median(speedups):.2f}x (target 1.7x); the workers' CPU time over the serial "
+        f"run's: {', '.join(f'{x:.2f}' for x in cpu_ratio)}; {os.cpu_count()} cores, load average over 1 min "
+        "given per run (other work on the machine lowers both runs' share of it)"
     )
     print(
         "peak memory per worker (MiB): " + ", ".join(f"{v:.0f}" for v in memory.values())

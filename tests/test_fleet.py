@@ -42,13 +42,22 @@ def fleet(tmp_path_factory):
 
 
 def _strip(rows):
-    return [{k: v for k, v in r.items() if k != "elapsed_s"} for r in rows]
+    return [{k: v for k, v in r.items() if k not in ("elapsed_s", "cpu_s")} for r in rows]
 
 
-def test_a_local_cluster_of_two_workers_gives_the_serial_table(fleet, tmp_path):
-    """Four recordings (two robots) keep it short; the drift tests are a function of the table."""
+def test_a_local_cluster_of_two_workers_gives_the_serial_table(fleet, tmp_path, monkeypatch):
+    """Four recordings (two robots) keep it short; the drift tests are a function of the table.
+
+    The caller's environment is left as it was: Dask's nanny sets its workers' variables (one BLAS
+    thread, a hash seed, a heap-trim threshold) in the process that starts them.
+    """
+    monkeypatch.setenv("OMP_NUM_THREADS", "3")
+    for key in ("MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MALLOC_TRIM_THRESHOLD_", "PYTHONHASHSEED"):
+        monkeypatch.delenv(key, raising=False)
+    before = dict(os.environ)
     recordings = find_recordings(fleet["pattern"])[1:5]
     on_cluster = identify_fleet("ur5", recordings, workers=2, **OPTIONS)
+    assert {k: v for k, v in os.environ.items() if not k.startswith("__DASK")} == before
     assert on_cluster.info["scheduler"] == "local" and on_cluster.info["workers"] == 2
     assert len(on_cluster.rows) == 4 and not on_cluster.errors
     assert _strip(on_cluster.rows) == _strip(fleet["serial"].rows[1:5])
@@ -66,6 +75,29 @@ def test_a_local_cluster_of_two_workers_gives_the_serial_table(fleet, tmp_path):
     assert [r["path"] for r in summary["rows"]] == [r["path"] for r in on_cluster.rows]
     assert [r["fc3"] for r in summary["rows"]] == list(on_cluster.column("fc3"))
     on_cluster.write(out)  # its own earlier folder is replaced
+
+
+def _worker_environment():
+    return {k: os.environ.get(k) for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "MALLOC_TRIM_THRESHOLD_")}
+
+
+def test_local_workers_get_one_blas_thread_and_the_caller_keeps_its_environment(monkeypatch):
+    """Dask's default trim threshold (64 KiB) made the workers fault in every large array anew: left out."""
+    from dynid._cluster import _spawn_environment, cluster_client
+
+    monkeypatch.setenv("MKL_NUM_THREADS", "4")
+    for key in ("OMP_NUM_THREADS", "MALLOC_TRIM_THRESHOLD_"):
+        monkeypatch.delenv(key, raising=False)
+    caller = _worker_environment()
+    with cluster_client(None, workers=1) as client:
+        assert _worker_environment() == caller  # already while the cluster runs
+        seen = list(client.run(_worker_environment).values())
+    assert seen == [{"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "MALLOC_TRIM_THRESHOLD_": None}]
+    assert _worker_environment() == caller == {"OMP_NUM_THREADS": None, "MKL_NUM_THREADS": "4", "MALLOC_TRIM_THRESHOLD_": None}
+    monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "131072")  # one the user sets is theirs to keep
+    overrides, saved = _spawn_environment()
+    assert saved["MALLOC_TRIM_THRESHOLD_"] == "131072"
+    assert not any(key.endswith("MALLOC_TRIM_THRESHOLD_") for key in overrides)
 
 
 def test_the_table_holds_parameters_with_their_spread_and_the_held_out_error(fleet):
@@ -260,3 +292,4 @@ def test_ros2_bags_go_through_the_same_reader_and_give_the_csv_rows(fleet, tmp_p
     for bag_row, csv_row in zip(bags.rows, csv_rows, strict=True):
         for p in fleet["serial"].parameters:
             np.testing.assert_allclose(bag_row[p["name"]], csv_row[p["name"]], rtol=1e-6, atol=1e-9)
+

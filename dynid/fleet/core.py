@@ -15,7 +15,9 @@ runs the same function in this process, so both give the same table.
 
 The table has one row per recording: ``path, robot, time, order``, ``error`` (empty, or the sentence
 that refused the recording: one bad recording does not stop the fleet), ``warnings`` (dynid's warnings
-on the recording, joined by `` | ``), the samples used, ``cond``,
+on the recording, joined by `` | ``), ``elapsed_s`` and ``cpu_s`` (the identification's wall and CPU
+time, s; the CPU time is its process's, which the machine's load does not inflate: in a Dask worker it
+includes Dask's own threads, and tasks that share a worker share it), the samples used, ``cond``,
 every layer-1 parameter ``<name>`` with its standard deviation ``<name>_std`` (base parameters,
 armature ``ia<j>``, Coulomb ``fc<j>``, viscous ``fv<j>`` and offset ``fo<j>`` friction, SI units), the
 refitted friction coefficients ``friction.<coef><j>`` when layer 2 refits them, the held-out RMS per
@@ -160,6 +162,7 @@ def _failed_row(recording: Recording, error: str) -> dict[str, Any]:
         "error": error,
         "warnings": "",
         "elapsed_s": 0.0,
+        "cpu_s": 0.0,
     }
 
 
@@ -186,8 +189,8 @@ def identify_recording(robot: Any, recording: Recording, settings: FleetSettings
 
     robot = _resolve_robot(robot)
     row = _failed_row(recording, "")
-    del row["warnings"], row["elapsed_s"]
-    started = time.perf_counter()
+    del row["warnings"], row["elapsed_s"], row["cpu_s"]
+    started, cpu_started = time.perf_counter(), time.process_time()
     caught: list[warnings.WarningMessage] = []
     try:
         with warnings.catch_warnings(record=True) as caught:
@@ -225,9 +228,11 @@ def identify_recording(robot: Any, recording: Recording, settings: FleetSettings
         row["error"] = str(exc) if isinstance(exc, DynidError) else f"{type(exc).__name__}: {exc}"
         row["warnings"] = _warning_text(caught)
         row["elapsed_s"] = time.perf_counter() - started
+        row["cpu_s"] = time.process_time() - cpu_started
         return {"row": row, "parameters": None}
     row["warnings"] = _warning_text(caught)
     row["elapsed_s"] = time.perf_counter() - started
+    row["cpu_s"] = time.process_time() - cpu_started
     return {"row": row, "parameters": parameter_table(model)}
 
 
