@@ -301,9 +301,9 @@ def _refine(
                 gmr = _select_mixtures(
                     C, tau, Fb, u_kept, u_full, r3, gmm, gmm_mode, random_state, prep, weights
                 )
+                Gb = _filtered(prep, gmr.design(u_full))
             else:  # later rounds: the gates again, on the new residual, same sizes and joints
-                gmr = _refit_mixtures(gmr, u_kept, u_full, r3, prep)
-            Gb = _filtered(prep, gmr.design(u_full))
+                gmr, Gb = _refit_mixtures(gmr, u_kept, u_full, r3, prep)
         step = _link_step(C, tau, Fb, Gb, weights, lower=low)
         x_sel = step.x
         fric, corr = _nuisance_step(C, tau, x_sel, Fb, Gb, layer, gmr)
@@ -465,8 +465,11 @@ def _direction_check(G, r, dq) -> float:
     return float(np.sqrt(err / ref)) if ref > 0 else 1.0
 
 
-def _refit_mixtures(old: GMRCorrection, u_kept, u_full, r3, prep) -> GMRCorrection:
+def _refit_mixtures(old: GMRCorrection, u_kept, u_full, r3, prep) -> tuple[GMRCorrection, list]:
     """The same sizes and joints, gates fitted again on a new residual; the direction check.
+
+    Returns the mixture and its filtered design at the kept rows (:func:`_filtered` of ``design``):
+    the direction check filters the active joints' designs, which the joint fit then takes as they are.
 
     A correction of ``position`` mode is a function of ``q_j`` alone, so it must hold whichever way the
     joint moves: experts fitted on the samples moving one way must predict those moving the other way
@@ -481,15 +484,17 @@ def _refit_mixtures(old: GMRCorrection, u_kept, u_full, r3, prep) -> GMRCorrecti
     )
     for name in ("scores_", "validation_rms_", "validation_", "fallback_", "direction_ratio_"):
         setattr(new, name, getattr(old, name))
+    design = new.design(u_full)
+    Gb = _filtered(prep, design)
     if old.mode == "position":
         n = r3.shape[1]
-        design = new.design(u_full)
         off = []
         for j in np.flatnonzero(new.active_):
-            ratio = _direction_check(prep.filter(design[j])[prep.rows], r3[:, j], u_kept[:, n + j])
+            ratio = _direction_check(Gb[j], r3[:, j], u_kept[:, n + j])
             new.direction_ratio_[j] = ratio
             if ratio > 1.0 - _MIN_IMPROVEMENT:
                 new.active_[j] = False
+                Gb[j] = design[j][:, :0][prep.rows]  # no correction: what design() now gives, taken there
                 off.append(str(j + 1))
         if off:
             note = (
@@ -497,7 +502,7 @@ def _refit_mixtures(old: GMRCorrection, u_kept, u_full, r3, prep) -> GMRCorrecti
                 "of motion it did not predict the other (the residual depends on the velocity too)"
             )
             new.fallback_ = note if new.fallback_ is None else f"{new.fallback_}; {note}"
-    return new
+    return new, Gb
 
 
 def _mixtures(mode: str, n: int) -> int:
