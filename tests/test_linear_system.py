@@ -254,3 +254,12 @@ def test_r_factor_is_scipys_triangular_factor_to_the_bit(shape) -> None:
     ref = scipy.linalg.qr(A, mode="r", check_finite=False)[0][: min(shape)]
     assert np.array_equal(r_factor(A), ref)
     assert np.array_equal(r_factor(fortran_stack(A[:, :1], A[:, 1:]), overwrite=True), ref)
+
+
+@pytest.mark.parametrize("shape", [(5000, 9), (40, 40), (3, 5)])
+def test_q_factor_is_scipys_economic_q_to_the_bit(shape) -> None:
+    from dynid.identify._qr import q_factor
+
+    A = np.random.default_rng(shape[1]).standard_normal(shape)
+    ref = scipy.linalg.qr(A, mode="economic", check_finite=False)[0]
+    assert np.array_equal(q_factor(np.asfortranarray(A)), ref)

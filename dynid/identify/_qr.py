@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.linalg import get_lapack_funcs
 
-__all__ = ["fortran_stack", "r_factor"]
+__all__ = ["fortran_stack", "q_factor", "r_factor"]
 
 
 def fortran_stack(*blocks: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -61,3 +61,36 @@ def r_factor(A: NDArray[np.float64], *, overwrite: bool = False) -> NDArray[np.f
     if info < 0:
         raise ValueError(f"illegal value in {-info}th argument of internal geqrf")
     return np.triu(qr[: min(m, k)])
+
+
+def q_factor(A: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Q (m, k) of the economic ``A = Q R`` (m >= k): ``scipy.linalg.qr(A, mode="economic")[0]`` to the bit.
+
+    The same LAPACK calls (``geqrf``, ``orgqr``, each with its workspace query); a Fortran-ordered
+    float64 ``A`` is factored in place (it is overwritten).
+
+    Parameters
+    ----------
+    A : ndarray, shape (m, k)
+        Matrix with m >= k (float64, finite; not checked).
+
+    Returns
+    -------
+    ndarray, shape (m, k)
+    """
+    a1 = np.asarray(A)
+    m, k = a1.shape
+    if m < k or a1.size == 0:
+        import scipy.linalg
+
+        return scipy.linalg.qr(a1, mode="economic", check_finite=False)[0]
+    geqrf, orgqr = get_lapack_funcs(("geqrf", "orgqr"), (a1,))
+    lwork = geqrf(a1, lwork=-1)[-2][0].real.astype(np.int_)
+    qr, tau, _, info = geqrf(a1, lwork=lwork, overwrite_a=True)
+    if info < 0:
+        raise ValueError(f"illegal value in {-info}th argument of internal geqrf")
+    lwork = orgqr(qr, tau, lwork=-1)[-2][0].real.astype(np.int_)
+    Q, _, info = orgqr(qr, tau, lwork=lwork, overwrite_a=1)
+    if info < 0:
+        raise ValueError(f"illegal value in {-info}th argument of internal orgqr")
+    return Q

@@ -60,7 +60,7 @@ import scipy.linalg
 from numpy.typing import NDArray
 
 from dynid._threads import single_blas_thread
-from dynid.identify._qr import r_factor
+from dynid.identify._qr import q_factor, r_factor
 from dynid.identify.estimators import bounded_triangular, long_run_factor
 from dynid.identify.friction import _FIT_THREADS, FrictionLayer, bounded_lsq
 from dynid.identify.gmr import GMRCorrection, validation_mask
@@ -185,12 +185,20 @@ def _ridge_rows(
 
 
 def _eliminator(N: NDArray[np.float64], ridge: NDArray[np.float64]):
-    """Projection ``v - N (N^T N + L)^-1 N^T v`` (unit-norm columns, ridge L) as a function."""
+    """Projection ``v - N (N^T N + L)^-1 N^T v`` (unit-norm columns, ridge L) as a function.
+
+    ``proj(v, out=None)``: the projection of v (m,) or (m, k), written into ``out`` when given.
+    """
     if N.shape[1] == 0:
-        return lambda v: v
-    A, _ = _ridge_rows(N, ridge)
-    Q = scipy.linalg.qr(A, mode="economic", check_finite=False)[0][: len(N)]
-    return lambda v: v - Q @ (Q.T @ v)
+        return lambda v, out=None: v if out is None else np.copyto(out, v) or out
+    norms = np.linalg.norm(N, axis=0)
+    norms[norms == 0] = 1.0
+    m, k = N.shape
+    A = np.empty((m + k, k), order="F")  # _ridge_rows(N, ridge)[0], built in the QR's layout
+    np.divide(N, norms, out=A[:m])
+    A[m:] = np.diag(np.sqrt(ridge))
+    Q = q_factor(A)[:m]
+    return lambda v, out=None: np.subtract(v, Q @ (Q.T @ v), out=out)
 
 
 def _nuisance(
@@ -526,12 +534,11 @@ def _link_step(C: _Columns, tau, Fb, Gb, weights, rows=None, lower=None) -> _Lin
     def joint(j: int):
         N = np.hstack([Fb[j], Gb[j]])
         proj = _eliminator(N, _ridges(Fb[j], Gb[j]))
-        A = proj(C.W[j] if rows is None else C.W[j][rows])
-        b = proj(tau[:, j])
         k = len(C.idx[j])
-        Ab = np.empty((len(b), k + 1), order="F")  # the weighted [A b], in the QR's layout
-        np.multiply(np.sqrt(weights[j]), A, out=Ab[:, :k])
-        np.multiply(np.sqrt(weights[j]), b, out=Ab[:, k])
+        Ab = np.empty((len(tau), k + 1), order="F")  # the weighted, projected [W tau], in the QR's layout
+        proj(C.W[j] if rows is None else C.W[j][rows], out=Ab[:, :k])
+        proj(tau[:, j], out=Ab[:, k])
+        Ab *= np.sqrt(weights[j])
         Rj = r_factor(Ab, overwrite=True)
         full = np.zeros((len(Rj), p_sel + 1))
         full[:, C.idx[j]] = Rj[:, :k]
