@@ -272,7 +272,7 @@ class LinearSystem:
         Z = self.data_matrix()
         cols = np.flatnonzero(self.z_param < 0)
         order = np.argsort(self.z_joint[cols])
-        return Z[self.prepared.rows][:, cols[order]]
+        return Z[np.ix_(self.prepared.rows, cols[order])]  # (Z[rows] would copy all of Z first)
 
     def predict(self, x: NDArray[np.float64], mask: NDArray[np.bool_] | None = None) -> NDArray[np.float64]:
         """``W x`` at the kept rows (N m), (m, n), with the regressor treated like the torque.

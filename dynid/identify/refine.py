@@ -298,8 +298,8 @@ def _refine(
     history = []
     Fb = [np.zeros((m, 0))] * n
     Gb = [np.zeros((m, 0))] * n
+    link = C.torque(x_sel)  # the link torque of x_sel, kept up to date with it
     for _ in range(max(1, int(rounds))):
-        link = C.torque(x_sel)
         if layer2:
             layer, Fb = _friction_step(system, friction, prep, tau - link - corr, layer)
             fric = np.column_stack([B @ mdl.linear_coef() for B, mdl in zip(Fb, layer.models_, strict=True)])
@@ -314,19 +314,20 @@ def _refine(
                 gmr, Gb = _refit_mixtures(gmr, u_kept, u_full, r3, prep)
         step = _link_step(C, tau, Fb, Gb, weights, lower=low)
         x_sel = step.x
-        fric, corr = _nuisance_step(C, tau, x_sel, Fb, Gb, layer, gmr)
-        history.append(float(np.sqrt(np.mean((tau - C.torque(x_sel) - fric - corr) ** 2))))
+        link = C.torque(x_sel)
+        fric, corr = _nuisance_step(C, tau, x_sel, Fb, Gb, layer, gmr, link)
+        history.append(float(np.sqrt(np.mean((tau - link - fric - corr) ** 2))))
 
     info: dict[str, Any] = {"rounds": len(history), "rms_per_round": history, "weighting": weighting}
     if consistent is not None:
-        resid = tau - C.torque(x_sel) - fric - corr
+        resid = tau - link - fric - corr
         kappa, _ = long_run_factor(resid, prep.noise_correlation)
         scale2 = float(np.sum(weights * kappa * np.mean(resid**2, axis=0)) / n)
         x_sel, info["consistency"] = _consistent_step(system, C, x_sel, step.R, scale2, consistent, x0)
         info["consistency"]["rms_unprojected"] = _rms(resid)  # the training RMS before the projection
-        fric, corr = _nuisance_step(C, tau, x_sel, Fb, Gb, layer, gmr)
-        info["consistency"]["rms_projected"] = _rms(tau - C.torque(x_sel) - fric - corr)
-    link = C.torque(x_sel)
+        link = C.torque(x_sel)
+        fric, corr = _nuisance_step(C, tau, x_sel, Fb, Gb, layer, gmr, link)
+        info["consistency"]["rms_projected"] = _rms(tau - link - fric - corr)
     resid = tau - link - fric - corr
     cov_sel, kappa = _covariance(step, resid, weights, prep.noise_correlation, Fb, Gb)
     info["correlation"] = [float(k) for k in kappa]
@@ -555,13 +556,17 @@ def _link_step(C: _Columns, tau, Fb, Gb, weights, rows=None, lower=None) -> _Lin
     return _LinkSolution(x=x_sel, R=R[:, :p_sel], blocks=projected)
 
 
-def _nuisance_step(C: _Columns, tau, x_sel, Fb, Gb, layer, gmr):
-    """Friction (within bounds) and experts per joint for fixed link parameters; their torques."""
+def _nuisance_step(C: _Columns, tau, x_sel, Fb, Gb, layer, gmr, link=None):
+    """Friction (within bounds) and experts per joint for fixed link parameters; their torques.
+
+    ``link``: ``C.torque(x_sel)`` when the caller has it already.
+    """
     n = len(C.W)
     fric = np.zeros_like(tau)
     corr = np.zeros_like(tau)
     f_coefs, g_coefs, noise = [], [], np.zeros(n)
-    link = C.torque(x_sel)
+    if link is None:
+        link = C.torque(x_sel)
 
     def joint(j: int) -> NDArray[np.float64]:
         N = np.hstack([Fb[j], Gb[j]])
