@@ -23,6 +23,7 @@ from dynid.identify.dataset import Dataset
 from dynid.identify.friction import FrictionLayer
 from dynid.identify.model import IdentifiedModel
 from dynid.identify.preparation import Preprocessing, prepare
+from dynid.validation.validate import described_model
 
 __all__ = ["DESCRIPTION_SUFFIXES", "description_friction", "description_model", "is_description"]
 
@@ -98,25 +99,18 @@ def description_model(
         }
     )
     nan = [float("nan")] * n
-    return IdentifiedModel(
-        robot=robot,
-        columns=cols,
-        params=x,
-        cov=np.zeros((cols.p, cols.p)),
+    return described_model(
+        robot,
+        cols,
+        x,
+        prep,
+        friction,
         method="nominal",
-        preprocessing=dict(prep.settings),
-        friction=friction,
         friction_source="layer1",
-        gmr=None,
-        cond=float("nan"),
-        rms=np.full(n, np.nan),
         rms_layers={"link": nan, "friction": nan, "gmm": nan},
-        info={
-            "notes": [
-                f"the simulator's own model from {path.name}: rigid body, armature, damping and Coulomb "
-                "friction as the file states them; nothing identified"
-            ],
-            "reference": prep.reference,
-        },
+        notes=[
+            f"the simulator's own model from {path.name}: rigid body, armature, damping and Coulomb "
+            "friction as the file states them; nothing identified"
+        ],
         layers_filtered=True,
     )

@@ -60,6 +60,7 @@ __all__ = [
     "compare",
     "compare_methods",
     "describe_model",
+    "described_model",
     "identify_methods",
     "nominal_model",
     "reference_noise_floor",
@@ -533,24 +534,84 @@ def nominal_model(
     def rms(r: NDArray[np.float64]) -> list[float]:
         return [float(v) for v in np.sqrt(np.mean(r**2, axis=0))]
 
+    return described_model(
+        robot,
+        cols,
+        x,
+        prep,
+        layer,
+        method="urdf",
+        friction_source="layer2",
+        rms_layers={"link": rms(resid), "friction": rms(after), "gmm": rms(after)},
+        notes=["rigid body from the robot description"],
+        n_samples=len(rows),
+    )
+
+
+def described_model(
+    robot,
+    cols,
+    x: NDArray[np.float64],
+    prep: Prepared,
+    friction: FrictionLayer,
+    *,
+    method: str,
+    friction_source: str,
+    rms_layers: dict[str, list[float]],
+    notes: list[str],
+    n_samples: int | None = None,
+    layers_filtered: bool = False,
+) -> IdentifiedModel:
+    """A model whose rigid body comes from a robot description: nothing of it estimated.
+
+    The shared shape of :func:`nominal_model` (URDF bodies, friction fitted) and
+    :func:`dynid.simmodel.nominal.description_model` (a simulator's file, friction as it states it): a
+    zero covariance, no mixture, no condition number.
+
+    Parameters
+    ----------
+    robot : RobotModel
+        The robot.
+    cols : ColumnSet
+        The model's columns.
+    x : ndarray, shape (p,)
+        Its parameters in those columns.
+    prep : Prepared
+        The data it was prepared on (its settings and reference are recorded).
+    friction : FrictionLayer
+        The friction layer.
+    method : str
+        What the model is (``"urdf"``, ``"nominal"``).
+    friction_source : {"layer1", "layer2"}
+        Where the friction comes from (see :class:`IdentifiedModel`).
+    rms_layers : dict
+        Training RMS (N m) after ``link``, ``friction`` and ``gmm``, per joint (NaN where not measured).
+    notes : list of str
+        Notes for the summary.
+    n_samples : int, optional
+        Samples the friction was fitted on.
+    layers_filtered : bool
+        As for :class:`IdentifiedModel`.
+    """
+    n = robot.n
+    info: dict[str, Any] = {"notes": list(notes), "reference": prep.reference}
+    if n_samples is not None:
+        info = {"n_samples": int(n_samples), **info}
     return IdentifiedModel(
         robot=robot,
         columns=cols,
         params=x,
         cov=np.zeros((cols.p, cols.p)),
-        method="urdf",
+        method=method,
         preprocessing=dict(prep.settings),
-        friction=layer,
-        friction_source="layer2",
+        friction=friction,
+        friction_source=friction_source,
         gmr=None,
         cond=float("nan"),
-        rms=np.array(rms(after)),
-        rms_layers={"link": rms(resid), "friction": rms(after), "gmm": rms(after)},
-        info={
-            "n_samples": len(rows),
-            "notes": ["rigid body from the robot description"],
-            "reference": prep.reference,
-        },
+        rms=np.asarray(rms_layers["friction"], dtype=np.float64).reshape(n),
+        rms_layers=rms_layers,
+        info=info,
+        layers_filtered=layers_filtered,
     )
 
 
