@@ -170,6 +170,39 @@ class _Columns:
     def torque(self, x_sel: NDArray[np.float64]) -> NDArray[np.float64]:
         return np.column_stack([W @ x_sel[i] for W, i in zip(self.W, self.idx, strict=True)])
 
+    def take(self, rows: NDArray[np.intp]) -> _Columns:
+        """The same columns at ``rows`` of the kept samples only (copies)."""
+        out = object.__new__(_Columns)
+        out.sel, out.idx = self.sel, self.idx
+        out.W = [W[rows] for W in self.W]
+        out.tau = [t[rows] for t in self.tau]
+        return out
+
+
+@dataclass(frozen=True, eq=False)
+class _Split:
+    """The training and validation rows of :func:`_select_mixtures`, taken once for all its trials."""
+
+    train: _Columns
+    val: _Columns
+    tau_train: NDArray[np.float64]
+    tau_val: NDArray[np.float64]
+    F_train: list[NDArray[np.float64]]
+    F_val: list[NDArray[np.float64]]
+    rows: tuple[NDArray[np.intp], NDArray[np.intp]]
+
+    @classmethod
+    def of(cls, C: _Columns, tau, Fb, train, val) -> _Split:
+        return cls(
+            C.take(train),
+            C.take(val),
+            tau[train],
+            tau[val],
+            [F[train] for F in Fb],
+            [F[val] for F in Fb],
+            (train, val),
+        )
+
 
 def _ridge_rows(
     N: NDArray[np.float64], ridge: NDArray[np.float64]
@@ -380,19 +413,21 @@ _SIZES = (1, 2, 3, 4, 6, 8)  # mixture sizes tried by gmm="auto"
 _EM_SAMPLES = 4000  # samples (evenly strided) of each EM fit of the gates
 
 
-def _joint_validation(C: _Columns, tau, Fb, Gb, weights, train, val) -> NDArray[np.float64]:
+def _joint_validation(split: _Split, Gb, weights) -> NDArray[np.float64]:
     """Per joint, the validation RMS of the joint fit (link, friction, experts) made on the training rows."""
-    x_sel = _link_step(C, tau, Fb, Gb, weights, rows=train).x
+    train, val = split.rows
+    G_train, G_val = [G[train] for G in Gb], [G[val] for G in Gb]
+    x_sel = _link_step(split.train, split.tau_train, split.F_train, G_train, weights).x
 
     def joint(j: int) -> float:
-        N = np.hstack([Fb[j], Gb[j]])
-        W = C.W[j][:, :]
-        target = tau[train, j] - W[train] @ x_sel[C.idx[j]]
-        c = _nuisance_free(N[train], target, _ridges(Fb[j], Gb[j]))
-        pred = W[val] @ x_sel[C.idx[j]] + N[val] @ c
-        return float(np.sqrt(np.mean((tau[val, j] - pred) ** 2)))
+        idx = split.train.idx[j]
+        target = split.tau_train[:, j] - split.train.W[j] @ x_sel[idx]
+        ridges = _ridges(split.F_train[j], G_train[j])
+        c = _nuisance_free(np.hstack([split.F_train[j], G_train[j]]), target, ridges)
+        pred = split.val.W[j] @ x_sel[idx] + np.hstack([split.F_val[j], G_val[j]]) @ c
+        return float(np.sqrt(np.mean((split.tau_val[:, j] - pred) ** 2)))
 
-    return np.array(_per_joint(joint, len(C.W)), dtype=np.float64)
+    return np.array(_per_joint(joint, len(split.train.W)), dtype=np.float64)
 
 
 def _nuisance_free(N, target, ridge):
@@ -421,7 +456,8 @@ def _select_mixtures(C, tau, Fb, u_kept, u_full, r3, gmm, mode, random_state, pr
     vrows = np.flatnonzero(val)[::stride]
     sizes = list(_SIZES) if gmm == "auto" else [int(gmm)]
     empty = [np.zeros((len(tau), 0))] * n
-    none = _joint_validation(C, tau, Fb, empty, weights, train, vrows)
+    split = _Split.of(C, tau, Fb, train, vrows)
+    none = _joint_validation(split, empty, weights)
     best = np.full(n, np.inf)
     best_K = np.ones(n, dtype=int)
     stale = 0
@@ -432,7 +468,7 @@ def _select_mixtures(C, tau, Fb, u_kept, u_full, r3, gmm, mode, random_state, pr
             mode=mode, random_state=random_state, max_samples=_EM_SAMPLES, range_margin=np.inf
         ).fit_mixtures(u_kept[train], r3[train], [K] * _mixtures(mode, n))
         G = _filtered(prep, trial.design(u_full))
-        score = _joint_validation(C, tau, Fb, G, weights, train, vrows)
+        score = _joint_validation(split, G, weights)
         better = score < best
         for j in range(n):
             scores[j].append((K, float(score[j])))
