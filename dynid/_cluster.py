@@ -44,6 +44,17 @@ TRIM_VARIABLE = "MALLOC_TRIM_THRESHOLD_"
 """glibc's heap-trim threshold, which Dask sets to 64 KiB in its workers by default (left unset here)."""
 
 
+QUIET_WORKERS = {
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.tick.interval": "1s",
+    "distributed.admin.system-monitor.interval": "2s",
+}
+"""Dask settings of the local workers: no statistical profiler (a stack sample every 10 ms), the event
+loop's tick and the system monitor every 1 s and 2 s instead of 20 ms and 500 ms.  Measured on 24 UR5
+identifications under load: Dask's threads of a worker used 3.6 % of a core by default, 0.8 % so (the
+dashboard of a local cluster then shows no profile)."""
+
+
 def _spawn_environment() -> tuple[dict[str, Any], dict[str, str | None]]:
     """The Dask configuration local workers are spawned with, and the caller's values to restore afterwards.
 
@@ -59,6 +70,8 @@ def _spawn_environment() -> tuple[dict[str, Any], dict[str, str | None]]:
     recordings: 12x the page faults and 45 % more CPU time per recording than the same process without
     it).  A trim threshold the caller set in its own environment is kept.
 
+    The workers' own periodic work is also slowed (:data:`QUIET_WORKERS`).
+
     Returns
     -------
     overrides : dict
@@ -71,6 +84,7 @@ def _spawn_environment() -> tuple[dict[str, Any], dict[str, str | None]]:
     configured = dict(dask.config.get("distributed.nanny.pre-spawn-environ", default={}) or {})
     saved = {key: os.environ.get(key) for key in {*configured, *THREAD_VARIABLES, TRIM_VARIABLE, "PYTHONHASHSEED"}}
     overrides: dict[str, Any] = {f"distributed.nanny.pre-spawn-environ.{key}": 1 for key in THREAD_VARIABLES}
+    overrides.update(QUIET_WORKERS)
     if saved[TRIM_VARIABLE] is None:
         overrides[f"distributed.nanny.pre-spawn-environ.{TRIM_VARIABLE}"] = None
     return overrides, saved
