@@ -52,6 +52,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("search")
     group.add_argument("--patience", type=int, default=15, help="tries without improvement before stopping (default 15)")
     group.add_argument("--max-tries", type=int, default=60, help="most tries per trajectory (default 60)")
+    group.add_argument(
+        "--screen-iter",
+        type=int,
+        default=40,
+        metavar="N",
+        help="IPOPT iterations of each try's screening solve; only the best --polish tries are solved to the end "
+        "(default 40; 0: every try solved to the end)",
+    )
+    group.add_argument("--polish", type=int, default=2, help="screened tries solved to the end (default 2)")
     group.add_argument("--n-jobs", type=int, default=2, help="parallel tries (joblib; -1: every core; default 2)")
     group.add_argument("--backend", help="joblib backend (loky, threading, dask, ...; default joblib's)")
     group.add_argument(
@@ -121,6 +130,8 @@ def run(args: argparse.Namespace) -> int:
     )
     if not (args.rate > 0):
         raise UsageError(f"--rate is {args.rate}; give the controller rate in Hz, e.g. 500.")
+    if args.screen_iter < 0:
+        raise UsageError(f"--screen-iter is {args.screen_iter}; give 1 or more iterations, or 0 to solve every try to the end.")
     check_harmonics(args.harmonics, args.base_freq, rate=args.rate)
     robot = robot_from_args(args)
     home = _floats("home", args.home, robot.n)
@@ -154,6 +165,8 @@ def run(args: argparse.Namespace) -> int:
         n_jobs=args.n_jobs,
         backend=args.backend,
         baseline=args.baseline,
+        screen_iter=args.screen_iter or None,
+        polish=args.polish,
         progress=lambda line: print("  " + line, flush=True),
     )
     sampled = None
