@@ -15,7 +15,9 @@ load of the machine (``os.getloadavg``) before and after each part:
     One UR5 design with the paper's criterion (``dynid excite --robot ur5 --criterion seed``: seed 0,
     100 random baseline trajectories, 2 parallel tries): wall time, CPU time of the process and its
     workers, and the cond ratio (cond / best random cond).  Baseline: the issue's quoted 93 s wall
-    (80 s without the random baseline), 156 s of CPU, cond ratio 0.34.
+    (80 s without the random baseline), 156 s of CPU, cond ratio 0.34.  ``--excite-seeds 0,1,2``
+    repeats the design on other seeds (the ratio over seeds); ``--screen-iter 0`` runs the previous
+    search (every try solved to the end, with the present linear algebra) in this script.
 ``identify``
     ``identify(robot, data)`` with default flags on the whole TX40 recording (45,000 rows, needs
     ``../shared/data``), against OLS with linear friction in the same process; FIGAROH 0.2.4's 9.0 s on
@@ -33,10 +35,11 @@ Measured on a shared 2-core machine (load 3-10, so the CPU times are the compara
 - build: 85-88 s of CPU (146 s wall at load 6, 229 s at load 10); the previous recipe rebuilt here
   198-210 s of CPU (215 s wall at load 3-5, 586 s at load 10); byte-identical UR5 Functions.  On
   2 idle cores the two units take about 45 s (each about 43 s of CPU).
-- excite: 154-155 s of CPU, 158 s wall at load 4 (375 s at load 10), ratio 0.353, 44 tries: the
-  tries cost what they did (IPOPT's limited-memory back-solves are most of a try).  What changed is
-  the designing process (one BLAS thread): the baseline and one try took 49-97 s wall before, 7.5 s
-  after, at load 9.
+- excite: 32 s of CPU (151 s wall at load 16-17), ratio 0.349, 44 tries screened at 40 IPOPT
+  iterations and 2 finished; seeds 1 and 2: 14 and 17 s of CPU, ratio 0.335 and 0.326.  Before
+  (every try solved to the end, IPOPT's Sherman-Morrison limited-memory update): 154-155 s of CPU,
+  158 s wall at load 4, ratio 0.353 (seed 2: 0.346).  On 2 idle cores the 32 s of CPU are about
+  16 s of wall time.
 - identify: default 9.3-9.6 s of CPU (13.8-17.9 s wall at load 6) against 12.2-12.6 s before on the
   same code otherwise (identical parameters to the bit); OLS 0.7 s.
 """
@@ -172,24 +175,28 @@ def _build_baseline(new_exe: Path) -> None:
         print(f"  UR5 Functions of both generators byte-identical: {same} ({len(names)} files)")
 
 
-def part_excite(repeat: int) -> None:
+def part_excite(repeat: int, seeds: list[int] | None = None, screen_iter: int = 40) -> None:
     from dynid.optim.excitation import ExcitationProblem, design_excitation
     from dynid.symbolic import load_robot
 
-    print("\n== one UR5 excitation design, criterion seed (dynid excite defaults: seed 0, 2 parallel tries)")
+    print(
+        "\n== one UR5 excitation design, criterion seed (dynid excite defaults: 2 parallel tries, "
+        f"screening {screen_iter or 'off'})"
+    )
     robot = load_robot("ur5")
-    for k in range(repeat):
+    for k, seed in enumerate([0] * repeat if not seeds else seeds):
         problem = ExcitationProblem(robot=robot, criterion="seed")
         print(f"  [{load()}]")
         # joblib's workers outlive a design (and may serve the next one): count their CPU time as a
         # difference too
         c0, t0 = self_cpu() + children_cpu() + workers_cpu(), time.perf_counter()
-        result = design_excitation(problem, seed=0, n_jobs=2)
+        result = design_excitation(problem, seed=seed, n_jobs=2, screen_iter=screen_iter or None)
         wall = time.perf_counter() - t0
         cpu = self_cpu() + children_cpu() + workers_cpu() - c0
         stage = result.stages[0]
         print(
-            f"  run {k + 1}: {wall:.1f} s wall, {cpu:.1f} s CPU (process and workers), cond {result.cond:.4g}, "
+            f"  run {k + 1} (seed {seed}): {wall:.1f} s wall, {cpu:.1f} s CPU (process and workers), "
+            f"cond {result.cond:.4g}, "
             f"random baseline {result.baseline_cond:.4g}, ratio {result.cond / result.baseline_cond:.3f}; "
             f"{stage.tries} tries, kept #{stage.kept + 1}  [{load()}]"
         )
@@ -297,6 +304,10 @@ def main() -> None:
     parser.add_argument(
         "--stages", action="store_true", help="also the CPU time of each stage of one default identification"
     )
+    parser.add_argument("--excite-seeds", help="seeds of the excitation designs, e.g. 0,1,2 (default: 0, --repeat times)")
+    parser.add_argument(
+        "--screen-iter", type=int, default=40, help="screening iterations of the design (0: every try to the end)"
+    )
     args = parser.parse_args()
     print(
         f"{os.cpu_count()} cores, {load()}, python {sys.version.split()[0]}, compiler {shutil.which('c++')}"
@@ -304,7 +315,8 @@ def main() -> None:
     if "build" in args.part:
         part_build(args.repeat, args.build_baseline)
     if "excite" in args.part:
-        part_excite(args.repeat)
+        seeds = None if not args.excite_seeds else [int(v) for v in args.excite_seeds.split(",")]
+        part_excite(args.repeat, seeds, args.screen_iter)
     if "identify" in args.part:
         part_identify(args.repeat, args.stages)
 
