@@ -372,3 +372,35 @@ def test_a_signal_during_the_design_ends_it_at_once_with_one_line(tmp_path, n_jo
     while any(_alive(pid) for pid in workers) and time.monotonic() < deadline:
         time.sleep(0.2)
     assert not [pid for pid in workers if _alive(pid)], "a worker outlived the command"
+
+
+# ---------------------------------------------------------------------------- on a Dask cluster
+def test_cli_scheduler_runs_the_tries_on_a_dask_cluster_with_the_serial_design(problem, tmp_path, capsys):
+    """--scheduler: the tries go to a real LocalCluster (2 worker processes) through joblib's dask backend,
+    and the design is the one of the serial search (the rest of a batch is discarded whatever its size)."""
+    distributed = pytest.importorskip("distributed", reason="--scheduler needs dask.distributed")
+    serial = design_excitation(problem, seed=5, n_jobs=1, **SEARCH)
+    out = tmp_path / "T.json"
+    with distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=40
+    ) as cluster:
+        code = main(
+            ["excite", "--robot", "ur5", "--harmonics", "3", "--grid", "30", "--criterion", "seed", "--seed", "5",
+             "--patience", "2", "--max-tries", "3", "--baseline", "20", "--scheduler", cluster.scheduler_address,
+             "--out", str(out)]
+        )  # fmt: skip
+        assert cluster.scheduler.transition_counter > 0  # the scheduler ran the tries
+    assert code == 0
+    assert "tries on the Dask cluster" in capsys.readouterr().out
+    again = load_trajectory(out)
+    for name in ("a", "b", "c"):
+        np.testing.assert_array_equal(getattr(again, name), getattr(serial.trajectories[0], name))
+    assert again.meta["cond_stack"] == serial.stages[0].cond
+
+
+def test_cli_scheduler_and_backend_are_refused_together(tmp_path, capsys):
+    code = main(["excite", "--robot", "ur5", "--scheduler", "tcp://127.0.0.1:1", "--backend", "loky", "--out",
+                 str(tmp_path / "T.json")])  # fmt: skip
+    assert code == 2
+    assert "--scheduler and --backend loky exclude each other" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []

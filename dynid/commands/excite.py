@@ -61,8 +61,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "(default 40; 0: every try solved to the end)",
     )
     group.add_argument("--polish", type=int, default=2, help="screened tries solved to the end (default 2)")
-    group.add_argument("--n-jobs", type=int, default=2, help="parallel tries (joblib; -1: every core; default 2)")
-    group.add_argument("--backend", help="joblib backend (loky, threading, dask, ...; default joblib's)")
+    group.add_argument(
+        "--n-jobs",
+        type=int,
+        help="parallel tries (joblib; -1: every core, or every worker thread with --scheduler; default 2, -1 "
+        "with --scheduler)",
+    )
+    group.add_argument("--backend", help="joblib backend (loky, threading, ...; default joblib's)")
+    group.add_argument(
+        "--scheduler",
+        metavar="ADDRESS|FILE",
+        help="run the tries on a running Dask scheduler (tcp://HOST:8786, or a scheduler file .json) through "
+        "joblib's dask backend; the design is the same as without it",
+    )
     group.add_argument(
         "--baseline", type=int, default=100, help="random feasible trajectories to compare with (default 100)"
     )
@@ -130,6 +141,11 @@ def run(args: argparse.Namespace) -> int:
     )
     if not (args.rate > 0):
         raise UsageError(f"--rate is {args.rate}; give the controller rate in Hz, e.g. 500.")
+    if args.scheduler and args.backend:
+        raise UsageError(
+            f"--scheduler and --backend {args.backend} exclude each other; --scheduler runs the tries through "
+            "joblib's dask backend: give one of them."
+        )
     if args.screen_iter < 0:
         raise UsageError(f"--screen-iter is {args.screen_iter}; give 1 or more iterations, or 0 to solve every try to the end.")
     check_harmonics(args.harmonics, args.base_freq, rate=args.rate)
@@ -156,19 +172,29 @@ def run(args: argparse.Namespace) -> int:
         f"{robot.name}: {args.criterion} criterion, {problem.harmonics} harmonics at {problem.base_freq:g} Hz, "
         f"{args.trajectories} trajectory(ies), {problem.grid} grid points per period"
     )
-    result = design_excitation(
-        problem,
-        trajectories=args.trajectories,
-        seed=args.seed,
-        patience=args.patience,
-        max_tries=args.max_tries,
-        n_jobs=args.n_jobs,
-        backend=args.backend,
-        baseline=args.baseline,
-        screen_iter=args.screen_iter or None,
-        polish=args.polish,
-        progress=lambda line: print("  " + line, flush=True),
-    )
+    options = {
+        "trajectories": args.trajectories,
+        "seed": args.seed,
+        "patience": args.patience,
+        "max_tries": args.max_tries,
+        "baseline": args.baseline,
+        "screen_iter": args.screen_iter or None,
+        "polish": args.polish,
+        "progress": lambda line: print("  " + line, flush=True),
+    }
+    if args.scheduler:
+        import joblib
+
+        from dynid._cluster import cluster_client
+
+        with cluster_client(args.scheduler) as client, joblib.parallel_config(backend="dask"):
+            threads = sum(client.nthreads().values())
+            print(f"  tries on the Dask cluster at {args.scheduler} ({threads} worker threads)", flush=True)
+            result = design_excitation(problem, n_jobs=-1 if args.n_jobs is None else args.n_jobs, **options)
+    else:
+        result = design_excitation(
+            problem, n_jobs=2 if args.n_jobs is None else args.n_jobs, backend=args.backend, **options
+        )
     sampled = None
     if csv is not None:  # built before anything is written: a failure leaves no file behind
         sampled = executable_trajectory(
