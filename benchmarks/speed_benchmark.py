@@ -26,7 +26,7 @@ load of the machine (``os.getloadavg``) before and after each part:
 Run::
 
     OMP_NUM_THREADS=1 python benchmarks/speed_benchmark.py [--part build excite identify] [--repeat N]
-        [--build-baseline]
+        [--build-baseline] [--stages]
 
 The machine may be shared: every time is printed with the CPU time beside it and the load averages.
 
@@ -42,6 +42,13 @@ Measured on a shared 2-core machine (load 3-10, so the CPU times are the compara
   16 s of wall time.
 - identify: default 9.3-9.6 s of CPU (13.8-17.9 s wall at load 6) against 12.2-12.6 s before on the
   same code otherwise (identical parameters to the bit); OLS 0.7 s.
+- identify, after the friction search, link step and refinement changes of commits 5a050b7-6157cf8
+  (identical parameters to the bit), alternated with the code before them at load 12-18: default
+  7.5-9.6 s of CPU against 10.3-12.2 s (20-45 s wall at that load; the wall time of an idle 2-core
+  machine was not measured).  ``--stages`` at load 12, after (before): friction searches 1.30 s
+  (2.72), link steps 0.83 (1.28), nuisance steps 0.20 (0.31), the rest of the refinements 0.76
+  (1.30); unchanged: the mixtures 3.2 s (EM 1.54, designs 0.53, the mixture fitted on the physical
+  layers' residual 1.14: 43 % of the CPU time), consistent projection 0.42, build 0.51, IRLS 0.19.
 """
 
 from __future__ import annotations
