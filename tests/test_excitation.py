@@ -96,6 +96,25 @@ def test_same_seed_same_result_whatever_n_jobs(problem, stacked):
     assert again.stages[0].cond == stacked.stages[0].cond
 
 
+def test_every_try_solved_to_the_end_without_screening(problem, stacked):
+    """screen_iter=None: the search ranks finished tries (the previous method); the design holds the same checks."""
+    full = design_excitation(problem, seed=3, n_jobs=1, screen_iter=None, **SEARCH)
+    first = full.stages[0]
+    assert full.feasible and problem.is_feasible(full.trajectories[0])
+    assert first.cond < 0.7 * first.start_cond
+    assert full.cond < full.baseline_cond
+    # screening finishes only the best screened tries: here the same try, to the same criterion within 2 %
+    assert first.kept == stacked.stages[0].kept
+    np.testing.assert_allclose(first.objective, stacked.stages[0].objective, rtol=0.02)
+
+
+def test_cli_negative_screen_iter_is_refused(tmp_path, capsys):
+    code = main(["excite", "--robot", "ur5", "--screen-iter", "-1", "--out", str(tmp_path / "T.json")])
+    assert code == 2
+    assert "--screen-iter is -1; give 1 or more iterations, or 0" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_cartesian_floor_holds(ur5):
     problem = ExcitationProblem(robot=ur5, criterion="cond", cartesian=CartesianLimits(z_min=-0.3), **SMALL)
     result = design_excitation(problem, seed=0, n_jobs=2, patience=1, max_tries=2, baseline=5)
