@@ -16,7 +16,7 @@ Run:  OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python benchmarks/excitation_benc
 Measured (UR5, seed criterion, shared 2-core machine at load 15-17, so CPU time is the comparable
 figure): screening at 40 iterations, 2 polished: ratio 0.349 / 0.335 / 0.326 on seeds 0 / 1 / 2 for
 32 / 14 / 17 s of CPU; every try to the end (the previous method, --screen-iter 0 with IPOPT's
-Sherman-Morrison update): 0.353 (155 s of CPU) / - / 0.346.
+Sherman-Morrison update): 0.353 (155 s of CPU) / 0.325 / 0.346.
 
 Not a test: nothing is asserted.
 """

@@ -38,7 +38,7 @@ Measured on a shared 2-core machine (load 3-10, so the CPU times are the compara
 - excite: 32 s of CPU (151 s wall at load 16-17), ratio 0.349, 44 tries screened at 40 IPOPT
   iterations and 2 finished; seeds 1 and 2: 14 and 17 s of CPU, ratio 0.335 and 0.326.  Before
   (every try solved to the end, IPOPT's Sherman-Morrison limited-memory update): 154-155 s of CPU,
-  158 s wall at load 4, ratio 0.353 (seed 2: 0.346).  On 2 idle cores the 32 s of CPU are about
+  158 s wall at load 4, ratio 0.353 (seeds 1 and 2: 0.325 and 0.346).  On 2 idle cores the 32 s of CPU are about
   16 s of wall time.
 - identify: default 9.3-9.6 s of CPU (13.8-17.9 s wall at load 6) against 12.2-12.6 s before on the
   same code otherwise (identical parameters to the bit); OLS 0.7 s.

@@ -78,7 +78,7 @@ stops there (``screen_iter``), the search above runs on those values, and only t
 (``polish``) are continued to the end from their point and multipliers, with the limits checked and
 tightened as above.  Measured on the UR5 (seed criterion, seed 0): the kept try is the same (#29 of
 44) and the cond ratio 0.349 against 0.353, for 32 s of CPU instead of 155 s; over seeds 0-2 the
-ratio is 0.349 / 0.335 / 0.326 (before: 0.353 / - / 0.346).  Screening at 30 iterations cost 21 s
+ratio is 0.349 / 0.335 / 0.326 (before: 0.353 / 0.325 / 0.346).  Screening at 30 iterations cost 21 s
 and reached 0.367 on seed 0.  Tries run in parallel through joblib:
 ``joblib.parallel_config(backend="dask")`` around the call (or ``backend=``) spreads them on a cluster.
 
