@@ -23,6 +23,21 @@ runs); both tables compared; peak memory (``ru_maxrss``) of each worker and of t
 ``--dask-trim`` gives the workers Dask's default ``MALLOC_TRIM_THRESHOLD_=65536``, which
 :mod:`dynid._cluster` leaves out (it cost the workers about 45 % more CPU time per recording).
 
+Measured (2026-11-24, 2 vCPUs shared with other work at a load average of 8-19; ``--robots 16``: 96
+recordings; each row one invocation, its runs in order)::
+
+                                                 workers' CPU / serial CPU   wall speed-up
+    Dask's MALLOC_TRIM_THRESHOLD_ (--dask-trim)  1.46, 1.40                 1.75x, 1.64x
+    no trim threshold                            1.24, 1.28, 1.33           1.60x, 0.90x, 0.67x
+    no trim threshold, quiet workers (default)   1.09, 1.05                 0.86x, 0.71x
+
+The CPU time per recording in this process was 0.52-0.60 s throughout.  The wall speed-ups follow the
+machine's load, not the code: the share of the 2 cores a run got (0.18-0.67 cores) varied more than
+the runs differ, and Linux schedules a session's processes as one group (autogroup, on here), so two
+workers need not get more of a busy machine than one serial process.  The last row's CPU times allow
+1.8-1.9x on two otherwise idle cores, before what the cores share (cache, memory); no idle machine was
+there to measure it.
+
 Run:  OMP_NUM_THREADS=1 python benchmarks/fleet_benchmark.py                       # the full fleet
       OMP_NUM_THREADS=1 python benchmarks/fleet_benchmark.py --robots 16 --out /tmp/fleet16 --repeat 3
       OMP_NUM_THREADS=1 python benchmarks/fleet_benchmark.py --robots 16 --out /tmp/fleet16 --reuse --dask-trim
@@ -226,6 +241,13 @@ def main() -> None:
         + f"; median {statistics.median(speedups):.2f}x (target 1.7x); the workers' CPU time over the serial "
         f"run's: {', '.join(f'{x:.2f}' for x in cpu_ratio)}; {os.cpu_count()} cores, load average over 1 min "
         "given per run (other work on the machine lowers both runs' share of it)"
+    )
+    # Linux schedules a session's processes as one group (autogroup): on a busy machine the workers
+    # together get about the share one serial process gets, so the wall times measure the load.
+    print(
+        f"speed-up the CPU times allow on {args.workers} otherwise idle cores ({args.workers} x serial CPU / "
+        "workers' CPU, an estimate, not a measurement): "
+        + ", ".join(f"{args.workers / x:.2f}x" for x in cpu_ratio)
     )
     print(
         "peak memory per worker (MiB): " + ", ".join(f"{v:.0f}" for v in memory.values())
