@@ -51,7 +51,7 @@ QUIET_WORKERS = {
 }
 """Dask settings of the local workers: no statistical profiler (a stack sample every 10 ms), the event
 loop's tick and the system monitor every 1 s and 2 s instead of 20 ms and 500 ms.  Measured on 24 UR5
-identifications under load: Dask's threads of a worker used 3.6 % of a core by default, 0.8 % so (the
+identifications under load: Dask's threads of a worker used 3.6 % of a core by default, 1.4 % so (the
 dashboard of a local cluster then shows no profile)."""
 
 
@@ -125,6 +125,12 @@ def cluster_client(
     ------
     UsageError
         The packages are missing, ``workers`` is below 1, or no scheduler answers at ``scheduler``.
+
+    Notes
+    -----
+    A local cluster's workers get one BLAS thread, no heap-trim threshold and quieter Dask threads
+    (:func:`_spawn_environment`), and the caller's environment is left as it was.  The workers of a
+    running scheduler were started by their owner, with whatever Dask settings they have.
     """
     distributed = _distributed()
     if scheduler is None:
