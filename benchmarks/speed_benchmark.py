@@ -49,6 +49,12 @@ Measured on a shared 2-core machine (load 3-10, so the CPU times are the compara
   (2.72), link steps 0.83 (1.28), nuisance steps 0.20 (0.31), the rest of the refinements 0.76
   (1.30); unchanged: the mixtures 3.2 s (EM 1.54, designs 0.53, the mixture fitted on the physical
   layers' residual 1.14: 43 % of the CPU time), consistent projection 0.42, build 0.51, IRLS 0.19.
+
+With nothing else running (load 0.7-1.2), at fa58a13: ``dynid excite --robot ur5 --criterion seed``
+(with its 100-trajectory random baseline) 21.4 s wall, cond ratio 0.35; the default identification of
+the TX40 recording 8.66 s wall / 10.0 s of CPU (OLS 0.64 s), against FIGAROH's quoted 9.0 s.  The
+TX40 fit puts the physical layers first (the mixture took joint 2's gravity), so its mixtures are fitted
+twice: the joint fit's, then one on the physical layers' residual.
 """
 
 from __future__ import annotations
