@@ -800,7 +800,11 @@ class ThreeLayerModel:
         else:
             source = "layer2"
             friction = FrictionLayer(model=self.friction).fit(prep.dq, resid, prepared=prep)
-            resid = resid - prep.filter(friction.predict(prep.dq))[rows]
+            # the fit's own filtered columns (taking them also frees them: the layer must not keep them)
+            filtered = friction.filtered_basis(prep)
+            resid = resid - np.column_stack(
+                [B @ mdl.linear_coef() for B, mdl in zip(filtered, friction.models_, strict=True)]
+            )
         rms_layers["friction"] = _rms(resid)
         gmr: GMRCorrection | None = None
         if self.gmm != "off":
