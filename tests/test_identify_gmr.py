@@ -147,6 +147,13 @@ def test_the_correction_fades_beyond_the_training_range(rng) -> None:
     assert np.all(near > 0.7 * inside), (near, inside)
 
 
+@pytest.mark.parametrize("margin", [0.0, -1.0, float("nan")])
+def test_a_range_margin_that_is_not_positive_is_refused(rng, margin) -> None:
+    u = rng.normal(size=(400, 2))
+    with pytest.raises(UsageError, match=r"range_margin is .*give a positive number"):
+        GMRCorrection(n_components=1, range_margin=margin).fit(u, u[:, :1])
+
+
 def test_files_written_before_the_range_fade_keep_their_predictions(rng) -> None:
     gmr, u = _broad(rng, 1.0)
     arrays = {k: v for k, v in gmr.to_arrays().items() if not k.endswith("_range_margin")}

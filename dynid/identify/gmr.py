@@ -338,6 +338,14 @@ class GMRCorrection:
             raise DataError("u holds non-finite values; drop or interpolate those samples")
         return u
 
+    def _check_margin(self) -> None:
+        margin = float(self.range_margin)
+        if not margin > 0:  # NaN too
+            raise UsageError(
+                f"range_margin is {self.range_margin!r}; give a positive number of standard deviations, "
+                "or inf for no fade beyond the training range"
+            )
+
     @classmethod
     def _check_pair(cls, u: ArrayLike, y: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Inputs (m, d) and residual (m, n), one row per sample, finite."""
@@ -413,6 +421,7 @@ class GMRCorrection:
         """
         if self.mode not in _MODES:
             raise UsageError(f"mode is {self.mode!r}; choose one of {', '.join(_MODES)}")
+        self._check_margin()
         if not (
             self.n_components == "auto" or (isinstance(self.n_components, int) and self.n_components >= 1)
         ):
@@ -503,6 +512,7 @@ class GMRCorrection:
         """
         if self.mode not in _MODES:
             raise UsageError(f"mode is {self.mode!r}; choose one of {', '.join(_MODES)}")
+        self._check_margin()
         u, y = self._check_pair(u, y)
         m, n = y.shape
         specs = self._specs(u.shape[1], n)
