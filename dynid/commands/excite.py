@@ -14,7 +14,7 @@ from dynid.commands.common import (
     robot_from_args,
     write_figures,
 )
-from dynid.exceptions import UsageError
+from dynid.exceptions import DynidError, UsageError
 
 __all__ = ["HELP", "add_arguments", "output_paths", "run"]
 
@@ -190,7 +190,15 @@ def run(args: argparse.Namespace) -> int:
         with cluster_client(args.scheduler) as client, joblib.parallel_config(backend="dask"):
             threads = sum(client.nthreads().values())
             print(f"  tries on the Dask cluster at {args.scheduler} ({threads} worker threads)", flush=True)
-            result = design_excitation(problem, n_jobs=-1 if args.n_jobs is None else args.n_jobs, **options)
+            try:
+                result = design_excitation(problem, n_jobs=-1 if args.n_jobs is None else args.n_jobs, **options)
+            except (DynidError, KeyboardInterrupt):
+                raise
+            except Exception as exc:  # a worker lost, or one without dynid: the cluster's fault, not a bug here
+                raise UsageError(
+                    f"the Dask cluster at {args.scheduler} failed during the design ({type(exc).__name__}: {exc}); "
+                    "check that its workers run and have dynid installed, or run without --scheduler"
+                ) from None
     else:
         result = design_excitation(
             problem, n_jobs=2 if args.n_jobs is None else args.n_jobs, backend=args.backend, **options

@@ -1063,6 +1063,7 @@ class _Nlp:
 
 
 _NLPS: dict[tuple, _Nlp] = {}
+_NLPS_LOCK = threading.Lock()
 
 
 def _graph_key(problem: ExcitationProblem) -> tuple:
@@ -1082,13 +1083,18 @@ def _graph_key(problem: ExcitationProblem) -> tuple:
 
 
 def _nlp(problem: ExcitationProblem, functions: _Functions) -> _Nlp:
-    # One per thread too: a solver keeps the multipliers of its last solve (threading backend).
+    # One per thread too: a solver keeps the multipliers of its last solve (threading backend, or a
+    # Dask worker's threads).  The cache is shared by those threads: its reads and writes hold a lock,
+    # and it keeps a few graphs per live thread, so that no thread rebuilds its solvers for every try.
     key = (*_graph_key(problem), threading.get_ident())
-    nlp = _NLPS.get(key)
+    with _NLPS_LOCK:
+        nlp = _NLPS.get(key)
     if nlp is None:
-        if len(_NLPS) >= 4:
-            _NLPS.pop(next(iter(_NLPS)))
-        nlp = _NLPS[key] = _Nlp(problem, functions)
+        nlp = _Nlp(problem, functions)  # built outside the lock: threads build theirs at once
+        with _NLPS_LOCK:
+            while len(_NLPS) >= max(4, 2 * threading.active_count()):
+                _NLPS.pop(next(iter(_NLPS)))
+            _NLPS[key] = nlp
     else:
         nlp.problem = problem  # same graph; the limits (bounds) may differ
     return nlp
