@@ -202,10 +202,14 @@ def test_the_capped_excess_test_finds_an_excess_that_sits_in_a_few_blocks(rng):
 def test_the_capped_excess_test_keeps_its_size_under_the_null():
     rng = np.random.default_rng(5)
     block = 20
-    hits = 0
+    hits = capped = 0
     for _ in range(300):
-        z = rng.standard_normal(block * 60)
-        hits += excess_test(z**2, 1.0, block=block, cap=20.0) < 0.05
+        # a heavy-tailed null (squared Student t, 3 degrees of freedom, unit mean) and a cap that bites
+        z = rng.standard_t(3, size=block * 60) / np.sqrt(3.0)
+        means = (z**2).reshape(-1, block).mean(axis=1)
+        capped += np.count_nonzero(means > 1.0 + 0.5)
+        hits += excess_test(z**2, 1.0, block=block, cap=0.5) < 0.05
+    assert capped > 300 * 60 * 0.05  # the cap is reached in more than 5 % of the blocks
     assert hits / 300 <= 0.07  # at most the test's level (a capped mean is never above the true one)
 
 
