@@ -7,7 +7,13 @@ import pytest
 from scipy.stats import multivariate_normal
 
 from dynid.exceptions import DataError, UsageError
-from dynid.identify.gmr import GMRCorrection, conditional_mean, period_of, validation_mask
+from dynid.identify.gmr import (
+    GMRCorrection,
+    conditional_mean,
+    fit_gaussian_mixture,
+    period_of,
+    validation_mask,
+)
 
 
 def motion(t: np.ndarray, phase: float) -> tuple[np.ndarray, np.ndarray]:
@@ -42,6 +48,43 @@ def test_conditional_mean_matches_the_textbook_formula(rng) -> None:
             )
         )
     np.testing.assert_allclose(conditional_mean(u, w, mu, S, n_in), np.array(expected), rtol=1e-10)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+@pytest.mark.parametrize("K", [1, 3, 6])
+def test_the_mixture_em_is_scikit_learns(rng, d, K) -> None:
+    # the same start, steps and stop as sklearn's GaussianMixture: equal parameters to rounding
+    from sklearn.mixture import GaussianMixture
+
+    q = np.sin(np.linspace(0.0, 60.0, 3000)) * 2 + 0.1 * rng.standard_normal(3000)
+    cols = [
+        q,
+        np.cos(q) + 0.01 * rng.standard_normal(3000),
+        0.3 * np.sin(3 * q) + 0.05 * rng.standard_normal(3000),
+    ]
+    X = np.column_stack(cols[:1] + cols[3 - d + 1 :])
+    X = (X - X.mean(axis=0)) / X.std(axis=0)
+    ref = GaussianMixture(K, covariance_type="full", reg_covar=1e-4, random_state=3, max_iter=200).fit(X)
+    got = fit_gaussian_mixture(X, K, reg_covar=1e-4, random_state=3)
+    assert got.n_iter_ == ref.n_iter_
+    np.testing.assert_allclose(got.weights_, ref.weights_, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(got.means_, ref.means_, rtol=0, atol=1e-11)
+    np.testing.assert_allclose(got.covariances_, ref.covariances_, rtol=0, atol=1e-11)
+
+
+def test_the_mixture_em_recovers_known_components(rng) -> None:
+    w = np.array([0.3, 0.7])
+    mu = np.array([[-2.0, 1.0], [1.5, -0.5]])
+    S = np.array([[[0.2, 0.05], [0.05, 0.1]], [[0.3, -0.1], [-0.1, 0.2]]])
+    k = rng.random(40_000) < w[0]
+    X = np.where(
+        k[:, None], rng.multivariate_normal(mu[0], S[0], k.size), rng.multivariate_normal(mu[1], S[1], k.size)
+    )
+    got = fit_gaussian_mixture(X, 2, reg_covar=1e-9)
+    order = np.argsort(got.means_[:, 0])
+    np.testing.assert_allclose(got.weights_[order], w, atol=0.01)
+    np.testing.assert_allclose(got.means_[order], mu, atol=0.02)
+    np.testing.assert_allclose(got.covariances_[order], S, atol=0.02)
 
 
 def test_learns_a_smooth_unmodelled_torque(rng) -> None:
