@@ -8,13 +8,26 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import os
 import threading
 from collections.abc import Callable, Iterator
 from typing import Any, TypeVar
 
-__all__ = ["one_blas_thread", "single_blas_thread"]
+__all__ = ["JOINT_THREADS", "core_count", "one_blas_thread", "single_blas_thread"]
 
 F = TypeVar("F", bound=Callable[..., Any])
+
+
+def core_count() -> int:
+    """Cores this process may run on (its CPU affinity where the system tells it)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
+JOINT_THREADS = min(2, core_count())
+"""Threads of the per-joint work of an identification (friction searches, link steps, filters): two at
+most, as the work per joint is small and the process's own threads run beside them."""
 
 
 _LOCK = threading.Lock()

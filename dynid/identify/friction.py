@@ -35,7 +35,6 @@ Every model also exposes its linear part at the fitted shape (:meth:`basis`, :me
 
 from __future__ import annotations
 
-import os
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, ClassVar, Self
 
@@ -44,7 +43,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares, lsq_linear, nnls
 from scipy.special import expit
 
-from dynid._threads import one_blas_thread
+from dynid._threads import JOINT_THREADS, one_blas_thread
 from dynid.exceptions import DataError, ModelFileError, UsageError
 from dynid.identify._qr import r_factor
 from dynid.identify.checks import check_is_fitted
@@ -65,8 +64,6 @@ __all__ = [
 _SEARCH_SAMPLES = 10_000  # samples used in shape-parameter searches (evenly strided)
 _SEARCH_WINDOW = 10_000  # full-rate samples filtered per candidate in a search on filtered data
 _GOLDEN_STEPS = 20  # golden-section refinements of a threshold search
-_FIT_THREADS = min(2, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
-"""Joints of a :class:`FrictionLayer` fitted at once (threads; the result does not depend on it)."""
 
 
 def _check_pair(
@@ -796,7 +793,7 @@ class FrictionLayer:
         # The joints are independent, and their searches spend most of their time in filtering, QR and
         # large array operations that release the GIL: two threads fit two joints at once on 2 cores
         # (the same CPU time and the same result, bit for bit, as one after the other).
-        workers = min(dq.shape[1], _FIT_THREADS)
+        workers = min(dq.shape[1], JOINT_THREADS)  # the result does not depend on it
         if workers > 1:
             with ThreadPoolExecutor(max_workers=workers) as pool:
                 models = list(pool.map(fit_joint, range(dq.shape[1])))

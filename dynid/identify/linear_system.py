@@ -37,7 +37,7 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import NDArray
 
-from dynid._threads import single_blas_thread
+from dynid._threads import JOINT_THREADS, single_blas_thread
 from dynid.exceptions import DataError, IdentificationError, ShapeError
 from dynid.identify._qr import r_factor
 from dynid.identify.columns import (
@@ -76,7 +76,6 @@ RANK_TOL = 1e-10
 """Relative singular value (of the column-normalised weighted regressor) below which a direction of
 the parameters counts as not excited by the data."""
 _FILTER_COLUMNS = 16  # columns of Z filtered at once (16 x 360,000 samples: 46 MB of temporaries)
-_FILTER_THREADS = 2  # chunks of columns filtered at once
 
 
 @dataclass(frozen=True, eq=False)
@@ -340,7 +339,7 @@ def _filter_in_place(Z: NDArray[np.float64], prepared: Prepared) -> None:
             Z[run, cols] = filtfilt_rows(sos, Z[run, cols].T).T
 
         # scipy's filter releases the GIL: two chunks at once on 2 cores (the same values)
-        with ThreadPoolExecutor(max_workers=_FILTER_THREADS) as pool:
+        with ThreadPoolExecutor(max_workers=JOINT_THREADS) as pool:
             list(pool.map(chunk, range(0, Z.shape[1], _FILTER_COLUMNS)))
 
 

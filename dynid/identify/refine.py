@@ -49,7 +49,6 @@ from __future__ import annotations
 
 import copy
 import hashlib
-import os
 import weakref
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -60,7 +59,7 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import NDArray
 
-from dynid._threads import single_blas_thread
+from dynid._threads import JOINT_THREADS, single_blas_thread
 from dynid.identify._qr import q_factor, r_factor
 from dynid.identify.estimators import bounded_triangular, long_run_factor
 from dynid.identify.friction import FrictionLayer, bounded_lsq
@@ -73,8 +72,6 @@ RIDGE = 1e-3
 """Ridge on the unit-norm expert columns in the joint least squares."""
 _TINY = 1e-10  # ridge on the friction columns (numerical safety only)
 _MIN_IMPROVEMENT = 0.1  # relative drop of a joint's validation RMS needed to keep its correction
-_THREADS = min(2, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
-"""Joints handled at once (threads; the results do not depend on it), as the friction layer does."""
 
 
 @dataclass(eq=False)
@@ -137,7 +134,7 @@ def _per_joint(func: Callable[[int], Any], n: int) -> list[Any]:
     wall time, for the same CPU time and the same results, bit for bit (each joint's arithmetic is the
     one of a loop, with one BLAS thread).
     """
-    workers = min(n, _THREADS)
+    workers = min(n, JOINT_THREADS)  # the results do not depend on it
     if workers <= 1:
         return [func(j) for j in range(n)]
     with ThreadPoolExecutor(max_workers=workers) as pool:
