@@ -29,12 +29,16 @@ Models, each identified on the training part only:
   ``+cfric``, the defaults with the effect the diagnosis ranks first on this recording added as a model
   term (``identify(..., effects="coupled_friction@5+6")``, as ``dynid identify --effects`` takes it).
 
+With ``--spring`` it also prints what physically consistent links cost a linear model (OLS
+with linear friction, no correction) on the held-out part, and what a torque linear in each
+joint's own angle, ``k_j (q_j - mean q_j)``, gives back (:func:`spring_check`).
+
 A model predicts from the states of the whole recording prepared as its identification data were
 (so the held-out part has no filter edge of its own; the held-out torque is never used), without its
 own torque filter; the scoring filter above is then applied to prediction and torque alike.
 
 Run:  OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python benchmarks/real_robots_benchmark.py --robot panda
-      (or ``--robot tx40``; each takes a few minutes on 2 cores)
+      (or ``--robot tx40``; each takes a few minutes on 2 cores; ``--spring`` adds half a minute)
 """
 
 from __future__ import annotations
@@ -106,9 +110,92 @@ def model_parts(model, full) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return prep.t, total - gmm, total
 
 
+def spring_check(robot, full, train_end: float, held: tuple[float, float], cutoff: float, step: int) -> None:
+    """What consistent links cost an OLS + linear-friction model held out, with and without joint springs.
+
+    The whole recording is prepared once (default preprocessing); the rows before ``train_end`` (less
+    the preprocessing's trim, so no filter reaches across) are fitted, the rows in ``held`` scored: the
+    residual against the prepared torque through ``cutoff`` Hz zero-phase (order 4), every ``step``
+    rows, the trim cut at both ends.  Four fits: unconstrained (the ``ols+lin`` baseline), its
+    closest consistent set in its own metric (:func:`dynid.identify.consistent.consistent_solution`),
+    and both again with one more column per joint, ``q_j - mean q_j`` in joint j's equation (a
+    torque linear in the joint's own angle, free in the projection: its Schur complement gives the
+    metric of the rest, and it is refitted after).  Prints the ratios to the baseline per joint, the
+    unconstrained armatures, the springs and ``corr(q_j, ddq_j)`` over the training rows.
+    """
+    from dynid.identify.consistent import consistent_solution
+    from dynid.identify.linear_system import build_system
+    from dynid.identify.preprocess import lowpass
+
+    system = build_system(robot, full, friction=True, armature=True)
+    prep = system.prepared
+    rows = prep.rows
+    Z = system.data_matrix()[rows]
+    n, p = system.n, system.p
+    t = prep.t[rows]
+    trim = float(prep.settings["trim_s"])
+    train = t < train_end - trim
+    test = (t >= held[0]) & (t <= held[1])
+    q = prep.filter(prep.q)[rows]
+    q_mean = q[train].mean(axis=0)
+
+    def design(sel: np.ndarray, spring: bool) -> tuple[np.ndarray, np.ndarray]:
+        m = int(sel.sum())
+        A = np.zeros((m * n, p + (n if spring else 0)))
+        b = np.zeros(m * n)
+        for j in range(n):
+            block = slice(j * m, (j + 1) * m)
+            for c in np.flatnonzero((system.z_joint == j) & (system.z_param >= 0)):
+                A[block, system.z_param[c]] += Z[sel, c]
+            b[block] = Z[sel, np.flatnonzero((system.z_joint == j) & (system.z_param < 0))[0]]
+            if spring:
+                A[block, p + j] = q[sel, j] - q_mean[j]
+        return A, b
+
+    def heldout(x: np.ndarray, spring: bool) -> np.ndarray:
+        A, b = design(test, spring)
+        r = lowpass((b - A @ x).reshape(n, -1).T, fs=float(prep.fs), cutoff=cutoff, order=4)
+        edge = round(trim * float(prep.fs))
+        return np.sqrt(np.mean(r[edge : len(r) - edge : step] ** 2, axis=0))
+
+    cols = system.columns
+    names = list(cols.names)
+    rms, notes = {}, []
+    for spring in (False, True):
+        A, b = design(train, spring)
+        x_u = np.linalg.lstsq(A, b, rcond=None)[0]
+        R = np.linalg.qr(A, mode="r")
+        if spring:  # the springs are no body's parameters: eliminate them (Schur complement), refit after
+            H = R.T @ R
+            back = np.linalg.solve(H[p:, p:], H[p:, :p])
+            R = np.linalg.cholesky(H[:p, :p] - H[:p, p:] @ back).T
+        phi, _ = consistent_solution(robot, cols, x_u[:p], R, 1.0)
+        x_c = x_u.copy()
+        x_c[:p] = cols.P @ phi
+        if spring:
+            x_c[p:] = x_u[p:] - back @ (x_c[:p] - x_u[:p])
+        tag = "+spring" if spring else ""
+        rms["ols+lin" + tag], rms["consistent" + tag] = heldout(x_u, spring), heldout(x_c, spring)
+        arm = [x_u[names.index(f"ia{j + 1}")] if f"ia{j + 1}" in names else np.nan for j in range(n)]
+        notes.append(f"unconstrained armature{tag} (kg m^2): {np.round(arm, 3).tolist()}")
+        if spring:
+            notes.append(f"springs k_j of the consistent fit (N m/rad): {np.round(x_c[p:], 3).tolist()}")
+    corr = [float(np.corrcoef(q[train, j], prep.ddq[rows][train, j])[0, 1]) for j in range(n)]
+    notes.append(f"corr(q_j, ddq_j) over the training rows: {np.round(corr, 2).tolist()}")
+    print("\nconsistent links on a linear model (OLS, linear friction), held out, ratio to ols+lin:")
+    base = rms["ols+lin"]
+    for label, v in rms.items():
+        print(f"{label:<20}" + "".join(f"{x:>8.3f}" for x in v / base) + f"   max {np.max(v / base):.3f}")
+    for note in notes:
+        print("  " + note)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
     parser.add_argument("--robot", choices=sorted(SETUPS), default="panda")
+    parser.add_argument(
+        "--spring", action="store_true", help="also what consistent links cost a linear model (spring_check)"
+    )
     args = parser.parse_args()
     setup = SETUPS[args.robot]
 
@@ -222,6 +309,8 @@ def main() -> None:
         print(
             f"{label:<10}" + "".join(f"{x:>8.2f}" for x in r[:n]) + f"   below 1 on {int(np.sum(r < 1))}/{n}"
         )
+    if args.spring:
+        spring_check(robot, full, split_t, (split_t, t_end), setup["cutoff"], setup["step"])
 
 
 if __name__ == "__main__":
