@@ -546,6 +546,11 @@ class IRLS(LinkEstimator):
         Stop when the change of the estimate, ``max |dx| / (|x| + std)``, falls below ``tol``.
     max_iter : int
         Most weightings tried; an :class:`IdentificationWarning` says when that was not enough.
+        The iteration converges linearly, and slowly on long recordings where a joint's weight and
+        the estimate move together: each step shrinks the change by about 0.92 on the identification
+        benchmark's 60,000 samples (2.4 standard deviations from the fixed point after 5 steps, 0.06
+        after 50, the tolerance after 174) and by 0.87 on the whole TX40 recording (0.01 after 50, the
+        tolerance after 101).  There the default stops short, with the warning.
 
     Attributes
     ----------
