@@ -11,10 +11,9 @@ import functools
 import os
 import threading
 from collections.abc import Callable, Iterator
-from concurrent.futures import Future
 from typing import Any, TypeVar
 
-__all__ = ["JOINT_THREADS", "Background", "core_count", "one_blas_thread", "single_blas_thread"]
+__all__ = ["JOINT_THREADS", "core_count", "one_blas_thread", "single_blas_thread"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -70,26 +69,3 @@ def one_blas_thread(func: F) -> F:
             return func(*args, **kwargs)
 
     return wrapper  # type: ignore[return-value]
-
-
-class Background:
-    """``func()`` run in a daemon thread; :meth:`result` waits for its value (or raises its error).
-
-    A daemon thread, not a pool's: a command stopped by Ctrl-C exits at once instead of waiting for
-    the work at interpreter exit.
-    """
-
-    def __init__(self, func: Callable[[], Any], name: str = "dynid-background") -> None:
-        self._future: Future = Future()
-
-        def run() -> None:
-            try:
-                self._future.set_result(func())
-            except BaseException as exc:  # handed to the caller of result()
-                self._future.set_exception(exc)
-
-        threading.Thread(target=run, name=name, daemon=True).start()
-
-    def result(self) -> Any:
-        """The value of ``func()``, once it is there."""
-        return self._future.result()

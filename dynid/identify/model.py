@@ -54,7 +54,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynid._io import atomic_path, dumps_json, to_jsonable
-from dynid._threads import Background, core_count, single_blas_thread
+from dynid._threads import single_blas_thread
 from dynid.exceptions import DynidError, ModelFileError, UsageError
 from dynid.identify.columns import ColumnSet, column_set, linear_torque
 from dynid.identify.consistent import ConsistentLS, consistent_projection, link_inertials, pseudo_inertia
@@ -820,41 +820,7 @@ class ThreeLayerModel:
         info["refinement"] = {"rounds": 0}
         return x, est.cov_, friction, source, gmr, rms_layers
 
-    def _physical_alone(self, system, est: LinkEstimator, x0, lower, consistent, mixture: bool):
-        """The physical layers refitted alone (link and friction together, no mixture), and, with
-        ``mixture``, the mixture fitted on what they leave (:meth:`_mixture_alone`; None when not asked)
-        and the residual it leaves."""
-        phys = refine(
-            system,
-            x0,
-            est.omega_,
-            friction=self.friction,
-            gmm="off",
-            rounds=int(self.rounds),
-            weighting="none" if self.method == "ols" else "per-joint",
-            consistent=consistent,
-            random_state=self.random_state,
-            lower=lower,
-        )
-        if not mixture:
-            return phys, None, None
-        return (phys, *self._mixture_alone(system.prepared, phys.residual))
-
-    def _mixture_alone(self, prep: Prepared, residual):
-        """The mixture fitted, with its own validation, on a residual; and what it leaves of it."""
-        u = np.hstack([prep.q, prep.dq])
-        gmr = GMRCorrection(
-            n_components=self.gmm if self.gmm == "auto" else int(self.gmm),
-            mode=self.gmm_mode,
-            random_state=self.random_state,
-        ).fit(u[prep.rows], residual)
-        if gmr.active_.any():
-            residual = residual - prep.filter(gmr.predict(u))[prep.rows]
-        return gmr, residual
-
-    def _physical_first(
-        self, system, est: LinkEstimator, x0, lower, consistent, out, info: dict[str, Any], alone
-    ):
+    def _physical_first(self, system, est: LinkEstimator, x0, lower, consistent, out, info: dict[str, Any]):
         """Keep the mixture from taking over torque that the physical layers explain.
 
         The physical layers are also fitted alone (link and friction refitted together, no mixture).
@@ -870,20 +836,28 @@ class ThreeLayerModel:
         physical layers alone partly absorb into gravity: ratio 4 on the shoulder, and the joint fit
         predicts held-out data twice as well as the physical layers first; the identification
         benchmark: ratio 5.7, held-out 0.26x OLS with the joint fit against 0.84x without).
-
-        ``alone`` is what :meth:`_physical_alone` returned, if it ran already (beside the joint fit).
         """
         prep = system.prepared
-        if alone is None:
-            alone = self._physical_alone(system, est, x0, lower, consistent, mixture=False)
-        phys, gmr, resid = alone
-        rms_alone = np.asarray(phys.rms_layers["friction"], dtype=np.float64)
+        rows = prep.rows
+        phys = refine(
+            system,
+            x0,
+            est.omega_,
+            friction=self.friction,
+            gmm="off",
+            rounds=int(self.rounds),
+            weighting="none" if self.method == "ols" else "per-joint",
+            consistent=consistent,
+            random_state=self.random_state,
+            lower=lower,
+        )
+        alone = np.asarray(phys.rms_layers["friction"], dtype=np.float64)
         joint = np.asarray(out.rms_layers["friction"], dtype=np.float64)
-        ratio = joint / np.maximum(rms_alone, 1e-300)
+        ratio = joint / np.maximum(alone, 1e-300)
         power = np.mean(prep.tau_reference**2, axis=0)
-        share = (joint**2 - rms_alone**2) / np.maximum(power, 1e-300)
+        share = (joint**2 - alone**2) / np.maximum(power, 1e-300)
         check = {
-            "physical_alone_rms": rms_alone.tolist(),
+            "physical_alone_rms": alone.tolist(),
             "physical_in_joint_fit_rms": joint.tolist(),
             "ratio": ratio.tolist(),
             "limit": TAKEOVER,
@@ -895,8 +869,15 @@ class ThreeLayerModel:
         if not (over_ratio | over_share).any():
             info["physical_check"] = {**check, "kept": "joint fit"}
             return out
-        if gmr is None:
-            gmr, resid = self._mixture_alone(prep, phys.residual)
+        u = np.hstack([prep.q, prep.dq])
+        gmr = GMRCorrection(
+            n_components=self.gmm if self.gmm == "auto" else int(self.gmm),
+            mode=self.gmm_mode,
+            random_state=self.random_state,
+        ).fit(u[rows], phys.residual)
+        resid = phys.residual
+        if gmr.active_.any():
+            resid = resid - prep.filter(gmr.predict(u))[rows]
         first = _rms(resid)
         fitted = np.asarray(out.rms_layers["gmm"], dtype=np.float64)
         gain = np.asarray(first, dtype=np.float64) / np.maximum(fitted, 1e-300)
@@ -924,20 +905,8 @@ class ThreeLayerModel:
         return phys
 
     def _joint(self, system, est: LinkEstimator, info: dict[str, Any], x0, lower, consistent):
-        """The layers refitted together (:func:`dynid.identify.refine.refine`).
-
-        With a mixture, the takeover check (:meth:`_physical_first`) needs the physical layers fitted
-        alone: on two or more cores they are fitted beside the joint fit, in a second thread, with the
-        mixture on what they leave (used only when the physical layers come first).  The results are
-        those of one after the other, to the bit.
-        """
+        """The layers refitted together (:func:`dynid.identify.refine.refine`)."""
         cols = system.columns
-        beside = None
-        if self.gmm != "off" and core_count() >= 2:
-            beside = Background(
-                lambda: self._physical_alone(system, est, x0, lower, consistent, mixture=True),
-                name="dynid-physical-alone",
-            )
         out = refine(
             system,
             x0,
@@ -951,9 +920,8 @@ class ThreeLayerModel:
             random_state=self.random_state,
             lower=lower,
         )
-        alone = None if beside is None else beside.result()  # also before the system is released
         if out.gmr is not None and out.gmr.active_.any():
-            out = self._physical_first(system, est, x0, lower, consistent, out, info, alone)
+            out = self._physical_first(system, est, x0, lower, consistent, out, info)
         cov = np.array(est.cov_, dtype=np.float64)
         cov[out.mask, :] = 0.0
         cov[:, out.mask] = 0.0

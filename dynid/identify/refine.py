@@ -49,10 +49,9 @@ from __future__ import annotations
 
 import copy
 import hashlib
-import threading
 import weakref
 from collections.abc import Callable
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -314,8 +313,10 @@ def _refine(
     n, m = system.n, system.m
     layer2 = friction not in ("none", "linear")
     mask = cols.link_mask | (cols.friction_mask if friction == "linear" else False)
-    # the two refinements of a default identification take the same columns
-    C, _ = _once(system.derived, ("refine-columns", mask.tobytes()), lambda: _Columns(system, mask))
+    key = ("refine-columns", mask.tobytes())
+    C = system.derived.get(key)
+    if C is None:  # the two refinements of a default identification take the same columns
+        C = system.derived[key] = _Columns(system, mask)
     low = None if lower is None else np.asarray(lower, dtype=np.float64)[C.sel]
     tau = np.column_stack(C.tau)
     x_sel = np.asarray(x0, dtype=np.float64)[C.sel].copy()
@@ -393,46 +394,18 @@ def _friction_step(system: LinearSystem, friction: str, prep, F, around: Frictio
     same residual; the second one takes a copy of the first's result (a quarter of the friction
     searches of a default identification).
     """
-
-    def fit() -> tuple[FrictionLayer, list]:
-        layer = FrictionLayer(model=friction).fit(prep.dq, F, prepared=prep, around=around)
-        return layer, layer.filtered_basis(prep)  # the fit filtered them already
-
-    if around is not None:
-        return fit()
-    with _ONCE_LOCK:
-        memo = _FRICTION_MEMO.setdefault(system, {})
-    key = friction.encode() + hashlib.sha256(np.ascontiguousarray(F).tobytes()).digest()
-    (layer, Fb), _ = _once(memo, key, fit)
-    return copy.deepcopy(layer), Fb  # the memo's layer stays as fitted
-
-
-_ONCE_LOCK = threading.Lock()
-
-
-def _once(store: dict, key: Any, compute: Callable[[], Any]) -> tuple[Any, bool]:
-    """``compute()`` once per key of ``store``, also when threads ask at the same time.
-
-    The default identification runs its two refinements in two threads (:mod:`dynid.identify.model`);
-    the second to ask for a value waits for the first's.  Returns the value and whether this call
-    computed it.
-    """
-    with _ONCE_LOCK:
-        entry = store.get(key)
-        owner = entry is None
-        if owner:
-            entry = store[key] = Future()
-    if not owner:
-        return entry.result(), False
-    try:
-        value = compute()
-    except BaseException as exc:
-        with _ONCE_LOCK:
-            store.pop(key, None)
-        entry.set_exception(exc)
-        raise
-    entry.set_result(value)
-    return value, True
+    memo = _FRICTION_MEMO.setdefault(system, {}) if around is None else None
+    key = b""
+    if memo is not None:
+        key = friction.encode() + hashlib.sha256(np.ascontiguousarray(F).tobytes()).digest()
+        if key in memo:
+            layer, Fb = memo[key]
+            return copy.deepcopy(layer), Fb
+    layer = FrictionLayer(model=friction).fit(prep.dq, F, prepared=prep, around=around)
+    Fb = layer.filtered_basis(prep)  # the fit filtered them already
+    if memo is not None:
+        memo[key] = (copy.deepcopy(layer), Fb)
+    return layer, Fb
 
 
 _SELECT_SAMPLES = 20_000  # training rows of the per-joint regressions that choose the mixture sizes
