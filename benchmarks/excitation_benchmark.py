@@ -30,24 +30,7 @@ import os
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-
-def cpu_seconds() -> float:
-    """CPU time (s) of this process and its live children (joblib's workers; without psutil, the process only)."""
-    import resource
-
-    usage = resource.getrusage(resource.RUSAGE_SELF)
-    total = usage.ru_utime + usage.ru_stime
-    try:
-        import psutil
-    except ImportError:
-        return total
-    for child in psutil.Process().children(recursive=True):
-        try:
-            t = child.cpu_times()
-            total += t.user + t.system
-        except psutil.Error:
-            pass
-    return total
+from _timing import cpu_seconds
 
 
 def main() -> None:

@@ -91,6 +91,9 @@ def _warm(recording, options) -> bool:
 
 
 def _cpu_seconds() -> float:
+    """CPU time (s) of the process that runs it: here and, by ``client.run``, on each worker (a function of
+    this script travels to the workers by value; one of ``benchmarks/_timing.py`` would need that module
+    importable there)."""
     usage = resource.getrusage(resource.RUSAGE_SELF)
     return usage.ru_utime + usage.ru_stime
 

@@ -66,7 +66,6 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import filecmp  # noqa: E402
-import resource  # noqa: E402
 import shutil  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
@@ -76,42 +75,12 @@ import warnings  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
+from _timing import children_cpu, load, self_cpu, workers_cpu  # noqa: E402
 
 ISSUE_BUILD_S = 221.0
 ISSUE_EXCITE_S = (80.0, 93.0, 156.0, 0.34)  # wall without / with baseline, CPU, cond ratio
 FIGAROH_TX40_S = 9.0
 OLD_GENERATOR = "9121d39:dynid/symbolic/_generator/generator.cpp"
-
-
-def load() -> str:
-    one, five, fifteen = os.getloadavg()
-    return f"load {one:.1f} {five:.1f} {fifteen:.1f}"
-
-
-def children_cpu() -> float:
-    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return usage.ru_utime + usage.ru_stime
-
-
-def self_cpu() -> float:
-    usage = resource.getrusage(resource.RUSAGE_SELF)
-    return usage.ru_utime + usage.ru_stime
-
-
-def workers_cpu() -> float:
-    """CPU time (s) of the live child processes (joblib's workers), 0 without psutil."""
-    try:
-        import psutil
-    except ImportError:
-        return 0.0
-    total = 0.0
-    for child in psutil.Process().children(recursive=True):
-        try:
-            t = child.cpu_times()
-            total += t.user + t.system
-        except psutil.Error:
-            pass
-    return total
 
 
 def part_build(repeat: int, baseline: bool) -> None:
