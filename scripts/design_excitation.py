@@ -1,6 +1,6 @@
 """Design an excitation trajectory for a UR5 standing on a table, and write what the robot runs.
 
-Run:  python scripts/design_excitation.py [OUT_DIR]        (1-3 minutes on 2 cores)
+Run:  python scripts/design_excitation.py [OUT_DIR]        (about a minute on 2 cores)
 
 The same as ``dynid excite --robot ur5 --criterion seed --z-min -0.3 --out OUT/ur5.json --csv OUT/ur5.csv``,
 spelled out step by step.
