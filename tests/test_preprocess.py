@@ -84,12 +84,24 @@ def test_lowpass_in_place_on_trailing_dimensions(rng: np.random.Generator) -> No
 def test_filter_errors(rng: np.random.Generator) -> None:
     with pytest.raises(DataError, match=r"Nyquist frequency 500 Hz of data sampled at 1000 Hz; got 600"):
         pp.lowpass(rng.normal(size=100), fs=FS, cutoff=600.0)
-    with pytest.raises(DataError, match="run 1 has 20 samples, too short"):
-        pp.lowpass(rng.normal(size=120), fs=FS, cutoff=50.0, runs=[slice(0, 100), slice(100, 120)])
+    # order 5: scipy's sosfiltfilt pads with 18 samples (its first-order section pads less than 21)
+    with pytest.raises(DataError, match=r"run 1 has 18 samples, too short .*needs more than 18"):
+        pp.lowpass(rng.normal(size=118), fs=FS, cutoff=50.0, runs=[slice(0, 100), slice(100, 118)])
     with pytest.raises(DataError, match="order must be a positive integer"):
         pp.butter_sos(10.0, FS, order=0)
     with pytest.raises(DataError, match="inplace=True needs a writeable, C-contiguous float64 array"):
         pp.lowpass(np.zeros((100, 2), dtype=np.float32), fs=FS, cutoff=50.0, inplace=True)
+
+
+def test_the_shortest_run_a_filter_takes_is_scipys(rng: np.random.Generator) -> None:
+    from scipy.signal import sosfiltfilt
+
+    y = rng.normal(size=119)
+    for order in (3, 4, 5):
+        runs = [slice(0, 100), slice(100, 119)]  # 19 samples: more than the 12, 15 or 18 scipy pads with
+        got = pp.lowpass(y, fs=FS, cutoff=50.0, order=order, runs=runs)
+        sos = pp.butter_sos(50.0, FS, order)
+        np.testing.assert_allclose(got[100:], sosfiltfilt(sos, y[100:]), rtol=0, atol=1e-12)
 
 
 # ---------------------------------------------------------------------- differences

@@ -432,8 +432,11 @@ def filtfilt_rows(sos: NDArray[np.float64], x: NDArray[np.float64]) -> NDArray[n
 
 
 def _padlen(sos: NDArray[np.float64]) -> int:
-    """Samples :func:`scipy.signal.sosfiltfilt` pads with by default (a run must be longer)."""
-    return 3 * (2 * len(sos) + 1)
+    """Samples :func:`scipy.signal.sosfiltfilt` pads with by default (a run must be longer): the
+    ``edge`` of :func:`filtfilt_rows`, one rule for both (an odd order's first-order section pads less
+    than ``3 (2 n_sections + 1)``)."""
+    sos = np.ascontiguousarray(sos, dtype=np.float64)
+    return _filtfilt_setup(sos.tobytes(), sos.shape)[0]
 
 
 def _as_runs(runs: Sequence[slice] | None, m: int) -> list[slice]:
