@@ -47,7 +47,7 @@ from dynid._threads import JOINT_THREADS, one_blas_thread
 from dynid.exceptions import DataError, ModelFileError, UsageError
 from dynid.identify._qr import r_factor
 from dynid.identify.checks import check_is_fitted
-from dynid.identify.preprocess import butter_sos, filtfilt_rows
+from dynid.identify.preprocess import filtfilt_rows
 
 __all__ = [
     "FRICTION_MODELS",
@@ -141,8 +141,7 @@ class _Sampling:
             inside = np.ones(len(rows), dtype=bool)
         self.search_rows = np.flatnonzero(inside)
         self._local = rows[inside] - (start if self.window is not None else 0)
-        s = prepared.settings
-        self._sos = butter_sos(s["cutoff_hz"], prepared.fs, s["order"]) if prepared.parallel_filter else None
+        self._sos = prepared.sos  # None without the parallel filter
 
     def full(self, A: NDArray[np.float64]) -> NDArray[np.float64]:
         return self.prepared.filter(A)[self.prepared.rows]
