@@ -49,7 +49,6 @@ from __future__ import annotations
 
 import copy
 import hashlib
-import weakref
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -380,11 +379,6 @@ def _refine(
     )
 
 
-_FRICTION_MEMO: weakref.WeakKeyDictionary[LinearSystem, dict[bytes, tuple[FrictionLayer, list]]] = (
-    weakref.WeakKeyDictionary()
-)
-
-
 def _friction_step(system: LinearSystem, friction: str, prep, F, around: FrictionLayer | None):
     """Friction fitted on ``F`` (with a search near ``around``), and its filtered columns at the kept rows.
 
@@ -394,17 +388,16 @@ def _friction_step(system: LinearSystem, friction: str, prep, F, around: Frictio
     same residual; the second one takes a copy of the first's result (a quarter of the friction
     searches of a default identification).
     """
-    memo = _FRICTION_MEMO.setdefault(system, {}) if around is None else None
-    key = b""
-    if memo is not None:
-        key = friction.encode() + hashlib.sha256(np.ascontiguousarray(F).tobytes()).digest()
-        if key in memo:
-            layer, Fb = memo[key]
+    key = None
+    if around is None:  # kept with the system's other derived arrays, until it is released
+        key = ("first-friction", friction, hashlib.sha256(np.ascontiguousarray(F).tobytes()).digest())
+        if key in system.derived:
+            layer, Fb = system.derived[key]
             return copy.deepcopy(layer), Fb
     layer = FrictionLayer(model=friction).fit(prep.dq, F, prepared=prep, around=around)
     Fb = layer.filtered_basis(prep)  # the fit filtered them already
-    if memo is not None:
-        memo[key] = (copy.deepcopy(layer), Fb)
+    if key is not None:
+        system.derived[key] = (copy.deepcopy(layer), Fb)
     return layer, Fb
 
 
