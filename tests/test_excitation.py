@@ -18,6 +18,7 @@ from dynid.cli import main
 from dynid.exceptions import RobotModelError, UsageError
 from dynid.optim.approach import default_home, executable_trajectory, point_to_point
 from dynid.optim.excitation import (
+    POLISH,
     CartesianLimits,
     ExcitationError,
     ExcitationProblem,
@@ -106,6 +107,11 @@ def test_every_try_solved_to_the_end_without_screening(problem, stacked):
     # screening finishes only the best screened tries: here the same try, to the same criterion within 2 %
     assert first.kept == stacked.stages[0].kept
     np.testing.assert_allclose(first.objective, stacked.stages[0].objective, rtol=0.02)
+    # what each record counts: screened tries that met the limits, and those finished after screening
+    assert first.polished == 0
+    screened = stacked.stages[0]
+    assert 1 <= screened.polished <= screened.feasible_tries <= screened.tries
+    assert screened.polished % POLISH == 0 or screened.polished == screened.feasible_tries
 
 
 def test_cli_negative_screen_iter_is_refused(tmp_path, capsys):

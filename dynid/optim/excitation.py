@@ -226,7 +226,6 @@ _WARM_OPTIONS = {
     "mu_init": 1e-4,
 }
 
-POLISH_WARM = True
 SCREEN_ITER: int | None = 40
 POLISH = 2
 
@@ -1222,7 +1221,7 @@ def _solve_try_guarded(
     rounds = 0
     for rounds in range(1, max_rounds + 1):
         if rounds == 1 and screened is not None:
-            y, status, it = nlp.solve(y, par, margins, warm=POLISH_WARM, multipliers=screened.multipliers)
+            y, status, it = nlp.solve(y, par, margins, warm=True, multipliers=screened.multipliers)
         else:
             y, status, it = nlp.solve(y, par, margins, warm=rounds > 1)
         _check_stop()
@@ -1269,7 +1268,9 @@ class StageRecord:
     kept : int
         Index of the try kept (0-based).
     feasible_tries : int
-        Tries whose result met every limit on the check grid.
+        Tries whose result met every limit on the check grid (with screening, the screened result).
+    polished : int
+        Screened tries continued to the end (0 without screening).
     start_cond, cond : float
         Exact cond of the stack (earlier trajectories and this one) at the kept try's random start
         and at its result.
@@ -1294,6 +1295,7 @@ class StageRecord:
     iterations: int
     rounds: int
     seconds: float
+    polished: int = 0
 
     def to_dict(self) -> dict:
         return {name: getattr(self, name) for name in self.__dataclass_fields__}
@@ -1616,7 +1618,7 @@ def _design(
         par = np.concatenate([prior.ravel(order="F"), data.weights, data.scale])
         best = None
         best_fig = None
-        fails = tries = feasible_tries = 0
+        fails = tries = feasible_tries = polished = 0
         screened: list[tuple[float, int, _TryResult]] = []
         while fails < patience and tries < max_tries:
             _check_stop()  # a signal CasADi swallowed in this process (baseline, a try run here)
@@ -1646,7 +1648,6 @@ def _design(
             # the screened tries, best first, continued to the end (limits checked) by batches of `polish`
             screened.sort(key=lambda item: (item[0], item[1]))
             best = best_fig = None
-            feasible_tries = 0
             for first in range(0, len(screened), polish):
                 _check_stop()
                 jobs = (
@@ -1656,9 +1657,9 @@ def _design(
                     for item in screened[first : first + polish]
                 )
                 for res in parallel(jobs):
+                    polished += 1
                     if not res.feasible:
                         continue
-                    feasible_tries += 1
                     fig = exact_figures(
                         np.vstack([stack_fine, problem.regressor(res.trajectory)]), criterion, data, gravity
                     )
@@ -1683,6 +1684,7 @@ def _design(
             tries=tries,
             kept=best.index,
             feasible_tries=feasible_tries,
+            polished=polished,
             start_cond=start_fig["cond"],
             cond=best_fig["cond"],
             start_objective=start_fig["objective"],
