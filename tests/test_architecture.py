@@ -297,3 +297,18 @@ def test_every_module_has_a_docstring_and_all():
             missing_all.append(module)
     assert missing_doc == [], f"modules without a docstring: {missing_doc}"
     assert missing_all == [], f"modules without __all__: {missing_all}"
+
+
+def test_no_package_exports_a_name_of_its_own_submodules():
+    # a lazily exported function named like its submodule is the function on first attribute access
+    # and the submodule ever after (importing the submodule sets the package's attribute)
+    import importlib
+
+    clashes = []
+    for info in pkgutil.walk_packages(dynid.__path__, "dynid."):
+        if not info.ispkg:
+            continue
+        package = importlib.import_module(info.name)
+        submodules = {m.name for m in pkgutil.iter_modules(package.__path__)}
+        clashes += [f"{info.name}.{name}" for name in getattr(package, "__all__", ()) if name in submodules]
+    assert not clashes, clashes

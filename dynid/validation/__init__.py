@@ -2,7 +2,8 @@
 
 The submodules are imported on first use (matplotlib and scikit-learn are slow to import):
 :mod:`dynid.validation.metrics` (error figures, the noise floor), :mod:`dynid.validation.validate`
-(a model's prediction of held-out data, methods side by side), :mod:`dynid.validation.report` and
+(a model's prediction of held-out data, methods side by side; its function
+:func:`dynid.validation.validate.validate` is not exported here, as the name is the submodule's), :mod:`dynid.validation.report` and
 :mod:`dynid.validation.plots` (the HTML report and its figures).  The gap diagnosis is
 :mod:`dynid.diagnosis`.
 """
@@ -21,7 +22,6 @@ _EXPORTS = {
     "compare_methods": "validate",
     "identify_methods": "validate",
     "nominal_model": "validate",
-    "validate": "validate",
     "write_predictions": "validate",
     "Report": "report",
     "render_report": "report",
