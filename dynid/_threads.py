@@ -25,9 +25,19 @@ def core_count() -> int:
     return os.cpu_count() or 1
 
 
-JOINT_THREADS = min(2, core_count())
+def _joint_threads() -> int:
+    limit = os.environ.get("DYNID_NUM_THREADS", "").strip()
+    cores = core_count()
+    if limit.isdigit() and int(limit) >= 1:
+        cores = min(cores, int(limit))
+    return min(2, cores)
+
+
+JOINT_THREADS = _joint_threads()
 """Threads of the per-joint work of an identification (friction searches, link steps, filters): two at
-most, as the work per joint is small and the process's own threads run beside them."""
+most, as the work per joint is small and the process's own threads run beside them; fewer when
+``$DYNID_NUM_THREADS`` says so (as the compiled regressors' threads), as in the local workers of a fleet,
+which share the machine's cores."""
 
 
 _LOCK = threading.Lock()

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -99,3 +101,21 @@ def test_the_joint_refit_recovers_links_and_a_nonlinear_friction(stribeck_fits) 
     _, _, out, _ = stribeck_fits[NOISES[1]]
     fitted = np.array([model.coef_ for model in out.friction.models_])
     np.testing.assert_allclose(fitted[:, :3], STRIBECK[:, :3], rtol=0.05)  # fc, fs, fv within 5 %
+
+
+@pytest.mark.parametrize(("value", "expected"), [("1", 1), ("", None), ("none", None), ("0", None)])
+def test_the_per_joint_threads_follow_dynid_num_threads(value, expected):
+    import subprocess
+    import sys
+
+    from dynid._threads import core_count
+
+    env = {**os.environ, "DYNID_NUM_THREADS": value}
+    out = subprocess.run(
+        [sys.executable, "-c", "from dynid._threads import JOINT_THREADS; print(JOINT_THREADS)"],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    assert int(out) == (min(2, core_count()) if expected is None else expected)
