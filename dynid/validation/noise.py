@@ -157,9 +157,12 @@ def encoder_step(q: NDArray[np.float64], *, min_moves: int = 50, tol: float = 1e
     """The quantisation step (rad) of logged angles, per joint, read from their distinct increments.
 
     A joint's angles come from an encoder when every non-zero increment between samples is a whole
-    multiple of the smallest one (to ``tol`` of it): a 14-bit encoder moves by multiples of
-    ``2 pi / 2^14``; unquantised angles (a filter's output, a simulator's states) move by arbitrary amounts
-    and give 0.
+    multiple of one step, to within ``tol`` of a step (an absolute tolerance; the step is the smallest
+    increment refined by least squares over all of them, so that a log's last digit does not bias it):
+    a 14-bit encoder moves by multiples of ``2 pi / 2^14``; unquantised angles (a filter's output, a
+    simulator's states) move by arbitrary amounts and give 0, even when one of their increments is tiny
+    (a tolerance relative to each increment would let every increment of 1/tol steps or more pass as a
+    whole multiple).
 
     Parameters
     ----------
@@ -184,7 +187,13 @@ def encoder_step(q: NDArray[np.float64], *, min_moves: int = 50, tol: float = 1e
         if d.size < min_moves:
             continue
         step = float(np.min(d))
-        k = d / step
-        if np.all(np.abs(k - np.round(k)) <= tol * np.maximum(k, 1.0)):
+        # The smallest increment carries the rounding of the stored angles (a log's last digit); the step
+        # is refined by least squares over every increment's whole multiple, and the multiples checked
+        # against it to within tol steps (plus the float spacing of the angles).
+        for _ in range(2):
+            k = np.maximum(np.round(d / step), 1.0)
+            step = float(np.sum(d * k) / np.sum(k * k))
+        k = np.maximum(np.round(d / step), 1.0)
+        if np.all(np.abs(d - k * step) <= tol * step + 4.0 * float(np.spacing(scale))):
             out[j] = step
     return out
