@@ -13,7 +13,7 @@ import threading
 from collections.abc import Callable, Iterator
 from typing import Any, TypeVar
 
-__all__ = ["JOINT_THREADS", "core_count", "one_blas_thread", "single_blas_thread"]
+__all__ = ["JOINT_THREADS", "core_count", "env_threads", "one_blas_thread", "single_blas_thread"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -25,19 +25,25 @@ def core_count() -> int:
     return os.cpu_count() or 1
 
 
+def env_threads() -> int | None:
+    """``$DYNID_NUM_THREADS`` if it is a whole number of 1 or more, else None (unset, empty or any
+    other value: ignored, as the exported loader ``dynid_loader.py`` ignores it)."""
+    try:
+        value = int(os.environ.get("DYNID_NUM_THREADS", "").strip())
+    except ValueError:
+        return None
+    return value if value >= 1 else None
+
+
 def _joint_threads() -> int:
-    limit = os.environ.get("DYNID_NUM_THREADS", "").strip()
-    cores = core_count()
-    if limit.isdigit() and int(limit) >= 1:
-        cores = min(cores, int(limit))
-    return min(2, cores)
+    return min(2, core_count(), env_threads() or 2)
 
 
 JOINT_THREADS = _joint_threads()
 """Threads of the per-joint work of an identification (friction searches, link steps, filters): two at
 most, as the work per joint is small and the process's own threads run beside them; fewer when
-``$DYNID_NUM_THREADS`` says so (as the compiled regressors' threads), as in the local workers of a fleet,
-which share the machine's cores."""
+``$DYNID_NUM_THREADS`` (:func:`env_threads`) says so, which also sets the compiled regressors' threads:
+the local workers of a fleet, which share the machine's cores, get 1."""
 
 
 _LOCK = threading.Lock()

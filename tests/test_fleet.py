@@ -82,7 +82,8 @@ def test_a_local_cluster_of_two_workers_gives_the_serial_table(fleet, tmp_path, 
 
 
 def _worker_environment():
-    return {k: os.environ.get(k) for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "MALLOC_TRIM_THRESHOLD_")}
+    keys = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "DYNID_NUM_THREADS", "MALLOC_TRIM_THRESHOLD_")
+    return {k: os.environ.get(k) for k in keys}
 
 
 def test_local_workers_get_one_blas_thread_and_the_caller_keeps_its_environment(monkeypatch):
@@ -90,14 +91,16 @@ def test_local_workers_get_one_blas_thread_and_the_caller_keeps_its_environment(
     from dynid._cluster import _spawn_environment, cluster_client
 
     monkeypatch.setenv("MKL_NUM_THREADS", "4")
-    for key in ("OMP_NUM_THREADS", "MALLOC_TRIM_THRESHOLD_"):
+    for key in ("OMP_NUM_THREADS", "DYNID_NUM_THREADS", "MALLOC_TRIM_THRESHOLD_"):
         monkeypatch.delenv(key, raising=False)
     caller = _worker_environment()
     with cluster_client(None, workers=1) as client:
         assert _worker_environment() == caller  # already while the cluster runs
         seen = list(client.run(_worker_environment).values())
-    assert seen == [{"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "MALLOC_TRIM_THRESHOLD_": None}]
-    assert _worker_environment() == caller == {"OMP_NUM_THREADS": None, "MKL_NUM_THREADS": "4", "MALLOC_TRIM_THRESHOLD_": None}
+    one = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "DYNID_NUM_THREADS": "1", "MALLOC_TRIM_THRESHOLD_": None}
+    assert seen == [one]
+    assert _worker_environment() == caller
+    assert caller == {"OMP_NUM_THREADS": None, "MKL_NUM_THREADS": "4", "DYNID_NUM_THREADS": None, "MALLOC_TRIM_THRESHOLD_": None}
     monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "131072")  # one the user sets is theirs to keep
     overrides, saved = _spawn_environment()
     assert saved["MALLOC_TRIM_THRESHOLD_"] == "131072"

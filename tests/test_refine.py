@@ -103,19 +103,33 @@ def test_the_joint_refit_recovers_links_and_a_nonlinear_friction(stribeck_fits) 
     np.testing.assert_allclose(fitted[:, :3], STRIBECK[:, :3], rtol=0.05)  # fc, fs, fv within 5 %
 
 
-@pytest.mark.parametrize(("value", "expected"), [("1", 1), ("", None), ("none", None), ("0", None)])
-def test_the_per_joint_threads_follow_dynid_num_threads(value, expected):
+@pytest.mark.parametrize(
+    ("value", "expected"),
+    [
+        ("1", 1),
+        (" 1 ", 1),
+        ("", None),
+        ("none", None),
+        ("0", None),
+        ("-1", None),
+        ("1.5", None),
+        ("\u00b2", None),
+    ],
+)
+def test_dynid_num_threads_is_read_alike_by_the_per_joint_work_and_the_compiled_regressors(value, expected):
     import subprocess
     import sys
 
     from dynid._threads import core_count
 
+    code = (
+        "from dynid._threads import JOINT_THREADS; from dynid.symbolic._export.loader import _env_threads; "
+        "print(JOINT_THREADS, _env_threads())"
+    )
     env = {**os.environ, "DYNID_NUM_THREADS": value}
     out = subprocess.run(
-        [sys.executable, "-c", "from dynid._threads import JOINT_THREADS; print(JOINT_THREADS)"],
-        env=env,
-        capture_output=True,
-        text=True,
-        check=True,
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
     ).stdout
-    assert int(out) == (min(2, core_count()) if expected is None else expected)
+    joint, loader = out.split()
+    assert int(joint) == (min(2, core_count()) if expected is None else expected)
+    assert loader == str(expected)

@@ -20,6 +20,21 @@ import numpy as np
 __all__ = ["CompiledLibrary"]
 
 
+def _env_threads() -> int | None:
+    """``$DYNID_NUM_THREADS`` if it is a whole number of 1 or more, else None (the same rule as
+    ``dynid._threads``; this file is copied beside exported libraries, so it imports nothing of dynid)."""
+    try:
+        value = int(os.environ.get("DYNID_NUM_THREADS", "").strip())
+    except ValueError:
+        return None
+    return value if value >= 1 else None
+
+
+def _cores() -> int:
+    """CPUs this process may run on."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
 class CompiledLibrary:
     """The compiled functions of one robot, evaluated on N samples in one C call each.
 
@@ -29,8 +44,8 @@ class CompiledLibrary:
         Folder holding ``manifest.json`` and the shared library it names.
     threads : int, optional
         Threads that share a large batch (ctypes releases the GIL during the C call).  Default:
-        ``$DYNID_NUM_THREADS``, else the number of CPUs, at most 8.  Batches under 20,000 samples
-        run on one thread.
+        ``$DYNID_NUM_THREADS`` (a whole number of 1 or more; any other value is ignored), else the
+        CPUs this process may use, at most 8.  Batches under 20,000 samples run on one thread.
     """
 
     MIN_SAMPLES_PER_THREAD = 10_000
@@ -38,7 +53,7 @@ class CompiledLibrary:
     def __init__(self, folder: str | Path, *, threads: int | None = None) -> None:
         self.folder = Path(folder)
         if threads is None:
-            threads = int(os.environ.get("DYNID_NUM_THREADS", 0)) or min(os.cpu_count() or 1, 8)
+            threads = _env_threads() or min(_cores(), 8)
         self.threads = max(1, int(threads))
         manifest_path = self.folder / "manifest.json"
         if not manifest_path.is_file():
