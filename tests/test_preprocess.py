@@ -104,6 +104,25 @@ def test_the_shortest_run_a_filter_takes_is_scipys(rng: np.random.Generator) -> 
         np.testing.assert_allclose(got[100:], sosfiltfilt(sos, y[100:]), rtol=0, atol=1e-12)
 
 
+def test_the_identification_takes_the_shortest_run_the_filter_takes(ur5) -> None:
+    # build_system filters the regressor columns run by run with the same rule as the torque's filter
+    from dynid.identify.linear_system import build_system
+    from dynid.identify.preparation import Preprocessing
+
+    t = np.arange(0.0, 1.2, 0.001)
+    q = 0.3 * np.sin(2 * np.pi * 0.5 * t[:, None] + np.arange(ur5.n))
+    tau = np.cos(2 * np.pi * 0.5 * t[:, None] + np.arange(ur5.n))
+    settings = Preprocessing(cutoff=40.0, order=5, trim=0.0)
+    whole = Dataset(t=t, q=q, tau=tau)
+    for extra, ok in ((19, True), (18, False)):  # order 5: the filter pads with 18 samples
+        part = Dataset.concat([whole, whole.select_rows(np.arange(extra))])  # two runs
+        if ok:
+            assert build_system(ur5, part, preprocessing=settings).m == len(t) + extra
+        else:
+            with pytest.raises(DataError, match="run 1 has 18 samples, too short for an order-5 zero-phase"):
+                build_system(ur5, part, preprocessing=settings)
+
+
 # ---------------------------------------------------------------------- differences
 @pytest.mark.parametrize("derivative", [1, 2])
 def test_central_differences_are_second_order(derivative: int) -> None:
@@ -316,5 +335,5 @@ def test_filtfilt_rows_is_scipys_sosfiltfilt_to_the_bit(order: int) -> None:
 
 def test_filtfilt_rows_refuses_a_signal_shorter_than_its_padding() -> None:
     sos = pp.butter_sos(35.0, 5000.0, 5)
-    with pytest.raises(DataError, match="too short for an order-6 zero-phase filter"):
+    with pytest.raises(DataError, match="too short for an order-5 zero-phase filter"):
         pp.filtfilt_rows(sos, np.ones((2, 10)))

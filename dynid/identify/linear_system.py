@@ -51,7 +51,7 @@ from dynid.identify.columns import (
 from dynid.identify.dataset import Dataset
 from dynid.identify.effect_terms import EffectColumns
 from dynid.identify.preparation import AUTO_CUTOFF_HZ, Prepared, Preprocessing, prepare, still_joints
-from dynid.identify.preprocess import filtfilt_rows
+from dynid.identify.preprocess import filter_order, filter_padding, filtfilt_rows
 
 __all__ = [
     "AUTO_CUTOFF_HZ",
@@ -326,11 +326,11 @@ def _filter_in_place(Z: NDArray[np.float64], prepared: Prepared) -> None:
     sos = prepared.sos
     if sos is None:
         return
-    pad = 3 * (2 * len(sos) + 1)
+    pad = filter_padding(sos)
     for r, run in enumerate(prepared.runs):
         if run.stop - run.start <= pad:
             raise DataError(
-                f"run {r} has {run.stop - run.start} samples, too short for an order-{2 * len(sos)} zero-phase "
+                f"run {r} has {run.stop - run.start} samples, too short for an order-{filter_order(sos)} zero-phase "
                 f"filter (needs more than {pad}); drop that run or record longer"
             )
 

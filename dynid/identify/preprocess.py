@@ -50,6 +50,8 @@ __all__ = [
     "central_difference",
     "choose_cutoff",
     "decimate",
+    "filter_order",
+    "filter_padding",
     "kept_rows",
     "lowpass",
     "parallel_filter",
@@ -418,7 +420,7 @@ def filtfilt_rows(sos: NDArray[np.float64], x: NDArray[np.float64]) -> NDArray[n
     k, length = x.shape
     if length <= edge:
         raise DataError(
-            f"{length} samples are too short for an order-{2 * len(sos)} zero-phase filter (it pads with {edge}); "
+            f"{length} samples are too short for an order-{filter_order(sos)} zero-phase filter (it pads with {edge}); "
             "record longer"
         )
     ext = np.empty((k, length + 2 * edge))
@@ -431,12 +433,20 @@ def filtfilt_rows(sos: NDArray[np.float64], x: NDArray[np.float64]) -> NDArray[n
     return y[:, edge : edge + length] if edge > 0 else y
 
 
-def _padlen(sos: NDArray[np.float64]) -> int:
-    """Samples :func:`scipy.signal.sosfiltfilt` pads with by default (a run must be longer): the
-    ``edge`` of :func:`filtfilt_rows`, one rule for both (an odd order's first-order section pads less
-    than ``3 (2 n_sections + 1)``)."""
+def filter_padding(sos: NDArray[np.float64]) -> int:
+    """Samples :func:`scipy.signal.sosfiltfilt` pads each end with by default: a run must be longer.
+
+    The ``edge`` of :func:`filtfilt_rows`, one rule for every check before filtering (an odd order's
+    first-order section pads less than ``3 (2 n_sections + 1)``: 18 samples at order 5, not 21).
+    """
     sos = np.ascontiguousarray(sos, dtype=np.float64)
     return _filtfilt_setup(sos.tobytes(), sos.shape)[0]
+
+
+def filter_order(sos: NDArray[np.float64]) -> int:
+    """Order of a filter in second-order sections (its poles: an odd order's last section has one)."""
+    sos = np.asarray(sos, dtype=np.float64)
+    return int(np.sum(sos[:, 4] != 0) + np.sum(sos[:, 5] != 0))
 
 
 def _as_runs(runs: Sequence[slice] | None, m: int) -> list[slice]:
@@ -465,12 +475,12 @@ def _filter_columns(
     k = y2.shape[1]
     longest = max(run.stop - run.start for run in runs)
     chunk = max(1, _CHUNK_VALUES // max(longest, 1))
-    pad = _padlen(sos)
+    pad = filter_padding(sos)
     for r, run in enumerate(runs):
         length = run.stop - run.start
         if length <= pad:
             raise DataError(
-                f"run {r} has {length} samples, too short for an order-{2 * len(sos)} zero-phase filter "
+                f"run {r} has {length} samples, too short for an order-{filter_order(sos)} zero-phase filter "
                 f"(needs more than {pad}); drop that run or record longer"
             )
         if rows is None:
