@@ -72,10 +72,13 @@ def test_the_mixture_em_is_scikit_learns(rng, d, K) -> None:
     np.testing.assert_allclose(got.covariances_, ref.covariances_, rtol=0, atol=1e-11)
 
 
-def test_stacked_component_densities_equal_one_at_a_time(rng) -> None:
+def test_stacked_component_densities_equal_one_at_a_time(rng, monkeypatch) -> None:
     from scipy.special import logsumexp
 
+    import dynid.identify.gmr as gmr_module
     from dynid.identify.gmr import _component, _component_log_densities, _logsumexp
+
+    monkeypatch.setattr(gmr_module, "_DENSITY_VALUES", 70)  # blocks of 7 rows: 400 rows in 58 blocks
 
     K, d = 5, 2
     w = rng.dirichlet(np.ones(K))
@@ -214,6 +217,30 @@ def test_a_range_margin_that_is_not_positive_is_refused(rng, margin) -> None:
     u = rng.normal(size=(400, 2))
     with pytest.raises(UsageError, match=r"range_margin is .*give a positive number"):
         GMRCorrection(n_components=1, range_margin=margin).fit(u, u[:, :1])
+
+
+@pytest.mark.parametrize("reg", [-1e-4, float("nan"), float("inf")])
+def test_a_covariance_regularisation_that_is_not_finite_and_nonnegative_is_refused(rng, reg) -> None:
+    u = rng.normal(size=(400, 2))
+    with pytest.raises(UsageError, match=r"reg_covar is .*give a finite number >= 0"):
+        GMRCorrection(n_components=1, reg_covar=reg).fit(u, u[:, :1])
+    with pytest.raises(UsageError, match=r"reg_covar is .*give a finite number >= 0"):
+        fit_gaussian_mixture(u, 2, reg_covar=reg)
+
+
+@pytest.mark.parametrize(
+    ("X", "K", "message"),
+    [
+        (np.ones(10), 1, r"an \(m, d\) array with m >= 2; got shape \(10,\)"),
+        (np.ones((1, 2)), 1, r"m >= 2; got shape \(1, 2\)"),
+        (np.array([[0.0, 1.0], [np.nan, 2.0], [1.0, 1.0]]), 1, "with non-finite values"),
+        (np.ones((5, 2)), 6, "K is 6; give a whole number of components from 1 to the 5 samples"),
+        (np.ones((5, 2)), 0, "K is 0"),
+    ],
+)
+def test_bad_mixture_input_is_refused(X, K, message) -> None:
+    with pytest.raises((DataError, UsageError), match=message):
+        fit_gaussian_mixture(X, K)
 
 
 def test_files_written_before_the_range_fade_keep_their_predictions(rng) -> None:
