@@ -54,14 +54,18 @@ With nothing else running (load 0.7-1.2), at fa58a13: ``dynid excite --robot ur5
 (with its 100-trajectory random baseline) 21.4 s wall, cond ratio 0.35; the default identification of
 the TX40 recording 8.66 s wall / 10.0 s of CPU (OLS 0.64 s), against FIGAROH's quoted 9.0 s.
 
-After the mixtures' EM and gates were stacked over their components (``fit_gaussian_mixture``: the same
-parameters as scikit-learn's to 1e-13, five times faster on these small fits), with every other process
-of the machine paused: build 38.2 s wall (69.9 s of CPU in the two compilers); the design 13.6 s wall,
-25.3 s of CPU, ratio 0.349 (44 tries, kept #29, as before); the default identification **3.83 s wall /
-5.02 s of CPU** (OLS 0.51 s), link and friction parameters identical to before, the mixtures to 1e-12.  ``dynid identify`` on the same recording
-as a CSV, from the shell: 5.6-5.9 s wall, of which about 1.5 s are imports (scipy.signal alone 1.1 s)
-and 0.3 s reading the 11 MB file.  Fitting the physical layers alone in a second thread beside the joint
-fit was tried and dropped: 3.80 s against 3.99 s over five runs each, for 0.5 s more CPU.
+At the start of the next change (7accfff, load 0.4): the default identification 7.05 s wall / 8.35 s of
+CPU.  After the mixtures' EM and gates were stacked over their components (``fit_gaussian_mixture``: the
+same parameters as scikit-learn's to rounding, five times faster on these small fits; 2.7 s of EM cut to
+about 0.5 s, 0.9 s of gates to about 0.3 s, and about 0.4 s of OpenMP-limit calls gone), with every
+other process of the machine paused, one run of each part: build 38.2 s wall (69.9 s of CPU in the two
+compilers); the design 13.6 s wall, 25.3 s of CPU, ratio 0.349 (44 tries, kept #29, as before); the
+default identification **3.83 s wall / 5.02 s of CPU** (OLS 0.51 s; five more runs of the same code:
+3.80-4.21 s, mean 3.99 s), link and friction parameters identical to before, the mixtures to 1e-12.
+``dynid identify`` on the same recording as a CSV, from the shell: 5.6-5.9 s wall, of which about 1.5 s
+are imports (scipy.signal alone 1.1 s) and 0.3 s reading the 11 MB file.  Fitting the physical layers
+alone in a second thread beside the joint fit was tried and dropped: 3.80 s mean over five runs against
+3.99 s one after the other, for 0.5 s more CPU.
 """
 
 from __future__ import annotations

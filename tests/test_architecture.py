@@ -305,10 +305,9 @@ def test_no_package_exports_a_name_of_its_own_submodules():
     import importlib
 
     clashes = []
-    for info in pkgutil.walk_packages(dynid.__path__, "dynid."):
-        if not info.ispkg:
-            continue
-        package = importlib.import_module(info.name)
+    packages = ["dynid"] + [i.name for i in pkgutil.walk_packages(dynid.__path__, "dynid.") if i.ispkg]
+    for name in packages:
+        package = importlib.import_module(name)
         submodules = {m.name for m in pkgutil.iter_modules(package.__path__)}
-        clashes += [f"{info.name}.{name}" for name in getattr(package, "__all__", ()) if name in submodules]
+        clashes += [f"{name}.{sub}" for sub in getattr(package, "__all__", ()) if sub in submodules]
     assert not clashes, clashes
