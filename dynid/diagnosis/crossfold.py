@@ -15,13 +15,18 @@ from __future__ import annotations
 import itertools
 
 import numpy as np
+import scipy.linalg
 from numpy.typing import NDArray
-
-from dynid.identify._qr import fortran_stack, r_factor
 
 __all__ = ["CrossFold"]
 
 _RCOND = 1e-9  # relative singular-value cut of the per-fold baseline factor (scaled columns)
+
+
+def _r_factor(A: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The top ``min(m, k)`` rows of R in ``A = Q R`` (Q is never formed)."""
+    R = scipy.linalg.qr(A, mode="r", overwrite_a=True, check_finite=False)[0]
+    return R[: min(A.shape)]
 
 
 class CrossFold:
@@ -61,7 +66,7 @@ class CrossFold:
         self.b_tr = b_tr
         ku = int(used.sum())
         # The training rows once, as the triangular factor of [A | b]: R and Q^T b, without Q.
-        Rb = r_factor(fortran_stack(self.A_tr, b_tr), overwrite=True)
+        Rb = _r_factor(np.column_stack([self.A_tr, b_tr]))
         R_tr, qb_tr = Rb[:ku, :ku], Rb[:ku, ku]
         self.edges = np.linspace(0, m, max(2, int(folds)) + 1).astype(int)
         self.A_fold = [
@@ -72,11 +77,14 @@ class CrossFold:
         self.u: list[NDArray[np.float64]] = []  # per fold: Q_f^T b
         for f in range(len(self.A_fold)):
             others = [g for g in range(len(self.A_fold)) if g != f]
-            stack = fortran_stack(
-                np.vstack([R_tr, *(self.A_fold[g] for g in others)]),
-                np.concatenate([qb_tr, *(self.b_fold[g] for g in others)]),
+            Rf = _r_factor(
+                np.column_stack(
+                    [
+                        np.vstack([R_tr, *(self.A_fold[g] for g in others)]),
+                        np.concatenate([qb_tr, *(self.b_fold[g] for g in others)]),
+                    ]
+                )
             )
-            Rf = r_factor(stack, overwrite=True)
             self.Rpinv.append(np.linalg.pinv(Rf[:ku, :ku], rcond=_RCOND))
             self.u.append(Rf[:ku, ku])
 
