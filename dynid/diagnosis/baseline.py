@@ -17,7 +17,6 @@ Stages, in the order :func:`dynid.diagnosis.core.diagnose` runs them:
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -55,7 +54,7 @@ __all__ = [
 _STATE_FACTOR = 2.0  # state filter cut-off over the parallel filter's in the refit
 _WEIGHT_PASSES = 6  # reweighting passes of the baseline refit, at most
 _MIN_TRAIN_SECONDS = 2.0
-_FOLDS = 5  # contiguous held-out stretches of the cross-fitted baseline
+FOLDS = 5  # contiguous held-out stretches of the cross-fitted baseline and candidates
 _CAP = 20.0  # block means of the excess test above the level are capped here (noise variances)
 
 FrictionShape = Callable[[NDArray[np.float64]], NDArray[np.float64]]
@@ -465,7 +464,7 @@ def crossfit_residual(
     weights: NDArray[np.float64],
     ho: Side | Sample,
     sigma: NDArray[np.float64],
-    folds: int = _FOLDS,
+    folds: int = FOLDS,
 ) -> NDArray[np.float64]:
     """Held-out residual of the baseline refitted on the training data and the other held-out folds.
 
@@ -492,30 +491,10 @@ def crossfit_residual(
     ndarray, shape (m_ho, n)
         Cross-fitted held-out residual (N m).
     """
-    m_tr, n, k = tr.X0.shape
-    m = ho.X0.shape[0]
-    A_tr = (tr.X0 * weights[:, :, None]).reshape(m_tr * n, k)
-    b_tr = (tr.y * weights).reshape(m_tr * n)
-    w_ho = ho.moving / sigma[None, :]
-    A_ho = ho.X0 * w_ho[:, :, None]
-    b_ho = ho.y * w_ho
-    scale = np.linalg.norm(A_tr, axis=0) + np.linalg.norm(A_ho.reshape(m * n, k), axis=0)
-    used = scale > 1e-12 * max(float(scale.max()), 1e-300)
-    # The training rows once, as a triangular factor: each fold's fit stacks it on the other folds' rows.
-    Q, R = np.linalg.qr(A_tr[:, used] / scale[used])
-    Qb = Q.T @ b_tr
-    edges = np.linspace(0, m, max(2, int(folds)) + 1).astype(int)
-    out = np.empty_like(ho.y)
-    for a, b in itertools.pairwise(edges):
-        keep = np.ones(m, dtype=bool)
-        keep[a:b] = False
-        A = np.vstack([R, A_ho[keep][:, :, used].reshape(-1, int(used.sum())) / scale[used]])
-        rhs = np.concatenate([Qb, b_ho[keep].reshape(-1)])
-        z, *_ = np.linalg.lstsq(A, rhs, rcond=1e-9)
-        x = np.zeros(k)
-        x[used] = z / scale[used]
-        out[a:b] = ho.y[a:b] - np.einsum("mnk,k->mn", ho.X0[a:b], x)
-    return out
+    from dynid.diagnosis.crossfold import CrossFold
+
+    cf = CrossFold(tr.X0, tr.y, weights, ho.X0, ho.y, ho.moving / sigma[None, :], folds)
+    return cf.residual()
 
 
 def excess_over_floor(

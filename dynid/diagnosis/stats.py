@@ -104,6 +104,7 @@ def diebold_mariano(
     block: int = 1,
     lag: int | None = None,
     extra_variance: float = 0.0,
+    cap: float | None = None,
 ) -> DMResult:
     """One-sided Diebold-Mariano test: is ``loss_alt`` lower than ``loss_ref`` on average?
 
@@ -122,22 +123,29 @@ def diebold_mariano(
     extra_variance : float
         A variance added to that of the mean difference, for a part of it that is fixed over the whole
         run and so invisible to the serial correlation (a model's parameter error).
+    cap : float, optional
+        Upper bound of a block mean of the difference (as in :func:`excess_test`: the capped mean is
+        never above the true one, so the one-sided test stays valid, while a gain made on a few moves no
+        longer swamps the variance it is divided by); the result's ``mean`` is then the capped one.
 
     Returns
     -------
     DMResult
     """
     d = np.asarray(loss_ref, dtype=float) - np.asarray(loss_alt, dtype=float)
-    mean, var_mean, lag, count = _block_mean(d, block, lag, "the loss difference", "a Diebold-Mariano test")
+    mean, var_mean, lag, count = _block_mean(
+        d, block, lag, "the loss difference", "a Diebold-Mariano test", cap=cap
+    )
     stat = mean / math.sqrt(var_mean + max(float(extra_variance), 0.0))
     # Student t with count - 1 degrees of freedom: conservative for few blocks (Harvey et al. 1997).
     p = float(stats.t.sf(stat, df=count - 1))
     return DMResult(mean=mean, stat=stat, p_value=p, lag=lag, blocks=count)
 
 
-def _block_mean(x: NDArray[np.float64], block: int, lag: int | None, what: str, test: str):
+def _block_mean(x: NDArray[np.float64], block: int, lag: int | None, what: str, test: str, cap=None):
     """Mean of a series, the variance of that mean from its block means (Newey-West), the lag used and
-    the block count; a clear error when there are fewer than 8 blocks."""
+    the block count; a clear error when there are fewer than 8 blocks.  With ``cap``, every block mean is
+    first lowered to at most ``cap``."""
     block = max(1, int(block))
     count = x.size // block
     if count < 8:
@@ -146,6 +154,8 @@ def _block_mean(x: NDArray[np.float64], block: int, lag: int | None, what: str, 
             "longer held-out data."
         )
     means = x[: count * block].reshape(count, block).mean(axis=1)
+    if cap is not None:
+        means = np.minimum(means, float(cap))
     lag = default_lag(count) if lag is None else int(lag)
     return float(means.mean()), newey_west_variance(means, lag) / count, lag, count
 
@@ -192,12 +202,7 @@ def excess_test(
         Upper bound of a block mean of ``loss - level`` (same unit as the loss); None: no bound.
     """
     x = np.asarray(loss, dtype=float) - np.asarray(level, dtype=float)
-    if cap is not None:
-        block = max(1, int(block))
-        count = x.size // block
-        means = np.minimum(x[: count * block].reshape(count, block).mean(axis=1), float(cap))
-        x = np.repeat(means, block)
-    mean, var_mean, _, count = _block_mean(x, block, lag, "the loss", "an excess test")
+    mean, var_mean, _, count = _block_mean(x, block, lag, "the loss", "an excess test", cap=cap)
     se = math.sqrt(var_mean)
     w = np.asarray(weights, dtype=float).ravel()
     w = w[w > 1e-12 * max(float(w.max()), 1e-300)] if w.size else w
