@@ -438,13 +438,24 @@ def filter_padding(sos: NDArray[np.float64]) -> int:
 
     The ``edge`` of :func:`filtfilt_rows`, one rule for every check before filtering (an odd order's
     first-order section pads less than ``3 (2 n_sections + 1)``: 18 samples at order 5, not 21).
+
+    Parameters
+    ----------
+    sos : ndarray, shape (n_sections, 6)
+        Second-order sections (:func:`butter_sos`).
     """
     sos = np.ascontiguousarray(sos, dtype=np.float64)
     return _filtfilt_setup(sos.tobytes(), sos.shape)[0]
 
 
 def filter_order(sos: NDArray[np.float64]) -> int:
-    """Order of a filter in second-order sections (its poles: an odd order's last section has one)."""
+    """Order of a filter in second-order sections (its poles: an odd order's last section has one).
+
+    Parameters
+    ----------
+    sos : ndarray, shape (n_sections, 6)
+        Second-order sections (:func:`butter_sos`).
+    """
     sos = np.asarray(sos, dtype=np.float64)
     return int(np.sum(sos[:, 4] != 0) + np.sum(sos[:, 5] != 0))
 
