@@ -239,11 +239,7 @@ def parsimonious(ok: list, alpha: float, block: int, min_gain: float):
     n = rb.loss.shape[1]
     for s in simpler:
         js = sorted(set(s[1].candidate.scored or range(n)) | set(rb.candidate.scored or range(n)))
-        # Capped only (not the doubled p-value of the candidates' own test): doubled, a richer candidate's
-        # edge on a few moves was lost, and the UR5's nonlinear viscous friction at 3x went to Stribeck.
-        dm = st.diebold_mariano(
-            s[1].loss[:, js].sum(axis=1), rb.loss[:, js].sum(axis=1), block=block, cap=GAIN_CAP
-        )
+        dm = _gain_test(s[1].loss[:, js].sum(axis=1), rb.loss[:, js].sum(axis=1), block)
         if dm.p_value > alpha or (dm.mean < min_gain and _nested(s[2], best[2])):
             return s
     return best
