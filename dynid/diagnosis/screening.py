@@ -184,7 +184,7 @@ def score(
     else:
         # An aperiodic run shows an effect on a few moves: block means of the gain are capped from above
         # as the excess test's are (the test stays valid, a few large blocks no longer swamp its variance).
-        dm = _gain_test(L_cur, L, ctx.block)
+        dm = st.diebold_mariano(L_cur, L, block=ctx.block, cap=GAIN_CAP)
         gain = float(np.mean(L_cur - L))
     mse_j = mse(r, ctx.mask)
     noise_var = ctx.sigma**2
@@ -207,20 +207,6 @@ def score(
     )
 
 
-def _gain_test(loss_ref, loss_alt, block: int) -> st.DMResult:
-    """One-sided Diebold-Mariano test of a gain, its block means capped from above and not, Bonferroni.
-
-    Capped (:data:`GAIN_CAP`), a gain made on a few moves of an aperiodic run is no longer lost in its own
-    variance; but a candidate that gains much on most blocks and loses on a few (a dead zone's relay,
-    cross-fitted) keeps all its losses and only a capped share of its gains.  Either test is valid; the
-    smaller p-value, doubled, is too.
-    """
-    capped = st.diebold_mariano(loss_ref, loss_alt, block=block, cap=GAIN_CAP)
-    plain = st.diebold_mariano(loss_ref, loss_alt, block=block)
-    best = capped if capped.p_value <= plain.p_value else plain
-    return replace(best, p_value=min(1.0, 2.0 * best.p_value))
-
-
 def parsimonious(ok: list, alpha: float, block: int, min_gain: float):
     """The best acceptable candidate, or the simplest one on the same joints that it does not beat
     significantly (held-out loss on the joints either scores).
@@ -239,7 +225,9 @@ def parsimonious(ok: list, alpha: float, block: int, min_gain: float):
     n = rb.loss.shape[1]
     for s in simpler:
         js = sorted(set(s[1].candidate.scored or range(n)) | set(rb.candidate.scored or range(n)))
-        dm = _gain_test(s[1].loss[:, js].sum(axis=1), rb.loss[:, js].sum(axis=1), block)
+        dm = st.diebold_mariano(
+            s[1].loss[:, js].sum(axis=1), rb.loss[:, js].sum(axis=1), block=block, cap=GAIN_CAP
+        )
         if dm.p_value > alpha or (dm.mean < min_gain and _nested(s[2], best[2])):
             return s
     return best
