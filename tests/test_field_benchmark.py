@@ -153,11 +153,7 @@ def test_the_state_estimation_term_matches_what_the_quantisation_does(ur5, case,
 def test_an_aperiodic_held_out_run_that_leaves_the_training_states_is_not_called_a_gap(ur5) -> None:
     """Nothing injected, 18-bit angles: the held-out motion leaves the training states, and the refit's
     parameter error shows 17 times the floor on joint 2 (what its covariance allows is a tenth of that).
-    The baseline refitted with the other held-out folds predicts it, and the verdict is "none".
-
-    The same training run leaves the shoulder's offset confounded with gravity: refitted on it alone the
-    offset came out at -31 +- 8 N m (Holm p 0.0008, a false "offset" finding); on the training and
-    held-out data together it is within its standard error of zero, and nothing is found."""
+    The baseline refitted with the other held-out folds predicts it, and the verdict is "none"."""
     from dynid.diagnosis.field_cases import run_field_case
 
     out = run_field_case(ur5, [], level=0.0, seed=101)
@@ -167,10 +163,6 @@ def test_an_aperiodic_held_out_run_that_leaves_the_training_states_is_not_called
     assert d.excess["ratio_tested"][1] < 2.0
     assert out["verdict"] == ["none"]
     assert "torque noise (floor)" in d.excess["explainable"]
-    shoulder = d.parametric["offsets"][1]
-    assert abs(shoulder["value"]) < 2.0 * shoulder["std"]
-    assert d.parametric["per_joint_data"] == "training and held-out data"
-    assert d.parametric["finding"] == "none"
 
 
 @pytest.mark.slow
@@ -187,21 +179,3 @@ def test_an_effect_outside_the_catalogue_on_a_few_moves_is_called_unexplained(ur
     assert out["excess"][5] > 20.0
     assert d.excess["significant_joint"][5]
     assert out["verdict"] == ["unexplained"]
-
-
-@pytest.mark.slow
-def test_an_effect_of_the_size_of_the_noise_is_named_on_the_cross_fitted_footing(ur5) -> None:
-    """Cogging on the wrist at 1x the noise, 18-bit angles: the held-out excess on joint 6 is 1.3 noise
-    variances over the floor.  Fitted beside the baseline on the training data alone, the cogging
-    candidate was not taken and the verdict was "none"; judged as the excess test judges the baseline
-    (refitted with the other held-out folds, each fold predicted by the fit that did not see it), it closes
-    the gap and is named."""
-    from dynid.diagnosis.field_cases import run_field_case
-
-    out = run_field_case(ur5, ["cogging@6"], level=1.0, seed=1)
-    d = out["diagnosis"]
-    assert out["verdict"] == ["cogging"]
-    first = d.accepted[0]
-    assert first.candidate.joint == 5
-    assert first.closure >= 0.5
-    assert first.p_holm < 0.05

@@ -17,17 +17,12 @@ Method, in the order it runs:
    the shape of its friction layer) are identified again on the training data by weighted least squares
    (weights: the baseline residual level per joint, reweighted until they settle).  The held-out error of the model as given minus
    that of the refit is the *parametric* part of the gap.
-3. Screen: every catalogue candidate on every joint (:mod:`dynid.diagnosis.candidates`) is tuned on the
-   training data (its hyper-parameters, never on the held-out data) and scored on the footing of the
-   excess test below: its columns and the baseline's are fitted on the training data and the other
-   held-out folds, each contiguous fold predicted by the fit that did not see it
-   (:class:`~dynid.diagnosis.crossfold.CrossFold`), and the score is the reduction of the cross-fitted
-   held-out loss ``sum_j r_j^2 / sigma_j^2`` against the current model's own cross-fitted loss; its
+3. Screen: every catalogue candidate on every joint (:mod:`dynid.diagnosis.candidates`) is refitted
+   together with the baseline on the training data (its hyper-parameters tuned there, never on the
+   held-out data) and scored by the reduction of the held-out loss ``sum_j r_j^2 / sigma_j^2``; its
    significance is a one-sided Diebold-Mariano test on the per-sample loss difference with a
-   Newey-West variance (block means capped from above, as in the excess test), Holm-corrected across
-   the candidates.  (Fitted on the training data alone, a
-   candidate of the size of the noise is hidden by the refit's parameter error wherever the held-out
-   motion leaves the training states.)
+   Newey-West variance, widened by the chance gain that the refit's parameter error allows (fixed over
+   the whole held-out run, so invisible to the serial correlation), Holm-corrected across the candidates.
 4. Forward selection: among the significant candidates that close at least ``min_closure`` of the
    gap on their own joint(s) (in noise variances), the one that lowers the held-out loss of the whole
    arm most is accepted (a simpler candidate on the same joints that it does not beat significantly
@@ -43,18 +38,12 @@ Method, in the order it runs:
    (sticking leaves a small excess even on an effect-free robot) plus what differentiating quantised
    angles adds (the encoder's step read from the angles and propagated through the preparation and the
    refit's torque), with block means capped so that an excess on a few moves is not lost in its own
-   variance (:func:`dynid.diagnosis.stats.excess_test`); the sources counted as noise are listed.
-   Cross-fitting lets the baseline learn, from the other held-out folds, any change its own parameters
-   can fit: a payload or a drive gain that differs between the training and the held-out recordings is
-   then predicted, and leaves no excess.  The parameter-change test (step 6, on the training refit
-   against the nominal parameters) is what must catch such changes; the excess test does not.
-   Candidates whose columns are nearly parallel once the baseline is projected out (small principal
-   angle) are reported as not separable with this excitation.
+   variance (:func:`dynid.diagnosis.stats.excess_test`); the sources counted as noise are listed.  Candidates whose columns are nearly parallel once the baseline is projected
+   out (small principal angle) are reported as not separable with this excitation.
 6. Parametric test: identified minus nominal base parameters, with a block (HAC) covariance, against
    structured hypotheses (common drive gain, a torque gain on one joint, payload on the last link, an
    armature per joint) by chi^2 / BIC; then the model's own torque offsets and armatures against
-   their nominal values, estimated on the training and held-out data together (on the training run
-   alone, a joint it barely moves through its gravity range leaves the offset confounded with gravity).
+   their nominal values.
 
 Each step is a stage with typed inputs and a typed record out, one module each: the noise floor
 (:mod:`dynid.validation.noise`), the data and the baseline refit (:mod:`.baseline`), the candidates'
@@ -75,7 +64,6 @@ from numpy.typing import NDArray
 from dynid._threads import single_blas_thread
 from dynid.diagnosis import baseline as bl
 from dynid.diagnosis.candidates import EFFECT_NAMES, enumerate_candidates
-from dynid.diagnosis.fitting import WeightedFit
 from dynid.diagnosis.gapmap import gap_map
 from dynid.diagnosis.parameter_change import parameter_change_test
 from dynid.diagnosis.result import Diagnosis, RankedCandidate
@@ -196,9 +184,6 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
     state_var, _ = bl.state_estimation_variance(structure, heldout, ho_sample, base.x, sigma)
     del tr_sample, ho_sample  # their full-rate columns are no longer needed
     held = bl.heldout_baseline(model, heldout, ho, base.x, sigma)
-    # Cross-fitted, the baseline also learns from the other held-out folds a change its own parameters
-    # can fit (a payload or drive gain present only in the held-out run): no excess is left of it, and
-    # the parameter-change test below is what catches it.
     crossfit = bl.crossfit_residual(tr, base.weights, ho, sigma)
     excess = bl.excess_over_floor(
         base.fit, ho, held, sigma, block, settings, crossfit=crossfit, state_variance=state_var
@@ -209,7 +194,7 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
     ctx = Context(
         tr=tr, ho=ho, sigma=sigma, block=block, mask=ho.moving, min_delay=float(np.median(np.diff(heldout.t)))
     )
-    sel = select(ctx, base, held, groups, settings, excess["significant_joint"], folds=bl.FOLDS)
+    sel = select(ctx, base, held, groups, settings, excess["significant_joint"])
 
     # A torque gain on one joint scales that joint's measured torque: what the refit absorbs of it.
     # Its columns were built for the screen (round 0 tunes every candidate).
@@ -224,11 +209,6 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
         settings.alpha,
         sigma,
         gain_dirs,
-        pooled=WeightedFit(
-            np.concatenate([tr.X0, ho.X0]),
-            np.concatenate([tr.y, ho.y]),
-            np.concatenate([base.weights, ho.moving / sigma[None, :]]),
-        ),
     )
     gmap = gap_map(
         t=ho.t,

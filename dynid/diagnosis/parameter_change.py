@@ -54,7 +54,6 @@ def parameter_change_test(
     sigma: NDArray[np.float64],
     gain_dirs: dict[int, NDArray[np.float64]] | None = None,
     chi2_per_dof: float = 5.0,
-    pooled: WeightedFit | None = None,
 ) -> dict[str, Any]:
     """Identified minus nominal parameters against structured hypotheses (chi^2, BIC).
 
@@ -67,15 +66,6 @@ def parameter_change_test(
     rejected clearly (chi^2 per degree of freedom above ``2 chi2_per_dof``) and what it leaves is
     within ``chi2_per_dof`` per degree of freedom (the block covariance underestimates the spread of
     filtered, coloured residuals by a few times: an exact chi^2 test would reject every model).
-
-    ``pooled``: the baseline fitted on the training and the held-out data together (the held-out rows
-    weighted by the moving mask over the noise floor).  The model's own offsets and armatures are tested
-    on it.  A training run that barely moves a joint through its gravity range leaves that joint's
-    offset confounded with the gravity parameters: on an effect-free UR5 the training refit put the
-    shoulder's offset at -31 N m with a standard error of 8 N m (3.8 of them, Holm p 0.0008, a false
-    "offset" finding), because any small model error (sticking, the state estimation) is amplified along
-    that direction, which its covariance does not foresee; with the held-out motion beside it, the same
-    offset came out -0.8 +- 0.9 N m.
     """
     n, nb = robot.n, cols.n_base
     cov = fit.covariance(block)
@@ -124,8 +114,7 @@ def parameter_change_test(
         "dof_nominal": h0.dof,
         "p_nominal": h0.p_value,
         "n_parameters": len(idx),
-        "covariance": "block (HAC) sandwich over blocks of the training data (offsets and armatures: of the "
-        "training and held-out data when pooled)",
+        "covariance": "block (HAC) sandwich over blocks of the training data",
     }
     finding, joint = "none", None
     text = "The re-identified base parameters show no structured change from the nominal ones."
@@ -163,14 +152,7 @@ def parameter_change_test(
             "hypothesis (common or one-joint gain, payload, armature) explains the change: the nominal inertial parameters "
             "are off."
         )
-    # Per-joint parameters the model holds: torque offsets (nominal 0) and armatures (nominal: the URDF's),
-    # on all the data when the pooled fit is given.
-    if pooled is not None:
-        x, _, _ = pooled.solve()
-        cov = pooled.covariance(block)
-        out["per_joint_data"] = "training and held-out data"
-    else:
-        out["per_joint_data"] = "training data"
+    # Per-joint parameters the model holds: torque offsets (nominal 0) and armatures (nominal: the URDF's).
     ddq_rms = np.sqrt(np.mean(ddq_train**2, axis=0))
     flagged = []
     for kind, unit in (("offset", "N m"), ("armature", "kg m^2")):

@@ -45,7 +45,7 @@ def fitted_delay(ctx: Context, fit: WeightedFit, s) -> float:
     return _first_order_delay(ctx, fit, rc.candidate, C_tr) if d is None else float(d)
 
 
-def refine_leaders(ctx, fit, acc_tr, acc_ho, scored, r_cur, mse_cur, rnd, cross=None):
+def refine_leaders(ctx, fit, acc_tr, acc_ho, scored, r_cur, mse_cur, rnd):
     """Refit the leading not-LIP candidates (elasticity, backlash, delay) before the choice.
 
     Their first-order columns recover only part of what they cause, so they are compared with the
@@ -57,7 +57,7 @@ def refine_leaders(ctx, fit, acc_tr, acc_ho, scored, r_cur, mse_cur, rnd, cross=
     for i in leaders:
         gi, rc, C_tr, C_ho = scored[i]
         cand, C_tr2, C_ho2, info = refine(ctx, fit, rc.candidate, C_tr)
-        rc2 = score(ctx, fit, acc_tr, acc_ho, C_tr2, C_ho2, cand, r_cur, mse_cur, rnd, cross)
+        rc2 = score(ctx, fit, acc_tr, acc_ho, C_tr2, C_ho2, cand, r_cur, mse_cur, rnd)
         if rc2.gain > rc.gain:
             out[i] = (gi, replace(rc2, refit=info), C_tr2, C_ho2)
         else:

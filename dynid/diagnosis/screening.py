@@ -3,11 +3,8 @@
 * :func:`tune`: the variant of a candidate (its hyper-parameters) with the lowest training RSS once
   refitted with the baseline; never tuned on held-out data.
 * :func:`score`: the reduction of the held-out loss ``sum_j r_j^2 / sigma_j^2`` on the joints the
-  candidate acts on, its closure of their gap, and a one-sided Diebold-Mariano test
-  (:class:`~dynid.diagnosis.result.RankedCandidate`); cross-fitted (:func:`cross_fitted`: the candidate
-  and the current model refitted on the training data and the other held-out folds) as the diagnosis
-  runs it, else fitted on the training data with the test widened by the chance gain the refit's
-  parameter error allows.
+  candidate acts on, its closure of their gap, and a one-sided Diebold-Mariano test widened by the chance
+  gain the refit's parameter error allows (:class:`~dynid.diagnosis.result.RankedCandidate`).
 * :func:`parsimonious`: among acceptable candidates on the same joints, the simplest one the best does
   not beat significantly.
 * :func:`confounding`: principal angles between the leading candidates once the baseline is projected
@@ -25,21 +22,11 @@ from numpy.typing import NDArray
 from dynid.diagnosis import stats as st
 from dynid.diagnosis.baseline import Side
 from dynid.diagnosis.candidates import Candidate, excitation_hint
-from dynid.diagnosis.crossfold import CrossFold
 from dynid.diagnosis.fitting import WeightedFit, losses, mse, predict
 from dynid.diagnosis.result import RankedCandidate
 from dynid.exceptions import UsageError
 
-__all__ = [
-    "Context",
-    "CrossFitted",
-    "confound_note",
-    "confounding",
-    "cross_fitted",
-    "parsimonious",
-    "score",
-    "tune",
-]
+__all__ = ["Context", "confound_note", "confounding", "parsimonious", "score", "tune"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -99,93 +86,28 @@ def _cogging_prescreen(ctx: Context, fit: WeightedFit, group: list[Candidate]) -
     return [replace(group[0], hyper={"N": float(N)}) for N in top]
 
 
-GAIN_CAP = 20.0
-"""Cap of a block mean of a cross-fitted candidate's gain in its test (noise variances), as the excess test's."""
-
-
-@dataclass(frozen=True, eq=False)
-class CrossFitted:
-    """The current model cross-fitted on the held-out folds: what candidates are scored against.
-
-    Attributes
-    ----------
-    fold : CrossFold
-        The current model (baseline and accepted effects) factored per held-out fold.
-    residual : ndarray, shape (m, n)
-        Its cross-fitted held-out residual (N m).
-    mse : ndarray, shape (n,)
-        Its mean square per joint over the moving rows (N^2 m^2).
-    """
-
-    fold: CrossFold
-    residual: NDArray[np.float64]
-    mse: NDArray[np.float64]
-
-
-def cross_fitted(ctx: Context, fit: WeightedFit, X_tr, X_ho, folds: int) -> CrossFitted:
-    """The current model (columns ``X_tr``, ``X_ho``: baseline and accepted effects) cross-fitted."""
-    cf = CrossFold(X_tr, ctx.tr.y, fit.w, X_ho, ctx.ho.y, ctx.mask / ctx.sigma[None, :], folds)
-    r = cf.residual()
-    return CrossFitted(fold=cf, residual=r, mse=mse(r, ctx.mask))
-
-
-def score(
-    ctx,
-    fit: WeightedFit,
-    acc_tr,
-    acc_ho,
-    C_tr,
-    C_ho,
-    cand,
-    r_cur,
-    mse_cur,
-    rnd,
-    cross: CrossFitted | None = None,
-) -> RankedCandidate:
-    """Held-out score of a candidate refitted with the current model: loss on the joints it acts on.
-
-    With ``cross``, the candidate is judged as the excess test judges the baseline: its columns are fitted
-    with the current model on the training data and the other held-out folds, each fold is predicted by
-    the fit that did not see it, and the gain, closure and test are taken against the current model's
-    own cross-fitted residual.  A held-out motion that leaves the training states shows the refit's
-    parameter error, which hides an effect of the size of the noise when the candidate is fitted on the
-    training data alone; cross-fitted, that error is learned from the other folds on both sides.
-    """
+def score(ctx, fit: WeightedFit, acc_tr, acc_ho, C_tr, C_ho, cand, r_cur, mse_cur, rnd) -> RankedCandidate:
+    """Held-out score of a candidate refitted with the current model: loss on the joints it acts on."""
+    # ``fit`` already holds the accepted columns in its baseline; solve with the candidate alone.
+    x, beta, _ = fit.solve(C_tr)
+    X_ho = np.concatenate([ctx.ho.X0, acc_ho], axis=2) if acc_ho.shape[2] else ctx.ho.X0
+    r = ctx.ho.y - predict(X_ho, x, C_ho, beta)
     js = list(cand.scored) if cand.scored else list(range(len(ctx.sigma)))
-    if cross is not None:
-        r = cross.fold.residual(C_tr, C_ho)
-        r_cur, mse_cur = cross.residual, cross.mse
-        # The fold fits leave no fixed parameter error to widen the test with: each fold's own
-        # estimation error enters its losses, serially correlated within the fold (the blocks).
-        chance_var = 0.0
-    else:
-        # ``fit`` already holds the accepted columns in its baseline; solve with the candidate alone.
-        x, beta, _ = fit.solve(C_tr)
-        X_ho = np.concatenate([ctx.ho.X0, acc_ho], axis=2) if acc_ho.shape[2] else ctx.ho.X0
-        r = ctx.ho.y - predict(X_ho, x, C_ho, beta)
-        # The refit's parameter error, fixed over the whole held-out run, lets any column that moves the
-        # baseline mend (or spoil) the held-out prediction by chance: the gain's variance gets that term,
-        # 4 tr(V_beta G C G^T), with G the held-out cross moment of the candidate's net prediction change
-        # and the baseline columns, C and V_beta the block covariances of the baseline and of the
-        # candidate's coefficients (independent: the candidate is fitted on the baseline's training
-        # residual).
-        net = C_ho - np.einsum("mnk,kc->mnc", X_ho, fit.regress(C_tr))
-        w = ctx.mask[:, js] / ctx.sigma[js][None, :] ** 2
-        G = np.einsum("mjc,mj,mjk->ck", net[:, js], w, X_ho[:, js]) / X_ho.shape[0]
-        cov = np.nan_to_num(fit.covariance(ctx.block))
-        chance_var = 4.0 * float(np.trace(fit.projected_covariance(C_tr, ctx.block) @ G @ cov @ G.T))
     # The refit moves every joint's prediction a little (shared base parameters); scoring the joints the
     # candidate acts on keeps that variance out of the test.
     L = losses(r[:, js], ctx.sigma[js], ctx.mask[:, js])
     L_cur = losses(r_cur[:, js], ctx.sigma[js], ctx.mask[:, js])
-    if cross is None:
-        dm = st.diebold_mariano(L_cur, L, block=ctx.block, extra_variance=max(chance_var, 0.0))
-        gain = dm.mean
-    else:
-        # An aperiodic run shows an effect on a few moves: block means of the gain are capped from above
-        # as the excess test's are (the test stays valid, a few large blocks no longer swamp its variance).
-        dm = st.diebold_mariano(L_cur, L, block=ctx.block, cap=GAIN_CAP)
-        gain = float(np.mean(L_cur - L))
+    # The refit's parameter error, fixed over the whole held-out run, lets any column that moves the
+    # baseline mend (or spoil) the held-out prediction by chance: the gain's variance gets that term,
+    # 4 tr(V_beta G C G^T), with G the held-out cross moment of the candidate's net prediction change and
+    # the baseline columns, C and V_beta the block covariances of the baseline and of the candidate's
+    # coefficients (independent: the candidate is fitted on the baseline's training residual).
+    net = C_ho - np.einsum("mnk,kc->mnc", X_ho, fit.regress(C_tr))
+    w = ctx.mask[:, js] / ctx.sigma[js][None, :] ** 2
+    G = np.einsum("mjc,mj,mjk->ck", net[:, js], w, X_ho[:, js]) / X_ho.shape[0]
+    cov = np.nan_to_num(fit.covariance(ctx.block))
+    chance_var = 4.0 * float(np.trace(fit.projected_covariance(C_tr, ctx.block) @ G @ cov @ G.T))
+    dm = st.diebold_mariano(L_cur, L, block=ctx.block, extra_variance=max(chance_var, 0.0))
     mse_j = mse(r, ctx.mask)
     noise_var = ctx.sigma**2
     # In noise variances, as the loss: in N^2 m^2 a heavy joint's small background excess would outweigh
@@ -196,7 +118,7 @@ def score(
     gain_all = float(np.mean(losses(r_cur, ctx.sigma, ctx.mask) - np.sum(loss_joint, axis=1)))
     return RankedCandidate(
         candidate=cand,
-        gain=gain,
+        gain=dm.mean,
         closure=closure,
         p_value=dm.p_value,
         round=rnd,
@@ -213,9 +135,7 @@ def parsimonious(ok: list, alpha: float, block: int, min_gain: float):
 
     A richer candidate whose columns contain a simpler one's must also beat it by ``min_gain`` noise
     variances per sample: an armature is nested in the spring and dead-zone candidates (their
-    motor-inertia column), which edged it out by 0.05 with a DM p of 0.002.  Block means of the
-    difference are capped as the candidates' own tests are (a richer candidate's edge on a few moves
-    of an aperiodic run would otherwise be lost in its own variance)."""
+    motor-inertia column), which edged it out by 0.05 with a DM p of 0.002."""
     best = ok[0]
     rb = best[1]
     simpler = sorted(
@@ -225,9 +145,7 @@ def parsimonious(ok: list, alpha: float, block: int, min_gain: float):
     n = rb.loss.shape[1]
     for s in simpler:
         js = sorted(set(s[1].candidate.scored or range(n)) | set(rb.candidate.scored or range(n)))
-        dm = st.diebold_mariano(
-            s[1].loss[:, js].sum(axis=1), rb.loss[:, js].sum(axis=1), block=block, cap=GAIN_CAP
-        )
+        dm = st.diebold_mariano(s[1].loss[:, js].sum(axis=1), rb.loss[:, js].sum(axis=1), block=block)
         if dm.p_value > alpha or (dm.mean < min_gain and _nested(s[2], best[2])):
             return s
     return best

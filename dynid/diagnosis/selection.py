@@ -21,7 +21,7 @@ from dynid.diagnosis.candidates import Candidate
 from dynid.diagnosis.fitting import WeightedFit, losses, mse, predict
 from dynid.diagnosis.refinement import KEPT, fitted_delay, refine, refine_leaders
 from dynid.diagnosis.result import RankedCandidate
-from dynid.diagnosis.screening import Context, confounding, cross_fitted, parsimonious, score, tune
+from dynid.diagnosis.screening import Context, confounding, parsimonious, score, tune
 from dynid.diagnosis.settings import DiagnosisSettings
 
 __all__ = ["Selection", "select"]
@@ -65,8 +65,6 @@ def select(
     groups: list[list[Candidate]],
     settings: DiagnosisSettings,
     significant_joint: NDArray[np.bool_],
-    *,
-    folds: int = 5,
 ) -> Selection:
     """Screen, test and accept candidate effects round by round (see the module docstring).
 
@@ -83,8 +81,6 @@ def select(
     settings : DiagnosisSettings
     significant_joint : ndarray of bool, shape (n,)
         Joints whose excess over the noise floor is significant.
-    folds : int
-        Contiguous held-out folds of the cross-fitted scores (those of the excess test).
     """
     tr, ho = ctx.tr, ctx.ho
     n = tr.y.shape[1]
@@ -104,14 +100,6 @@ def select(
     notes: list[str] = []
     tuned: dict[int, tuple[Candidate, NDArray[np.float64]]] = {}
     for rnd in range(max_effects + 1):
-        # The candidates are judged on the excess test's footing: cross-fitted with the current model.
-        cross = cross_fitted(
-            ctx,
-            current_fit,
-            np.concatenate([tr.X0, acc_tr], axis=2),
-            np.concatenate([ho.X0, acc_ho], axis=2),
-            folds,
-        )
         scored = []
         for gi, group in enumerate(groups):
             if any(
@@ -123,12 +111,12 @@ def select(
                 tuned[gi] = tune(ctx, current_fit, group)
             cand, C_tr = tuned[gi]
             C_ho = ho.columns(cand)
-            rc = score(ctx, current_fit, acc_tr, acc_ho, C_tr, C_ho, cand, r_cur, mse_cur, rnd, cross)
+            rc = score(ctx, current_fit, acc_tr, acc_ho, C_tr, C_ho, cand, r_cur, mse_cur, rnd)
             scored.append((gi, rc, C_tr, C_ho))
         if not scored:
             break
         if settings.refit and rnd < max_effects:
-            scored = refine_leaders(ctx, current_fit, acc_tr, acc_ho, scored, r_cur, mse_cur, rnd, cross)
+            scored = refine_leaders(ctx, current_fit, acc_tr, acc_ho, scored, r_cur, mse_cur, rnd)
         p_adj = st.holm([s[1].p_value for s in scored])
         scored = [
             (
@@ -183,7 +171,7 @@ def select(
         rc, replaced = chosen, False
         if settings.refit and not chosen.refit:
             cand, C_tr2, C_ho2, info = refine(ctx, current_fit, chosen.candidate, C_tr)
-            rc2 = score(ctx, current_fit, acc_tr, acc_ho, C_tr2, C_ho2, cand, r_cur, mse_cur, rnd, cross)
+            rc2 = score(ctx, current_fit, acc_tr, acc_ho, C_tr2, C_ho2, cand, r_cur, mse_cur, rnd)
             if rc2.gain >= chosen.gain:
                 rc = replace(
                     rc2,
