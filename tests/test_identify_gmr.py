@@ -243,6 +243,12 @@ def test_bad_mixture_input_is_refused(X, K, message) -> None:
         fit_gaussian_mixture(X, K)
 
 
+def test_a_collapsed_component_without_regularisation_is_refused_in_one_sentence() -> None:
+    X = np.repeat(np.array([[0.0, 0.0], [1.0, 2.0], [3.0, 1.0]]), 10, axis=0)  # 3 distinct points
+    with pytest.raises(DataError, match="a component of the 3-component mixture collapsed"):
+        fit_gaussian_mixture(X, 3, reg_covar=0.0)
+
+
 def test_files_written_before_the_range_fade_keep_their_predictions(rng) -> None:
     gmr, u = _broad(rng, 1.0)
     arrays = {k: v for k, v in gmr.to_arrays().items() if not k.endswith("_range_margin")}

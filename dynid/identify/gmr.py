@@ -173,7 +173,13 @@ def fit_gaussian_mixture(
         cov = np.matmul(diff * R[:, None, :], diff.transpose(0, 2, 1)) / nk[:, None, None]
         cov[:, diag, diag] += reg_covar
         # the Cholesky factor of each precision, upper triangular: inv(chol(cov)).T
-        prec_t = np.linalg.inv(np.linalg.cholesky(cov))  # its transpose, lower triangular
+        try:
+            prec_t = np.linalg.inv(np.linalg.cholesky(cov))  # its transpose, lower triangular
+        except np.linalg.LinAlgError:
+            raise DataError(
+                f"a component of the {K}-component mixture collapsed onto too few distinct samples (its "
+                f"covariance is singular with reg_covar {reg_covar:g}); use fewer components or a larger reg_covar"
+            ) from None
         return nk, means, cov, prec_t
 
     R = np.zeros((K, m))
