@@ -493,14 +493,19 @@ def test_sigterm_interrupts_a_command_without_leaving_files(folder, tmp_path):
     import sys
     import time
 
-    shutil.copy(folder / "D.csv", tmp_path / "D.csv")
+    # the recording four times over (time running on): the identification then takes about 8 s or more
+    lines = (folder / "D.csv").read_text().splitlines()
+    data = np.loadtxt(lines[1:], delimiter=",", ndmin=2)
+    span = data[-1, 0] - data[0, 0] + (data[1, 0] - data[0, 0])
+    longer = np.vstack([data + np.eye(1, data.shape[1], 0) * k * span for k in range(4)])
+    np.savetxt(tmp_path / "D.csv", longer, delimiter=",", header=lines[0], comments="", fmt="%.17g")
     argv = [
         sys.executable, "-m", "dynid.cli", "identify", "--robot", "ur5", "--data", str(tmp_path / "D.csv"),
         "--method", "irls", "--friction", "seed", "--gmm", "auto", "--out", str(tmp_path / "M.json"),
     ]  # fmt: skip
     proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    # dynid's handler is in place within a fraction of a second, and the identification takes about 4 s
-    # or more: a signal at 2.5 s lands while it works, not after it returned (then Python ends with -15).
+    # dynid's handler is in place within a fraction of a second: a signal at 2.5 s lands while the
+    # identification works, not after it returned (then Python ends with -15).
     time.sleep(2.5)
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=120)
