@@ -172,38 +172,36 @@ def fit_gaussian_mixture(
         diff = XT[None] - means[:, :, None]  # (K, d, m)
         cov = np.matmul(diff * R[:, None, :], diff.transpose(0, 2, 1)) / nk[:, None, None]
         cov[:, diag, diag] += reg_covar
-        # the Cholesky factor of each precision, upper triangular: inv(chol(cov)).T
+        return nk, means, cov
+
+    def singular(call, *args):  # a collapsed component's singular covariance, in one sentence
         try:
-            prec_t = np.linalg.inv(np.linalg.cholesky(cov))  # its transpose, lower triangular
+            return call(*args)
         except np.linalg.LinAlgError:
             raise DataError(
                 f"a component of the {K}-component mixture collapsed onto too few distinct samples (its "
                 f"covariance is singular with reg_covar {reg_covar:g}); use fewer components or a larger reg_covar"
             ) from None
-        return nk, means, cov, prec_t
 
     R = np.zeros((K, m))
     R[label, np.arange(m)] = 1.0
-    nk, means, cov, prec_t = m_step(R)
+    nk, means, cov = m_step(R)
     weights = nk / m
-    const = d * math.log(2 * math.pi)
     bound = -np.inf
     n_iter = 0
     while n_iter < int(max_iter):
         n_iter += 1
         previous = bound
-        log_det = np.log(np.diagonal(prec_t, axis1=1, axis2=2)).sum(axis=1)
-        y = np.matmul(prec_t, XT[None]) - np.matmul(prec_t, means[:, :, None])  # (K, d, m)
-        logp = -0.5 * (const + np.einsum("kdm,kdm->km", y, y)) + (log_det + np.log(weights))[:, None]
-        top = logp.max(axis=0)
+        logp = singular(_component_log_densities, X, weights, means, cov)  # weighted, (K, m), as the gates'
+        norm = _logsumexp(logp)
         with np.errstate(under="ignore"):
-            norm = np.log(np.exp(logp - top).sum(axis=0)) + top
             R = np.exp(logp - norm)
-        nk, means, cov, prec_t = m_step(R)
+        nk, means, cov = m_step(R)
         weights = nk / nk.sum()
         bound = float(norm.mean())
         if abs(bound - previous) < tol:
             break
+    singular(np.linalg.cholesky, cov)  # the returned covariances too are positive definite
     return _Mixture(weights, means, cov, n_iter)
 
 
