@@ -36,10 +36,12 @@ RECORDINGS = {
 
 def diagnose_recording(name: str, split: float, decimate: int, out: Path, root: Path | None = None) -> dict:
     """Identify on ``t < split``, diagnose on the rest; write the model and the report into ``out``."""
+    import numpy as np
     from _realrobot import load_with_robot, split_in_time
 
     from dynid.diagnosis.core import diagnose
     from dynid.diagnosis.report import write_diagnosis_report
+    from dynid.diagnosis.result import settling_excitation
     from dynid.identify.model import identify, load_model, save_model
     from dynid.identify.preparation import Preprocessing
 
@@ -89,14 +91,24 @@ def diagnose_recording(name: str, split: float, decimate: int, out: Path, root: 
     print("top of the ranking on the re-identified model:")
     for r in result.ranking[:6]:
         print(f"  {r.candidate.key:<24} gain {r.gain:8.3g}  closure {r.closure:6.2f}  p(Holm) {r.p_holm:.2g}")
+    rate = 1.0 / float(np.median(np.diff(heldout.t)))
+    settle = settling_excitation(result, robot=str(robot.source), dq_max=robot.dq_max, rate=rate)
+    if settle is not None:
+        settle["commands"] = [settle["excite"], f"# play {settle['csv']} on the robot and hold its recording out"]
+        print(settle["reason"] + " To settle it, record it like this:")
+        print("  " + settle["excite"])
     report = write_diagnosis_report(
         result,
         out / f"{name}_diagnosis.html",
         title=f"{name}: gap diagnosis (identified on t < {split:g} s, held out the rest)",
         context={"recording": name, "robot": robot.name, "split (s)": split, "decimation": decimate},
+        settle=settle,
     )
     print(f"report: {report}")
-    return result.to_dict()
+    doc = result.to_dict()
+    if settle is not None:
+        doc["settle"] = settle
+    return doc
 
 
 def main(out: Path) -> int:

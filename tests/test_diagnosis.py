@@ -489,23 +489,26 @@ def test_the_command_refuses_a_report_in_a_missing_folder_before_any_work(tmp_pa
 
 
 def test_heldout_needed_scales_the_run_to_the_holm_threshold():
-    """An undecided candidate's z-score grows as sqrt(T): the run that reaches alpha / m, times 1.5."""
+    """An undecided candidate's z-score grows as sqrt(T): the run that reaches alpha / m, times 1.5; none
+    when its gain per sample is below min_gain (no run of the same motion raises it)."""
     from types import SimpleNamespace
 
     from scipy.stats import norm
 
     from dynid.diagnosis.result import heldout_needed
 
-    top = SimpleNamespace(p_value=float(norm.sf(2.0)), closure=0.9, significant=False)
-    others = [SimpleNamespace(p_value=0.5, closure=0.1, significant=False)] * 9
+    top = SimpleNamespace(p_value=float(norm.sf(2.0)), closure=0.9, significant=False, gain=0.4)
+    others = [SimpleNamespace(p_value=0.5, closure=0.1, significant=False, gain=0.0)] * 9
     d = SimpleNamespace(
         verdict=["unexplained"],
         ranking=[top, *others],
-        settings={"alpha": 0.05, "min_closure": 0.5},
+        undecided=[top],
+        settings={"alpha": 0.05, "min_closure": 0.5, "min_gain": 0.15},
         residuals={"t": np.linspace(0.0, 30.0, 3001)},
     )
     expected = 30.0 * (norm.isf(0.05 / 10) / 2.0) ** 2 * 1.5
     assert heldout_needed(d) == pytest.approx(expected, rel=1e-9)
-    assert heldout_needed(SimpleNamespace(**{**vars(d), "verdict": ["none"]})) is None
-    top_closes_little = SimpleNamespace(p_value=top.p_value, closure=0.2, significant=False)
-    assert heldout_needed(SimpleNamespace(**{**vars(d), "ranking": [top_closes_little, *others]})) is None
+    assert heldout_needed(SimpleNamespace(**{**vars(d), "verdict": ["none"]})) == pytest.approx(expected, rel=1e-9)
+    assert heldout_needed(SimpleNamespace(**{**vars(d), "undecided": []})) is None
+    small = SimpleNamespace(**{**vars(top), "gain": 0.1})
+    assert heldout_needed(SimpleNamespace(**{**vars(d), "undecided": [small]})) is None

@@ -87,9 +87,16 @@ def test_tx40_diagnosis_points_at_the_coupled_wrist_and_is_provisional(shared_da
     assert top["closure"] > 0.9
     assert doc["provisional"] is True
     # Named, or the reason it is not: on 3 s of held-out data the 95 % closure is not significant after
-    # the correction for the ~60 candidates tested, and the summary must say that, not "closes too little".
+    # the correction for the ~60 candidates tested, and the summary must say that, not "closes too little",
+    # with the command that records the held-out run that decides.
     if doc["verdict"] != ["coupled_friction"]:
-        assert "a longer held-out run would decide" in printed.getvalue()
+        lead = doc["undecided"][0]
+        assert (lead["effect"], lead["joint"]) == ("coupled_friction", [5, 6]), doc["undecided"]
+        text = printed.getvalue()
+        assert "Undecided: coupled friction of joints 5 and 6 would close 95 %" in text
+        assert "s of the same kind would too" in text
+        assert doc["settle"]["candidate"] == "coupled_friction@5+6"
+        assert doc["settle"]["excite"].startswith("dynid excite --robot ") and doc["settle"]["excite"] in text
     assert doc["noise_floor"]["method"] == "spectrum"
     assert (tmp_path / "tx40_diagnosis.html").is_file()
 

@@ -176,6 +176,7 @@ def run(args: argparse.Namespace) -> int:
                 **context,
             },
             refit=figures.get("refit"),
+            settle=figures.get("settle"),
         )
         print(f"report written to {report}")
     return 0
@@ -261,37 +262,30 @@ def _correct_description(args, result, train, heldout) -> dict:
 
 
 def _settling_commands(args, model, heldout, result) -> dict | None:
-    """The exact commands that would record held-out data to settle a provisional or undecided verdict."""
-    import math
+    """The exact commands that would record held-out data to settle a provisional or undecided verdict:
+    the excitation (:func:`dynid.diagnosis.result.settling_excitation`), how to record it, and the
+    diagnosis to run on it."""
     import shlex
 
     import numpy as np
 
-    from dynid.diagnosis.result import heldout_needed
+    from dynid.diagnosis.result import settling_excitation
 
-    need = heldout_needed(result)
-    if need is None and not result.provisional:
-        return None
     rate = 1.0 / float(np.median(np.diff(heldout.t)))
-    base_freq = 0.1  # excite's default: a 10 s period
-    periods = max(3, math.ceil((need or 0.0) * base_freq))
-    if need is not None:
-        reason = f"Undecided: about {need:.0f} s of held-out data would decide the best candidate."
-    else:
-        reason = (
-            "Provisional: the held-out data do not repeat a period, so the noise floor is a lower bound."
-        )
-    robot = shlex.quote(str(model.robot.source))
-    csv = "heldout_excitation.csv"
+    settle = settling_excitation(result, robot=str(model.robot.source), dq_max=model.robot.dq_max, rate=rate)
+    if settle is None:
+        return None
+    csv = settle["csv"]
     return {
-        "reason": reason,
-        "heldout_seconds": need,
+        "reason": settle["reason"],
+        "heldout_seconds": settle["heldout_seconds"],
+        "candidate": settle["candidate"],
         "commands": [
-            f"dynid excite --robot {robot} --criterion cond --seed 11 --base-freq {base_freq:g} "
-            f"--out heldout_excitation.json --csv {csv} --rate {rate:.6g} --periods {periods}",
+            settle["excite"],
             f"# play {csv} on the robot (it rests 2 s at home at both ends); log t, q_i, tau_i to heldout.csv",
             f"dynid diagnose --model {shlex.quote(args.model)} --data {shlex.quote(args.data)} "
-            "--heldout heldout.csv" + (" --degrees" if getattr(args, "degrees", False) else "")
+            "--heldout heldout.csv"
+            + (" --degrees" if getattr(args, "degrees", False) else "")
             + (f" --topic {shlex.quote(args.topic)}" if getattr(args, "topic", None) else ""),
         ],
     }

@@ -66,6 +66,7 @@ __all__ = [
     "describe_hyper",
     "enumerate_candidates",
     "excitation_hint",
+    "settling_motion",
 ]
 
 PARAMETRIC_EFFECTS = ("drive_gain", "payload", "offset")
@@ -103,6 +104,66 @@ def excitation_hint(cand: Candidate) -> str:
     """Words for the motion that excites a candidate."""
     j = cand.joint + 1 if cand.joint is not None else (cand.joints[0] + 1 if cand.joints else 1)
     return CANDIDATES[cand.effect].excites.format(j=j)
+
+
+def settling_motion(
+    cand: Candidate, dq_max: Sequence[float], *, cutoff_hz: float | None = None, period: float = 10.0
+) -> tuple[dict[str, object], str]:
+    """Changes to a default excitation (``dynid excite``) whose recording would show a candidate.
+
+    The default excitation uses every joint's whole speed range, so it passes through the low speeds
+    where Stribeck friction, backlash and cogging live in a few milliseconds per reversal: such an effect
+    can be real and still too small, on that run, to pass the tests.  The settling run slows the joint
+    down instead (Stribeck: below five times the candidate's Stribeck speed; backlash: a tenth of the
+    limit; cogging: the gear harmonic below half the torque filter's cut-off), runs longer (temperature:
+    three of the candidate's time constants) or richer (elasticity: more harmonics; a delay: a higher base
+    frequency).  Other effects get a new excitation of the same kind.
+
+    Parameters
+    ----------
+    cand : Candidate
+        The undecided candidate (tuned hyper-parameters).
+    dq_max : sequence of float, shape (n,)
+        The robot's speed limits (rad/s).
+    cutoff_hz : float, optional
+        Cut-off of the torque filter the diagnosis used (Hz).
+    period : float
+        Period of the default excitation (s).
+
+    Returns
+    -------
+    options : dict
+        ``dq_max`` (a full per-joint list, rad/s), ``periods``, ``harmonics`` or ``base_freq``: the
+        ``dynid excite`` options that differ from its defaults; empty for a new excitation of the same kind.
+    why : str
+        The motion in words.
+    """
+    limits = [float(v) for v in dq_max]
+    j = cand.joint
+    options: dict[str, object] = {}
+    slow = None
+    if j is not None and cand.effect == "stribeck" and "vs" in cand.hyper:
+        slow = 5.0 * float(cand.hyper["vs"])
+    elif j is not None and cand.effect == "backlash":
+        slow = 0.1 * limits[j]
+    elif j is not None and cand.effect == "cogging" and "N" in cand.hyper:
+        slow = math.pi * (cutoff_hz if cutoff_hz else 10.0) / float(cand.hyper["N"])
+    if slow is not None and j is not None:
+        limits[j] = min(limits[j], slow)
+        options["dq_max"] = limits
+        why = f"joint {j + 1} kept below {limits[j]:.3g} rad/s ({excitation_hint(cand)})"
+    elif cand.effect == "temperature" and "T" in cand.hyper:
+        options["periods"] = max(3, min(60, math.ceil(3.0 * float(cand.hyper["T"]) / period)))
+        why = f"{options['periods']} periods ({excitation_hint(cand)})"
+    elif cand.effect == "elasticity":
+        options["harmonics"] = 10
+        why = f"10 harmonics ({excitation_hint(cand)})"
+    elif cand.effect == "delay":
+        options["base_freq"] = 0.2
+        why = f"a 5 s period ({excitation_hint(cand)})"
+    else:
+        why = f"a new excitation of the same kind (the effect shows with {excitation_hint(cand)})"
+    return options, why
 
 
 def enumerate_candidates(

@@ -66,6 +66,7 @@ from dynid.diagnosis import baseline as bl
 from dynid.diagnosis.candidates import EFFECT_NAMES, enumerate_candidates
 from dynid.diagnosis.gapmap import gap_map
 from dynid.diagnosis.parameter_change import parameter_change_test
+from dynid.diagnosis.refinement import fitted_delay
 from dynid.diagnosis.result import Diagnosis, RankedCandidate
 from dynid.diagnosis.screening import Context, confound_note
 from dynid.diagnosis.selection import Selection, select
@@ -225,6 +226,7 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
         filter_gain=_filter_gain_function(ho.prep),
     )
     verdict, notes = _verdict(sel, excess, noise, base, settings)
+    undecided = [] if sel.accepted else _undecided(ctx, base, sel.ranking, settings)
     return Diagnosis(
         verdict=verdict,
         accepted=sel.accepted,
@@ -257,7 +259,38 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
             "noise_std": sigma,
         },
         provisional=noise.method not in MEASURED_FLOORS,
+        undecided=undecided,
     )
+
+
+UNDECIDED_SHOWN = 3
+"""Most undecided candidates a diagnosis reports."""
+
+
+def _undecided(
+    ctx: Context, base: bl.Baseline, ranking: list[RankedCandidate], settings: DiagnosisSettings
+) -> list[RankedCandidate]:
+    """Candidates the held-out run cannot decide: they would close at least ``min_closure`` of their
+    joints' gap and pass the test on their own (raw p below ``alpha``), but not after the correction for
+    every candidate tested or not by ``min_gain``; largest gain first, as the ranking.  A timing mismatch shorter than one
+    sample is the state estimation's (see :func:`~dynid.diagnosis.refinement.fitted_delay`), not a lead."""
+    out = []
+    for r in ranking:  # best gain first
+        if len(out) == UNDECIDED_SHOWN:
+            break
+        if (
+            r.significant
+            or r.p_value >= settings.alpha
+            or not r.gain > 0
+            or not r.closure >= settings.min_closure
+        ):
+            continue
+        if r.candidate.effect == "delay":
+            d = fitted_delay(ctx, base.fit, (None, r, ctx.tr.columns(r.candidate), None))
+            if abs(d) < ctx.min_delay:
+                continue
+        out.append(r)
+    return out
 
 
 MEASURED_FLOORS = ("periods", "training periods")

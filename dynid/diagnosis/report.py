@@ -216,6 +216,7 @@ def render_diagnosis_html(
     title: str = "dynid gap diagnosis",
     context: dict[str, Any] | None = None,
     refit: dict[str, Any] | None = None,
+    settle: dict[str, Any] | None = None,
 ) -> str:
     """The report as one HTML string.
 
@@ -230,6 +231,9 @@ def render_diagnosis_html(
     refit : dict, optional
         The model refitted with the accepted effects (``dynid diagnose --out``): ``rms_before``,
         ``rms_after`` (N m per joint, held out), ``effects`` and ``path``; shown as a per-joint table.
+    settle : dict, optional
+        The recording that would settle an undecided or provisional verdict (``dynid diagnose``):
+        ``reason`` and the ``commands`` that record and diagnose it.
     """
     doc = result.to_dict()
     dec = doc["decomposition"]
@@ -242,6 +246,13 @@ def render_diagnosis_html(
         parts.append(html_table(None, [[k, str(v)] for k, v in context.items()], text_columns=2))
     if refit and refit.get("written"):
         parts.append(_refit_html(refit, result.joint_names))
+    if settle and settle.get("commands"):
+        commands = html.escape("\n".join(settle["commands"]))
+        parts.append(
+            "<h2>The recording that would decide</h2>"
+            f"<p>{html.escape(str(settle.get('reason', '')))}</p>"
+            f'<pre style="white-space: pre-wrap; overflow-wrap: anywhere">{commands}</pre>'
+        )
     parts.append("<h2>Where the held-out error lies</h2>")
     rows = []
     for j in range(n):
@@ -370,6 +381,7 @@ def write_diagnosis_report(
     title: str = "dynid gap diagnosis",
     context: dict[str, Any] | None = None,
     refit: dict[str, Any] | None = None,
+    settle: dict[str, Any] | None = None,
 ) -> Path:
     """Write the HTML report atomically (a temporary file renamed into place).
 
@@ -385,10 +397,14 @@ def write_diagnosis_report(
         Extra facts shown in a table.
     refit : dict, optional
         The model refitted with the accepted effects (see :func:`render_diagnosis_html`).
+    settle : dict, optional
+        The recording that would settle the verdict (see :func:`render_diagnosis_html`).
 
     Returns
     -------
     Path
     """
     path = check_report_path(path, pdf=False)
-    return write_text(path, render_diagnosis_html(result, title=title, context=context, refit=refit))
+    return write_text(
+        path, render_diagnosis_html(result, title=title, context=context, refit=refit, settle=settle)
+    )

@@ -8,6 +8,7 @@ test (:func:`dynid.diagnosis.core.diagnose` makes it); :func:`verdict_text` says
 from __future__ import annotations
 
 import math
+import shlex
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -15,10 +16,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynid._io import to_jsonable
-from dynid.diagnosis.candidates import Candidate, describe_hyper
+from dynid.diagnosis.candidates import Candidate, describe_hyper, excitation_hint, settling_motion
 from dynid.validation.metrics import NoiseFloor
 
-__all__ = ["Diagnosis", "RankedCandidate", "verdict_text"]
+__all__ = ["Diagnosis", "RankedCandidate", "heldout_needed", "settling_excitation", "verdict_text"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -129,6 +130,11 @@ class Diagnosis:
         The noise floor was estimated from the spectrum (the held-out data do not repeat a period), a
         lower bound when the noise is coloured: the excess, and an ``"unexplained"`` verdict, may be
         overstated.
+    undecided : list of RankedCandidate
+        When no effect is accepted: candidates that would close at least ``min_closure`` of their
+        joints' gap and pass the test on their own (raw p below ``alpha``) but not once every candidate
+        tested is accounted for, or not by ``min_gain``; most promising first (at most three).  The
+        held-out run has too little of the motion that shows them: a recording of that motion decides.
     """
 
     verdict: list[str]
@@ -144,6 +150,7 @@ class Diagnosis:
     settings: dict[str, Any]
     residuals: dict[str, Any] = field(default_factory=dict, repr=False)
     provisional: bool = False
+    undecided: list[RankedCandidate] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON-ready figures (``gap_map``, ``ranking``, ``verdict``, ``parametric``, and more)."""
@@ -153,6 +160,7 @@ class Diagnosis:
                 "provisional": self.provisional,
                 "ranking": [r.to_dict() for r in self.ranking],
                 "accepted": [r.to_dict() for r in self.accepted],
+                "undecided": [r.to_dict() for r in self.undecided],
                 "gap_map": self.gap_map,
                 "parametric": self.parametric,
                 "decomposition": self.decomposition,
@@ -199,20 +207,23 @@ def _describe_refit(r: RankedCandidate) -> str:
 
 
 def heldout_needed(d: Diagnosis) -> float | None:
-    """Seconds of held-out data that would make the best undecided candidate significant, or None.
+    """Seconds of held-out data of the same kind that would make the best undecided candidate significant.
 
-    A candidate that would close enough of its joints' gap but is not significant after the correction
-    for the candidates tested is undecided.  Its held-out gain grows with the length of the run and its
-    standard deviation with the square root, so its z-score grows as ``sqrt(T)``: the run that reaches
-    the Holm threshold of the top candidate (``alpha / m``, one-sided) is ``T (z_needed / z_now)^2``,
-    with a margin of 1.5 for the chance that this run's z-score was lucky.
+    An undecided candidate (:attr:`Diagnosis.undecided`) would close enough of its joints' gap but is not
+    significant once every candidate tested is accounted for.  Its held-out gain grows with the length of
+    the run and its standard deviation with the square root, so its z-score grows as ``sqrt(T)``: the run
+    that reaches the Holm threshold of the top candidate (``alpha / m``, one-sided) is
+    ``T (z_needed / z_now)^2``, with a margin of 1.5 for the chance that this run's z-score was lucky.
+    None when there is no undecided candidate, or when its gain per sample is below ``min_gain``: no run
+    of the same motion raises it, only a motion that shows the effect more
+    (:func:`~dynid.diagnosis.candidates.settling_motion`).
     """
     from scipy.stats import norm
 
-    if d.verdict != ["unexplained"] or not d.ranking:
+    if not d.undecided or not d.ranking:
         return None
-    top = d.ranking[0]
-    if top.significant or top.closure < d.settings.get("min_closure", 0.5):
+    top = d.undecided[0]
+    if top.gain < float(d.settings.get("min_gain", 0.15)):
         return None
     t = np.asarray(d.residuals.get("t", ()), dtype=float)
     if t.size < 2 or not (0 < top.p_value < 0.5):
@@ -221,6 +232,93 @@ def heldout_needed(d: Diagnosis) -> float | None:
     z_now = float(norm.isf(top.p_value))
     z_needed = float(norm.isf(alpha / len(d.ranking)))
     return float((t[-1] - t[0]) * max(1.0, (z_needed / z_now) ** 2) * 1.5)
+
+
+def settling_excitation(
+    d: Diagnosis, *, robot: str, dq_max, rate: float, out: str = "heldout_excitation"
+) -> dict[str, Any] | None:
+    """The ``dynid excite`` command whose recording, held out, would settle an undecided or provisional
+    verdict; None when the verdict is neither.
+
+    An undecided candidate (:attr:`Diagnosis.undecided`, the first) gets the motion that shows it
+    (:func:`~dynid.diagnosis.candidates.settling_motion`: Stribeck friction a slow joint, a temperature
+    drift a long run), for at least three periods and at least :func:`heldout_needed`; a provisional
+    verdict gets three periods of a new excitation, so that the noise floor is measured.
+
+    Parameters
+    ----------
+    d : Diagnosis
+    robot : str
+        The robot as ``dynid excite --robot`` takes it (a built-in name or a description file).
+    dq_max : array_like, shape (n,)
+        The robot's speed limits (rad/s).
+    rate : float
+        Sample rate of the recording (Hz): the controller rate of the excitation's CSV.
+    out : str
+        Stem of the excitation's files (``out.json``, ``out.csv``).
+
+    Returns
+    -------
+    dict or None
+        ``reason`` (one sentence), ``heldout_seconds`` (or None), ``candidate`` (its key, or None),
+        ``excite`` (the command) and ``csv`` (the file to play on the robot).
+    """
+    lead = d.undecided[0] if d.undecided else None
+    if lead is None and not d.provisional:
+        return None
+    need = heldout_needed(d)
+    options: dict[str, Any] = {}
+    if lead is not None:
+        cutoff = (d.settings.get("preprocessing") or {}).get("cutoff_hz")
+        options, why = settling_motion(lead.candidate, dq_max, cutoff_hz=cutoff, period=10.0)
+        reason = f"Undecided: {lead.candidate.label}. A held-out run with {why} would decide" + (
+            f" (or about {need:.0f} s more of the same kind)." if need else "."
+        )
+    else:
+        reason = "Provisional: the held-out data do not repeat a period, so the noise floor is a lower bound."
+    base_freq = float(options.get("base_freq", 0.1))  # excite's default: a 10 s period
+    periods = max(3, int(options.get("periods", 3)), math.ceil((need or 0.0) * base_freq))
+    extra = ""
+    if "dq_max" in options:
+        extra += " --dq-max " + ",".join(f"{v:.4g}" for v in options["dq_max"])
+    if "harmonics" in options:
+        extra += f" --harmonics {int(options['harmonics'])}"
+    csv = f"{out}.csv"
+    excite = (
+        f"dynid excite --robot {shlex.quote(robot)} --criterion cond --seed 11 --base-freq {base_freq:g}{extra} "
+        f"--out {shlex.quote(out + '.json')} --csv {shlex.quote(csv)} --rate {rate:.6g} --periods {periods}"
+    )
+    return {
+        "reason": reason,
+        "heldout_seconds": need,
+        "candidate": lead.candidate.key if lead is not None else None,
+        "excite": excite,
+        "csv": csv,
+    }
+
+
+def _undecided_text(d: Diagnosis) -> list[str]:
+    """One line per undecided candidate: what it would close, and why it is not taken."""
+    lines = []
+    min_gain = float(d.settings.get("min_gain", 0.15))
+    for r in d.undecided:
+        why = (
+            f"its gain, {r.gain:.2g} noise variances per sample, is below the {min_gain:g} asked of an effect"
+            if r.gain < min_gain
+            else f"not once the {len(d.ranking)} candidates tested are accounted for (Holm-adjusted p = "
+            f"{r.p_holm:.2g})"
+        )
+        lines.append(
+            f"Undecided: {r.candidate.label} would close {100 * r.closure:.0f} % of the gap on its joint(s) and "
+            f"passes the test on its own (p = {r.p_value:.2g}), but {why}.  The held-out run has too little of "
+            f"the motion that shows it ({excitation_hint(r.candidate)}): a recording of that motion decides"
+            + (
+                f"; about {need:.0f} s of the same kind would too."
+                if r is d.undecided[0] and (need := heldout_needed(d))
+                else "."
+            )
+        )
+    return lines
 
 
 def verdict_text(d: Diagnosis) -> str:
@@ -238,20 +336,12 @@ def verdict_text(d: Diagnosis) -> str:
             f"Unexplained gap: the held-out error is {ratio:.2f} times the noise floor (significant), and no "
             "candidate effect of the catalogue both closes enough of it and passes the significance test."
         )
-        if d.ranking:
+        if d.ranking and not d.undecided:
             top = d.ranking[0]
-            closes = (
-                f"{top.candidate.label}, would close {100 * max(top.closure, 0):.0f} % of its joints' gap"
+            lines.append(
+                f"The closest candidate, {top.candidate.label}, would close {100 * max(top.closure, 0):.0f} % of "
+                "its joints' gap; that is not taken as the cause."
             )
-            if top.closure >= d.settings.get("min_closure", 0.5) and not top.significant:
-                lines.append(
-                    f"The best candidate, {closes}, but that gain is not significant on these held-out data "
-                    f"once the {len(d.ranking)} candidates tested are accounted for (Holm-adjusted p = "
-                    f"{top.p_holm:.2g}): a longer held-out run would decide"
-                    + (f" (about {need:.0f} s)." if (need := heldout_needed(d)) else ".")
-                )
-            else:
-                lines.append(f"The closest candidate, {closes}; that is not taken as the cause.")
     else:
         for r in d.accepted:
             hyper = _describe_refit(r)
@@ -262,6 +352,7 @@ def verdict_text(d: Diagnosis) -> str:
         lines.append(
             f"Together the accepted effects close {100 * dec['closure_overall']:.0f} % of the gap overall."
         )
+    lines.extend(_undecided_text(d))
     est = np.asarray(d.excess.get("estimation", ()), dtype=float)
     loud = [j for j in range(est.size) if est[j] >= 0.25]
     if loud:
