@@ -297,6 +297,13 @@ def settling_excitation(
     }
 
 
+def _share(closure: float) -> str:
+    """A closure in words: above 1 the joints' gap was smaller than what the candidate removes."""
+    return (
+        f"{100 * closure:.0f} %" if closure <= 1.0 else f"all ({100 * closure:.0f} %, the gap there is small)"
+    )
+
+
 def _undecided_text(d: Diagnosis) -> list[str]:
     """One line per undecided candidate: what it would close, and why it is not taken."""
     lines = []
@@ -309,7 +316,7 @@ def _undecided_text(d: Diagnosis) -> list[str]:
             f"{r.p_holm:.2g})"
         )
         lines.append(
-            f"Undecided: {r.candidate.label} would close {100 * r.closure:.0f} % of the gap on its joint(s) and "
+            f"Undecided: {r.candidate.label} would close {_share(r.closure)} of the gap on its joint(s) and "
             f"passes the test on its own (p = {r.p_value:.2g}), but {why}.  The held-out run has too little of "
             f"the motion that shows it ({excitation_hint(r.candidate)}): a recording of that motion decides"
             + (
