@@ -108,7 +108,9 @@ def build_cases(seeds: list[int], none_per_seed: int, n: int = 6) -> list[dict]:
             )
     free = [c["seed"] for c in cases if c["kind"] == "none"]
     if len(set(free)) != len(free) or (free and max(free) >= 1000):
-        raise SystemExit(f"effect-free seeds {min(free)}..{max(free)} repeat or reach the tuning seeds (1000+)")
+        raise SystemExit(
+            f"effect-free seeds {min(free)}..{max(free)} repeat or reach the tuning seeds (1000+)"
+        )
     return cases
 
 
@@ -141,8 +143,41 @@ def run_one(case: dict) -> dict:
         "excess_joint": [out["excess"][j] for j in joints],
         "excess": out["excess"],
         "top": [r.candidate.key for r in d.ranking[:3]],
+        "undecided": [r.candidate.key for r in d.undecided],
         "seconds": time.perf_counter() - started,
     }
+
+
+def _same_effect(key: str, injected: str) -> bool:
+    """A candidate's key (``stribeck@2``) names the injected effect (``stribeck@2``, or ``base_tilt``)."""
+    return key == injected or ("@" not in injected and key.split("@")[0] == injected)
+
+
+def undecided_lines(results: list[dict]) -> list[str]:
+    """How the undecided candidates (a lead the held-out run cannot decide, with the recording that would)
+    fare: on effect-free cases they are false leads; on missed single effects, the first one is right or not."""
+    none = [r for r in results if r["kind"] == "none" and "undecided" in r]
+    leads = [r for r in none if r["undecided"]]
+    lines = [
+        f"Effect-free cases with an undecided lead (a recording suggested for nothing): {len(leads)}/{len(none)}"
+        f" = {100 * len(leads) / max(len(none), 1):.0f} %, one-sided 95 % upper bound "
+        f"{100 * _upper95(len(leads), len(none)):.0f} %"
+    ]
+    lines.extend(f"    seed {r['seed']}: {', '.join(r['undecided'])}" for r in leads)
+    missed = [
+        r
+        for r in results
+        if r["kind"] == "single"
+        and not r["correct"]
+        and "undecided" in r
+        and r["verdict"] in (["none"], ["unexplained"])
+    ]
+    right = [r for r in missed if r["undecided"] and _same_effect(r["undecided"][0], r["injected"][0])]
+    lines.append(
+        f"Single effects called none or unexplained whose first undecided lead is the injected effect: "
+        f"{len(right)}/{len(missed)} (the recording printed would test the right effect)"
+    )
+    return lines
 
 
 def report(results: list[dict]) -> str:
@@ -243,6 +278,7 @@ def report(results: list[dict]) -> str:
     for r in none:
         if not r["correct"]:
             lines.append(f"    seed {r['seed']}: {r['verdict']} parametric {r['parametric']}")
+    lines.extend(undecided_lines(results))
     unk = [r for r in results if r["kind"] == "unknown"]
     ok = sum(r["correct"] for r in unk)
     lines.append(
@@ -274,7 +310,9 @@ def main() -> None:
     )
     parser.add_argument("--none", type=int, default=17, help="effect-free cases per seed")
     parser.add_argument("--quick", action="store_true", help="2 seeds, 10 effect-free cases per seed")
-    parser.add_argument("--n-jobs", type=int, default=2, help="processes (joblib's own), or local Dask workers")
+    parser.add_argument(
+        "--n-jobs", type=int, default=2, help="processes (joblib's own), or local Dask workers"
+    )
     parser.add_argument(
         "--scheduler",
         default=None,
