@@ -512,3 +512,25 @@ def test_heldout_needed_scales_the_run_to_the_holm_threshold():
     assert heldout_needed(SimpleNamespace(**{**vars(d), "undecided": []})) is None
     small = SimpleNamespace(**{**vars(top), "gain": 0.1})
     assert heldout_needed(SimpleNamespace(**{**vars(d), "undecided": [small]})) is None
+
+
+def test_every_candidate_is_judged_on_both_footings_and_passes_on_either(ur5):
+    """Stribeck on joint 3: every candidate is scored fitted on the training data and cross-fitted with
+    the other held-out folds; its p-value is the smaller one doubled (Bonferroni over the two footings),
+    and its gain and closure are those of the footing that gave it, which its record names."""
+    from dynid.diagnosis.screening import CROSS, TRAINING
+
+    d = fast_case(ur5, ["stribeck@3:8"])["diagnosis"]
+    assert d.verdict[0] == "stribeck"
+    for r in d.ranking:
+        foot = r.refit["footing"]
+        by = foot["decided_by"]
+        p = {name: foot[name]["p_value"] for name in (TRAINING, CROSS)}
+        assert by == min(p, key=lambda name: p[name])
+        assert r.p_value == pytest.approx(min(1.0, 2.0 * p[by]), rel=1e-12)
+        assert r.gain == foot[by]["gain"]
+        assert r.closure == pytest.approx(foot[by]["closure"], rel=1e-12, nan_ok=True)
+        assert r.gain_all == foot[by]["gain_all"]
+    first = d.accepted[0]
+    assert first.refit["footing"][first.refit["footing"]["decided_by"]]["p_value"] < 0.025
+    json.dumps(d.to_dict())

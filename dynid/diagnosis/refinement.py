@@ -21,7 +21,7 @@ from scipy import optimize
 
 from dynid.diagnosis.candidates import Candidate
 from dynid.diagnosis.fitting import WeightedFit
-from dynid.diagnosis.screening import Context, score
+from dynid.diagnosis.screening import Context, on_training, score
 
 __all__ = ["KEPT", "fitted_delay", "refine", "refine_leaders"]
 
@@ -40,28 +40,32 @@ def fitted_delay(ctx: Context, fit: WeightedFit, s) -> float:
     states by about half a sample (effect-free simulated UR5s gave 'delays' of 0.3-0.7 ms at 1 kHz,
     closing 55-60 % of a gap below the significance level).
     """
-    _, rc, C_tr, _ = s
+    rc, C_tr = s[1], s[2]
     d = (rc.refit.get("effective") or {}).get("d")
     return _first_order_delay(ctx, fit, rc.candidate, C_tr) if d is None else float(d)
 
 
-def refine_leaders(ctx, fit, acc_tr, acc_ho, scored, r_cur, mse_cur, rnd):
+def refine_leaders(ctx, fit, acc_tr, acc_ho, scored, r_cur, mse_cur, rnd, cross=None):
     """Refit the leading not-LIP candidates (elasticity, backlash, delay) before the choice.
 
     Their first-order columns recover only part of what they cause, so they are compared with the
-    others on their nonlinear refit (on training data; held-out data only score it).
+    others on their nonlinear refit (on training data; held-out data only score it, on the footings of
+    :func:`~dynid.diagnosis.screening.score`).  ``scored`` holds ``(group, RankedCandidate, C_tr, C_ho,
+    losses)`` entries; the refit is kept when it gains more on the training footing (the one candidates
+    are compared on, :func:`~dynid.diagnosis.screening.on_training`).
     """
     order = sorted(range(len(scored)), key=lambda i: -scored[i][1].gain)
     leaders = [i for i in order if scored[i][1].candidate.effect in _NONLINEAR][:_LEADERS]
     out = list(scored)
     for i in leaders:
-        gi, rc, C_tr, C_ho = scored[i]
+        gi, rc, C_tr, C_ho, feet = scored[i]
         cand, C_tr2, C_ho2, info = refine(ctx, fit, rc.candidate, C_tr)
-        rc2 = score(ctx, fit, acc_tr, acc_ho, C_tr2, C_ho2, cand, r_cur, mse_cur, rnd)
-        if rc2.gain > rc.gain:
-            out[i] = (gi, replace(rc2, refit=info), C_tr2, C_ho2)
+        feet2: dict = {}
+        rc2 = score(ctx, fit, acc_tr, acc_ho, C_tr2, C_ho2, cand, r_cur, mse_cur, rnd, cross, feet2)
+        if on_training(rc2, "gain") > on_training(rc, "gain"):
+            out[i] = (gi, replace(rc2, refit={**rc2.refit, **info}), C_tr2, C_ho2, feet2)
         else:
-            out[i] = (gi, replace(rc, refit={**info, "kept": KEPT}), C_tr, C_ho)
+            out[i] = (gi, replace(rc, refit={**rc.refit, **info, "kept": KEPT}), C_tr, C_ho, feet)
     return out
 
 

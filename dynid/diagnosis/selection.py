@@ -1,11 +1,14 @@
 """Forward selection of the effects that explain the gap.
 
 Each round screens every candidate not yet accepted on top of the current model (:mod:`.screening`),
-refines the leading nonlinear ones (:mod:`.refinement`), Holm-corrects the p-values, and accepts, among
-the significant candidates that close at least ``min_closure`` of the gap on their joint(s), the one
-that lowers the held-out loss of the whole arm most (a simpler candidate on the same joints that it does
-not beat significantly is preferred); the accepted candidate is refined and joins the model.  Rounds
-stop when none is acceptable or ``max_effects`` are accepted.
+on two footings: fitted with the current model on the training data, and cross-fitted with it on the
+training data and the other held-out folds (the excess test's footing); a candidate passes on either,
+its p-value the smaller one doubled.  The round refines the leading nonlinear candidates
+(:mod:`.refinement`), Holm-corrects the p-values, and accepts, among the significant candidates that
+close at least ``min_closure`` of the gap on their joint(s), the one that lowers the held-out loss of
+the whole arm most (all compared on the training footing, whichever footing decided each; a simpler
+candidate on the same joints that it does not beat significantly there is preferred); the accepted
+candidate is refined and joins the model.  Rounds stop when none is acceptable or ``max_effects`` are accepted.
 """
 
 from __future__ import annotations
@@ -16,12 +19,20 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynid.diagnosis import stats as st
-from dynid.diagnosis.baseline import Baseline, HeldOutBaseline
+from dynid.diagnosis.baseline import FOLDS, Baseline, HeldOutBaseline
 from dynid.diagnosis.candidates import Candidate
 from dynid.diagnosis.fitting import WeightedFit, losses, mse, predict
 from dynid.diagnosis.refinement import KEPT, fitted_delay, refine, refine_leaders
 from dynid.diagnosis.result import RankedCandidate
-from dynid.diagnosis.screening import Context, confounding, parsimonious, score, tune
+from dynid.diagnosis.screening import (
+    Context,
+    confounding,
+    cross_fitted,
+    on_training,
+    parsimonious,
+    score,
+    tune,
+)
 from dynid.diagnosis.settings import DiagnosisSettings
 
 __all__ = ["Selection", "select"]
@@ -65,6 +76,8 @@ def select(
     groups: list[list[Candidate]],
     settings: DiagnosisSettings,
     significant_joint: NDArray[np.bool_],
+    *,
+    folds: int = FOLDS,
 ) -> Selection:
     """Screen, test and accept candidate effects round by round (see the module docstring).
 
@@ -81,6 +94,8 @@ def select(
     settings : DiagnosisSettings
     significant_joint : ndarray of bool, shape (n,)
         Joints whose excess over the noise floor is significant.
+    folds : int
+        Contiguous held-out folds of the cross-fitted footing (those of the excess test).
     """
     tr, ho = ctx.tr, ctx.ho
     n = tr.y.shape[1]
@@ -100,6 +115,13 @@ def select(
     notes: list[str] = []
     tuned: dict[int, tuple[Candidate, NDArray[np.float64]]] = {}
     for rnd in range(max_effects + 1):
+        cross = cross_fitted(
+            ctx,
+            current_fit,
+            np.concatenate([tr.X0, acc_tr], axis=2),
+            np.concatenate([ho.X0, acc_ho], axis=2),
+            folds,
+        )
         scored = []
         for gi, group in enumerate(groups):
             if any(
@@ -111,12 +133,13 @@ def select(
                 tuned[gi] = tune(ctx, current_fit, group)
             cand, C_tr = tuned[gi]
             C_ho = ho.columns(cand)
-            rc = score(ctx, current_fit, acc_tr, acc_ho, C_tr, C_ho, cand, r_cur, mse_cur, rnd)
-            scored.append((gi, rc, C_tr, C_ho))
+            feet: dict[str, NDArray[np.float64]] = {}
+            rc = score(ctx, current_fit, acc_tr, acc_ho, C_tr, C_ho, cand, r_cur, mse_cur, rnd, cross, feet)
+            scored.append((gi, rc, C_tr, C_ho, feet))
         if not scored:
             break
         if settings.refit and rnd < max_effects:
-            scored = refine_leaders(ctx, current_fit, acc_tr, acc_ho, scored, r_cur, mse_cur, rnd)
+            scored = refine_leaders(ctx, current_fit, acc_tr, acc_ho, scored, r_cur, mse_cur, rnd, cross)
         p_adj = st.holm([s[1].p_value for s in scored])
         scored = [
             (
@@ -124,8 +147,9 @@ def select(
                 replace(rc, p_holm=float(pa), significant=bool(pa < alpha and rc.gain >= min_gain)),
                 C_tr,
                 C_ho,
+                feet,
             )
-            for (gi, rc, C_tr, C_ho), pa in zip(scored, p_adj, strict=True)
+            for (gi, rc, C_tr, C_ho, feet), pa in zip(scored, p_adj, strict=True)
         ]
         scored.sort(key=lambda s: -s[1].gain)
         if rnd == 0:
@@ -164,26 +188,27 @@ def select(
             break
         # Among the acceptable ones, the candidate that mends the whole arm most: a gain error on one joint
         # leaks through the shared base parameters onto its neighbours, where a same-shaped candidate on
-        # the neighbour scores nearly as well on its own joint alone.
-        ok.sort(key=lambda s: -s[1].gain_all)
+        # the neighbour scores nearly as well on its own joint alone.  All are measured on the training
+        # footing (on_training): one footing, whichever decided each.
+        ok.sort(key=lambda s: -on_training(s[1], "gain_all"))
         best = parsimonious(ok, alpha, ctx.block, min_gain)
-        gi, chosen, C_tr, C_ho = best
+        gi, chosen, C_tr, C_ho, _ = best
         rc, replaced = chosen, False
-        if settings.refit and not chosen.refit:
+        if settings.refit and "method" not in chosen.refit:
             cand, C_tr2, C_ho2, info = refine(ctx, current_fit, chosen.candidate, C_tr)
-            rc2 = score(ctx, current_fit, acc_tr, acc_ho, C_tr2, C_ho2, cand, r_cur, mse_cur, rnd)
-            if rc2.gain >= chosen.gain:
+            rc2 = score(ctx, current_fit, acc_tr, acc_ho, C_tr2, C_ho2, cand, r_cur, mse_cur, rnd, cross)
+            if on_training(rc2, "gain") >= on_training(chosen, "gain"):
                 rc = replace(
                     rc2,
                     p_holm=chosen.p_holm,
                     significant=chosen.significant,
-                    refit=info,
+                    refit={**rc2.refit, **info},
                     confounded_with=chosen.confounded_with,
                     angle_deg=chosen.angle_deg,
                 )
                 C_tr, C_ho, replaced = C_tr2, C_ho2, True
             else:
-                rc = replace(chosen, refit={**info, "kept": KEPT})
+                rc = replace(chosen, refit={**chosen.refit, **info, "kept": KEPT})
         rc = replace(rc, accepted=True)
         accepted.append(rc)
         # The ranking shows it accepted: as chosen (with its refit note) unless a refit replaced it, and
