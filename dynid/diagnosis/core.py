@@ -17,12 +17,15 @@ Method, in the order it runs:
    the shape of its friction layer) are identified again on the training data by weighted least squares
    (weights: the baseline residual level per joint, reweighted until they settle).  The held-out error of the model as given minus
    that of the refit is the *parametric* part of the gap.
-3. Screen: every catalogue candidate on every joint (:mod:`dynid.diagnosis.candidates`) is refitted
-   together with the baseline on the training data (its hyper-parameters tuned there, never on the
-   held-out data) and scored by the reduction of the held-out loss ``sum_j r_j^2 / sigma_j^2``; its
-   significance is a one-sided Diebold-Mariano test on the per-sample loss difference with a
-   Newey-West variance, widened by the chance gain that the refit's parameter error allows (fixed over
-   the whole held-out run, so invisible to the serial correlation), Holm-corrected across the candidates.
+3. Screen: every catalogue candidate on every joint (:mod:`dynid.diagnosis.candidates`) is tuned on
+   the training data (never on the held-out data) and scored by the reduction of the held-out loss
+   ``sum_j r_j^2 / sigma_j^2`` on two footings: refitted with the baseline on the training data (a
+   one-sided Diebold-Mariano test on the per-sample loss difference with a Newey-West variance, widened
+   by the chance gain that the refit's parameter error allows: fixed over the whole held-out run, so
+   invisible to the serial correlation), and cross-fitted with the baseline on the training data and the
+   other held-out folds (the same test, block means capped as the excess test's).  Its p-value is the
+   smaller of the two, doubled, Holm-corrected across the candidates; its gain and closure are those of
+   the footing that gave it.  Candidates are compared with one another on the training footing.
 4. Forward selection: among the significant candidates that close at least ``min_closure`` of the
    gap on their own joint(s) (in noise variances), the one that lowers the held-out loss of the whole
    arm most is accepted (a simpler candidate on the same joints that it does not beat significantly

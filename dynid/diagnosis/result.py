@@ -35,7 +35,8 @@ class RankedCandidate:
         the joints it acts on (the tested figure).
     gain_all : float
         The same reduction summed over every joint: an effect that the shared base parameters spread to
-        other joints also mends them there.  The choice among acceptable candidates uses it.
+        other joints also mends them there.  Like ``gain``, on the footing that decided the candidate
+        (``refit["footing"]``); the choice among acceptable candidates uses the training footing's.
     closure : float
         ``sum_j (MSE_before_j - MSE_after_j) / noise_j`` over ``sum_j (MSE_before_j - noise_j) / noise_j``
         on its joint(s), held-out (per joint, in noise variances).
