@@ -62,7 +62,7 @@ os.environ.setdefault("DYNID_NUM_THREADS", "1")
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from diagnosis_benchmark import ABSORBED, SHAKE_ARM, UNKNOWN, _joint, _upper95
+from diagnosis_benchmark import ABSORBED, SHAKE_ARM, UNKNOWN, _joint, _upper95, undecided_lines
 
 LEVELS = (1.0, 3.0)
 QUICK_EFFECTS = ("stribeck", "cogging", "delay")
@@ -160,6 +160,7 @@ def run_one(case: dict) -> dict:
         "true_noise": out["true_noise"],
         "floor_over_true": out["floor_over_true"],
         "top": [r.candidate.key for r in d.ranking[:3]],
+        "undecided": [r.candidate.key for r in d.undecided],
         "seconds": time.perf_counter() - started,
         "cpu_seconds": time.process_time() - cpu,
     }
@@ -246,6 +247,7 @@ def _figures(results: list[dict]) -> tuple[list[str], dict]:
                 f"    {r['robot']} seed {r['seed']}: {r.get('verdict', r.get('error'))} parametric "
                 f"{r.get('parametric')}; excess per joint {ex}"
             )
+    lines.extend(undecided_lines(results))
     unk = [r for r in results if r["kind"] == "unknown"]
     ok = sum(r["correct"] for r in unk)
     fig["unknown_unexplained"] = ok / len(unk) if unk else None
