@@ -284,11 +284,31 @@ def _settling_commands(args, model, heldout, result) -> dict | None:
             settle["excite"],
             f"# play {csv} on the robot (it rests 2 s at home at both ends); log t, q_i, tau_i to heldout.csv",
             f"dynid diagnose --model {shlex.quote(args.model)} --data {shlex.quote(args.data)} "
-            "--heldout heldout.csv"
-            + (" --degrees" if getattr(args, "degrees", False) else "")
-            + (f" --topic {shlex.quote(args.topic)}" if getattr(args, "topic", None) else ""),
+            "--heldout heldout.csv" + _forwarded(args),
         ],
     }
+
+
+def _forwarded(args) -> str:
+    """The options of this run that the settling run's diagnosis must repeat (the robot, the effects
+    screened, the tests' level, the data's units and topic), as command-line text."""
+    import shlex
+
+    out = ""
+    for flag, value in (
+        ("--robot", getattr(args, "robot", None)),
+        ("--effects", getattr(args, "effects", None)),
+        ("--topic", getattr(args, "topic", None)),
+    ):
+        if value:
+            out += f" {flag} {shlex.quote(str(value))}"
+    if getattr(args, "alpha", 0.05) != 0.05:
+        out += f" --alpha {args.alpha:g}"
+    if getattr(args, "max_effects", 3) != 3:
+        out += f" --max-effects {args.max_effects}"
+    if getattr(args, "degrees", False):
+        out += " --degrees"
+    return out
 
 
 def _write_refit(model, train, heldout, result, out: str) -> dict:

@@ -115,7 +115,7 @@ def settling_motion(
     where Stribeck friction, backlash and cogging live in a few milliseconds per reversal: such an effect
     can be real and still too small, on that run, to pass the tests.  The settling run slows the joint
     down instead (Stribeck: below five times the candidate's Stribeck speed; backlash: a tenth of the
-    limit; cogging: the gear harmonic below half the torque filter's cut-off), runs longer (temperature:
+    limit; cogging: the gear harmonic below half the torque filter's cut-off, 10 Hz without a filter), runs longer (temperature:
     three of the candidate's time constants) or richer (elasticity: more harmonics; a delay: a higher base
     frequency).  Other effects get a new excitation of the same kind.
 

@@ -25,7 +25,8 @@ Method, in the order it runs:
    invisible to the serial correlation), and cross-fitted with the baseline on the training data and the
    other held-out folds (the same test, block means capped as the excess test's).  Its p-value is the
    smaller of the two, doubled, Holm-corrected across the candidates; its gain and closure are those of
-   the footing that gave it.  Candidates are compared with one another on the training footing.
+   the footing that gave it, and so is the ranking's order.  The choice among the acceptable
+   candidates and the simpler-candidate test compare them on the training footing.
 4. Forward selection: among the significant candidates that close at least ``min_closure`` of the
    gap on their own joint(s) (in noise variances), the one that lowers the held-out loss of the whole
    arm most is accepted (a simpler candidate on the same joints that it does not beat significantly

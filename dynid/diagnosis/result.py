@@ -272,8 +272,10 @@ def settling_excitation(
     if lead is not None:
         cutoff = (d.settings.get("preprocessing") or {}).get("cutoff_hz")
         options, why = settling_motion(lead.candidate, dq_max, cutoff_hz=cutoff, period=10.0)
-        reason = f"Undecided: {lead.candidate.label}. A held-out run with {why} would decide" + (
-            f" (or about {need:.0f} s more of the same kind)." if need else "."
+        # A motion aimed at the effect decides it; a new run of the default kind only may.
+        verb = "would decide" if options else "may decide"
+        reason = f"Undecided: {lead.candidate.label}. A held-out run with {why} {verb}" + (
+            f" (or about {need:.0f} s of held-out data of the same kind)." if need else "."
         )
     else:
         reason = "Provisional: the held-out data do not repeat a period, so the noise floor is a lower bound."
@@ -281,7 +283,7 @@ def settling_excitation(
     periods = max(3, int(options.get("periods", 3)), math.ceil((need or 0.0) * base_freq))
     extra = ""
     if "dq_max" in options:
-        extra += " --dq-max " + ",".join(f"{v:.4g}" for v in options["dq_max"])
+        extra += " --dq-max " + ",".join(_at_most(v) for v in options["dq_max"])
     if "harmonics" in options:
         extra += f" --harmonics {int(options['harmonics'])}"
     csv = f"{out}.csv"
@@ -298,11 +300,17 @@ def settling_excitation(
     }
 
 
+def _at_most(v: float) -> str:
+    """A limit printed with six digits, never above ``v`` (a rounded-up speed limit would be refused)."""
+    text = f"{v:.6g}"
+    return text if float(text) <= v else f"{math.floor(v * 1e5) / 1e5:.6g}"
+
+
 def _share(closure: float) -> str:
-    """A closure in words: above 1 the joints' gap was smaller than what the candidate removes."""
-    return (
-        f"{100 * closure:.0f} %" if closure <= 1.0 else f"all ({100 * closure:.0f} %, the gap there is small)"
-    )
+    """What a candidate would close, in words: above 1 the joints' gap is smaller than what it removes."""
+    if closure <= 1.0:
+        return f"{100 * closure:.0f} % of the gap on its joint(s)"
+    return f"more than the whole gap on its joint(s) ({100 * closure:.0f} %: that gap is small)"
 
 
 def _undecided_text(d: Diagnosis) -> list[str]:
@@ -317,7 +325,7 @@ def _undecided_text(d: Diagnosis) -> list[str]:
             f"{r.p_holm:.2g})"
         )
         lines.append(
-            f"Undecided: {r.candidate.label} would close {_share(r.closure)} of the gap on its joint(s) and "
+            f"Undecided: {r.candidate.label} would close {_share(r.closure)} and "
             f"passes the test on its own (p = {r.p_value:.2g}), but {why}.  The held-out run has too little of "
             f"the motion that shows it ({excitation_hint(r.candidate)}): a recording of that motion decides"
             + (
