@@ -47,7 +47,7 @@ def designs(tmp_path_factory):
 
 
 def _record(d, effect: str | None, capsys) -> dict:
-    """Training and held-out runs, the identified model and its diagnosis: the issue's default path."""
+    """Training and held-out runs, the identified model and its diagnosis: the user's default path."""
     tag = effect or "none"
     effects = ["--effects", effect] if effect else []
     train, held, model = d / f"train_{tag}.csv", d / f"held_{tag}.csv", d / f"M_{tag}.json"
@@ -62,30 +62,35 @@ def _record(d, effect: str | None, capsys) -> dict:
     return {"train": train, "model": model, "figures": figures, "out": out}
 
 
-def test_default_path_leaves_stribeck_undecided_and_the_printed_recording_names_it(designs, capsys, monkeypatch):
+def test_default_path_leaves_stribeck_undecided_and_the_printed_recording_names_it(
+    designs, capsys, monkeypatch
+):
     case = _record(designs, "stribeck", capsys)
     fig = case["figures"]
-    if fig["verdict"] != ["stribeck"]:
-        # Too small on this run to be named, and not a gap nobody can explain: undecided, with the command.
-        assert fig["verdict"] == ["none"], fig["verdict"]
-        assert fig["undecided"] and fig["undecided"][0]["effect"] == "stribeck", fig["undecided"]
-        lead = fig["undecided"][0]
-        assert lead["closure"] >= 0.5 and lead["p_raw"] < 0.05 and not lead["significant"]
-        assert "Undecided: stribeck on joint" in case["out"]
-        settle = fig["settle"]
-        assert settle["candidate"] == f"stribeck@{lead['joint']}"
-        excite, comment, diagnose = settle["commands"]
-        assert excite in case["out"] and diagnose in case["out"]
-        assert "--dq-max" in excite and comment.startswith("# play heldout_excitation.csv on the robot")
-        # Record it as printed; the simulator plays the excitation on the same robot (new noise).
-        monkeypatch.chdir(designs)
-        _run(shlex.split(excite)[1:], capsys)
-        _run(["simulate", "--robot", "ur5", "--trajectory", "heldout_excitation.json", "--effects", "stribeck",
-              "--seed", "2", "--truth-seed", "0", "--out", "heldout.csv"], capsys)  # fmt: skip
-        settled, _ = _diagnose(shlex.split(diagnose)[1:], designs / "D_settled.json", capsys)
-        assert settled["verdict"] == ["stribeck"], settled["verdict"]
-        assert settled["accepted"][0]["joint"] == lead["joint"]
-        assert settled["accepted"][0]["closure"] >= 0.5
+    # Too small on this run to be named, and not a gap nobody can explain: undecided, with the command.
+    # (A diagnosis that names it from this run would pass an 84-way correction on 0.02 noise variances
+    # per sample: this test is to change with the evidence, not to be loosened.)
+    assert fig["verdict"] == ["none"], fig["verdict"]
+    assert fig["undecided"] and fig["undecided"][0]["effect"] == "stribeck", fig["undecided"]
+    lead = fig["undecided"][0]
+    assert lead["closure"] >= 0.5 and lead["p_raw"] < 0.05 and not lead["significant"]
+    assert 0 < lead["gain"] < 0.15  # below min_gain: no longer run of this motion would decide
+    assert "Undecided: stribeck on joint" in case["out"]
+    settle = fig["settle"]
+    assert settle["candidate"] == f"stribeck@{lead['joint']}"
+    excite, comment, diagnose = settle["commands"]
+    assert excite in case["out"] and diagnose in case["out"]
+    assert "--dq-max" in excite and comment.startswith("# play heldout_excitation.csv on the robot")
+    # Record it as printed; the simulator plays the excitation on the same robot (new noise).
+    monkeypatch.chdir(designs)
+    _run(shlex.split(excite)[1:], capsys)
+    _run(["simulate", "--robot", "ur5", "--trajectory", "heldout_excitation.json", "--effects", "stribeck",
+          "--seed", "2", "--truth-seed", "0", "--out", "heldout.csv"], capsys)  # fmt: skip
+    settled, _ = _diagnose(shlex.split(diagnose)[1:], designs / "D_settled.json", capsys)
+    # Stribeck friction acts on every joint of this robot: the slow recording may show it on others too.
+    assert settled["verdict"] and set(settled["verdict"]) == {"stribeck"}, settled["verdict"]
+    named = {a["joint"]: a for a in settled["accepted"]}
+    assert lead["joint"] in named and named[lead["joint"]]["closure"] >= 0.5, settled["accepted"]
 
 
 def test_default_path_on_an_effect_free_robot_says_none_with_nothing_undecided(designs, capsys, monkeypatch):
