@@ -72,7 +72,7 @@ from dynid.diagnosis.gapmap import gap_map
 from dynid.diagnosis.parameter_change import parameter_change_test
 from dynid.diagnosis.refinement import fitted_delay
 from dynid.diagnosis.result import Diagnosis, RankedCandidate
-from dynid.diagnosis.screening import Context, confound_note
+from dynid.diagnosis.screening import Context, confound_note, cross_fitted
 from dynid.diagnosis.selection import Selection, select
 from dynid.diagnosis.settings import DiagnosisSettings
 from dynid.exceptions import DataError
@@ -189,17 +189,19 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
     state_var, _ = bl.state_estimation_variance(structure, heldout, ho_sample, base.x, sigma)
     del tr_sample, ho_sample  # their full-rate columns are no longer needed
     held = bl.heldout_baseline(model, heldout, ho, base.x, sigma)
-    crossfit = bl.crossfit_residual(tr, base.weights, ho, sigma)
+    ctx = Context(
+        tr=tr, ho=ho, sigma=sigma, block=block, mask=ho.moving, min_delay=float(np.median(np.diff(heldout.t)))
+    )
+    # The baseline cross-fitted on the held-out folds: the excess test's residual
+    # (:func:`~dynid.diagnosis.baseline.crossfit_residual`) and the first round's cross-fitted footing.
+    cross0 = cross_fitted(ctx, base.fit, tr.X0, ho.X0, bl.FOLDS)
     excess = bl.excess_over_floor(
-        base.fit, ho, held, sigma, block, settings, crossfit=crossfit, state_variance=state_var
+        base.fit, ho, held, sigma, block, settings, crossfit=cross0.residual, state_variance=state_var
     )
 
     skip = _in_model(structure)
     groups = enumerate_candidates(tr.src, settings.effects, skip=skip, motor_inertia="armature" not in skip)
-    ctx = Context(
-        tr=tr, ho=ho, sigma=sigma, block=block, mask=ho.moving, min_delay=float(np.median(np.diff(heldout.t)))
-    )
-    sel = select(ctx, base, held, groups, settings, excess["significant_joint"])
+    sel = select(ctx, base, held, groups, settings, excess["significant_joint"], cross0=cross0)
 
     # A torque gain on one joint scales that joint's measured torque: what the refit absorbs of it.
     # Its columns were built for the screen (round 0 tunes every candidate).

@@ -26,6 +26,7 @@ from dynid.diagnosis.refinement import KEPT, fitted_delay, refine, refine_leader
 from dynid.diagnosis.result import RankedCandidate
 from dynid.diagnosis.screening import (
     Context,
+    CrossFitted,
     confounding,
     cross_fitted,
     on_training,
@@ -78,6 +79,7 @@ def select(
     significant_joint: NDArray[np.bool_],
     *,
     folds: int = FOLDS,
+    cross0: CrossFitted | None = None,
 ) -> Selection:
     """Screen, test and accept candidate effects round by round (see the module docstring).
 
@@ -96,6 +98,8 @@ def select(
         Joints whose excess over the noise floor is significant.
     folds : int
         Contiguous held-out folds of the cross-fitted footing (those of the excess test).
+    cross0 : CrossFitted, optional
+        The baseline already cross-fitted on those folds (the excess test's): the first round's footing.
     """
     tr, ho = ctx.tr, ctx.ho
     n = tr.y.shape[1]
@@ -115,13 +119,16 @@ def select(
     notes: list[str] = []
     tuned: dict[int, tuple[Candidate, NDArray[np.float64]]] = {}
     for rnd in range(max_effects + 1):
-        cross = cross_fitted(
-            ctx,
-            current_fit,
-            np.concatenate([tr.X0, acc_tr], axis=2),
-            np.concatenate([ho.X0, acc_ho], axis=2),
-            folds,
-        )
+        if rnd == 0 and cross0 is not None:
+            cross = cross0
+        else:
+            cross = cross_fitted(
+                ctx,
+                current_fit,
+                np.concatenate([tr.X0, acc_tr], axis=2),
+                np.concatenate([ho.X0, acc_ho], axis=2),
+                folds,
+            )
         scored = []
         for gi, group in enumerate(groups):
             if any(
