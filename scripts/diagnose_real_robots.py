@@ -94,7 +94,7 @@ def diagnose_recording(name: str, split: float, decimate: int, out: Path, root: 
     rate = 1.0 / float(np.median(np.diff(heldout.t)))
     settle = settling_excitation(result, robot=str(robot.source), dq_max=robot.dq_max, rate=rate)
     if settle is not None:
-        settle["commands"] = [settle["excite"], f"# play {settle['csv']} on the robot and hold its recording out"]
+        settle["commands"] = [settle["excite"], settle["play"]]
         print(settle["reason"] + " To settle it, record it like this:")
         print("  " + settle["excite"])
     report = write_diagnosis_report(

@@ -275,14 +275,13 @@ def _settling_commands(args, model, heldout, result) -> dict | None:
     settle = settling_excitation(result, robot=str(model.robot.source), dq_max=model.robot.dq_max, rate=rate)
     if settle is None:
         return None
-    csv = settle["csv"]
     return {
         "reason": settle["reason"],
         "heldout_seconds": settle["heldout_seconds"],
         "candidate": settle["candidate"],
         "commands": [
             settle["excite"],
-            f"# play {csv} on the robot (it rests 2 s at home at both ends); log t, q_i, tau_i to heldout.csv",
+            settle["play"],
             f"dynid diagnose --model {shlex.quote(args.model)} --data {shlex.quote(args.data)} "
             "--heldout heldout.csv" + _forwarded(args),
         ],

@@ -262,7 +262,8 @@ def settling_excitation(
     -------
     dict or None
         ``reason`` (one sentence), ``heldout_seconds`` (or None), ``candidate`` (its key, or None),
-        ``excite`` (the command) and ``csv`` (the file to play on the robot).
+        ``excite`` (the command), ``csv`` (the file to play on the robot) and ``play`` (how, as a comment
+        line).
     """
     lead = d.undecided[0] if d.undecided else None
     if lead is None and not d.provisional:
@@ -297,6 +298,7 @@ def settling_excitation(
         "candidate": lead.candidate.key if lead is not None else None,
         "excite": excite,
         "csv": csv,
+        "play": f"# play {csv} on the robot (it rests 2 s at home at both ends); log t, q_i, tau_i to heldout.csv",
     }
 
 
