@@ -320,6 +320,15 @@ def _children(pid: int) -> list[int]:
     return out
 
 
+def _cmdline(pid: int) -> bytes:
+    from pathlib import Path
+
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ")
+    except OSError:
+        return b""
+
+
 def _alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
@@ -372,6 +381,11 @@ def test_a_signal_during_the_design_ends_it_at_once_with_one_line(tmp_path, n_jo
         time.sleep(4.0)
         workers = _children(proc.pid)
         assert proc.poll() is None, "the design ended before the signal"
+        # joblib's resource tracker shares the command's stderr: it must not add its own lines to the one line
+        if n_jobs != "1":
+            trackers = [p for p in workers if b"resource_tracker" in _cmdline(p)]
+            assert trackers, "no resource tracker among the workers"
+            assert all(b"-Wignore::UserWarning:joblib.externals.loky" in _cmdline(p) for p in trackers)
         t0 = time.monotonic()
         if signame == "SIGINT":
             os.killpg(proc.pid, signal.SIGINT)
@@ -380,8 +394,8 @@ def test_a_signal_during_the_design_ends_it_at_once_with_one_line(tmp_path, n_jo
         _, err = proc.communicate(timeout=60)
         elapsed = time.monotonic() - t0
     finally:
-        if proc.poll() is None:
-            proc.kill()
+        if proc.poll() is None:  # the whole group: workers holding the pipes would keep communicate() waiting
+            os.killpg(proc.pid, signal.SIGKILL)
             proc.communicate()
     assert proc.returncode == 130, err
     assert "Traceback" not in err and "KeyboardInterrupt" not in err, err

@@ -1475,9 +1475,21 @@ def _information(H: np.ndarray) -> np.ndarray:
     return H.T @ H
 
 
+# joblib's process pool (loky) starts a resource tracker that shares the command's stderr.  When Ctrl-C
+# reaches the whole process group, the tracker may outlive the command by a moment and warn of "leaked"
+# semaphores that the command had already unlinked (the warning ends with a FileNotFoundError), after the
+# command's one line.  The tracker is started with this interpreter's -W options: this one silences its
+# warnings alone.  It still unlinks whatever did leak.
+_QUIET_TRACKER = "ignore::UserWarning:joblib.externals.loky.backend.resource_tracker"
+
+
 def _parallel(n_jobs: int, backend: str | None):
+    import sys
+
     import joblib
 
+    if _QUIET_TRACKER not in sys.warnoptions:
+        sys.warnoptions.append(_QUIET_TRACKER)
     return joblib.Parallel(n_jobs=n_jobs, backend=backend)
 
 
