@@ -156,7 +156,7 @@ def _same_effect(key: str, injected: str) -> bool:
 def undecided_lines(results: list[dict]) -> list[str]:
     """How the undecided candidates (a lead the held-out run cannot decide, with the recording that would)
     fare: on effect-free cases they are false leads; on missed single effects, the first one is right or not."""
-    none = [r for r in results if r["kind"] == "none" and "undecided" in r]
+    none = [r for r in results if r["kind"] in ("none", "twin") and "undecided" in r]
     leads = [r for r in none if r["undecided"]]
     lines = [
         f"Effect-free cases with an undecided lead (a recording suggested for nothing): {len(leads)}/{len(none)}"

@@ -25,10 +25,15 @@ contribution on its joint, noise-free, on the training excitation, over the std 
 joint drawn per seed as in the lab benchmark; effect-free cases (the false-alarm rate); and the lab
 benchmark's effect outside the catalogue (coupled_friction, at 1x and 3x, left out of the catalogue).
 
-Printed, per robot and together: the confusion matrix, the share right where the visible excess is >= 1x
-(as in the lab benchmark: the baseline refit's held-out MSE on the effect's joints over the diagnosis' own
-noise floor, minus one; and the same over the true filtered noise), false alarms with the one-sided 95 %
-upper bound, unknown effects called "unexplained", the share of provisional verdicts, the noise-floor
+Each (robot, seed) also runs its effect-free twin: the same seed, so the same motions and noise, with
+nothing injected.  What an effect adds to the refit's held-out excess is the case's minus the twin's.
+
+Printed, per robot and together: the confusion matrix; the share right where the effect adds >= 1x the
+diagnosis' noise floor to the refit's held-out excess on its joints (the case minus its twin; and the same
+over the true filtered noise); the share right where the refit's excess on the effect's joints, background
+included, is >= 1x (the lab benchmark's measure: on an aperiodic held-out run it counts the refit's own
+parameter error, so effects that add nothing visible are counted as visible); false alarms (the
+effect-free cases and the twins) with the one-sided 95 % upper bound, unknown effects called "unexplained", the share of provisional verdicts, the noise-floor
 method per case (periods / training periods / spectrum) and how often the floor covers the true noise
 (the simulator's injected torque noise put through the diagnosis' filter and trim).  The issue's targets
 are printed beside the figures; nothing is tuned to them and nothing is asserted.
@@ -96,6 +101,10 @@ def build_cases(
                         {"robot": name, "kind": "single", "effect": effect, "injected": [spec], "level": level,
                          "seed": seed}
                     )  # fmt: skip
+            if effects:  # the single cases' effect-free twin: the same seed, so the same motion and noise
+                cases.append(
+                    {"robot": name, "kind": "twin", "effect": "none", "injected": [], "level": 0.0, "seed": seed}
+                )  # fmt: skip
             for k in range(none_per_seed):
                 free = 100 + 20 * k + seed
                 cases.append(
@@ -154,6 +163,8 @@ def run_one(case: dict) -> dict:
         "excess": out["excess"],
         "excess_joint": [out["excess"][j] for j in joints],
         "excess_true_joint": [out["mse_refit"][j] / true_var[j] for j in joints],
+        "excess_true": (np.asarray(out["mse_refit"]) / true_var).tolist(),
+        "joints": joints,
         "provisional": out["provisional"],
         "floor_method": out["floor_method"],
         "floor": out["floor"],
@@ -167,7 +178,24 @@ def run_one(case: dict) -> dict:
 
 
 def _visible(r: dict, key: str = "excess_joint") -> float:
+    """The refit's held-out excess on the effect's joints, background included (the lab benchmark's
+    measure): on an aperiodic held-out run the refit's own parameter error shows there too (up to 16
+    noise variances on an effect-free UR5's shoulder), whether or not the effect adds anything."""
     return max(r.get(key) or [1.0]) - 1.0
+
+
+def _added(r: dict, twins: dict, key: str = "excess") -> float | None:
+    """What the effect adds to the refit's held-out excess on its joints, in noise variances: the case's
+    excess minus its effect-free twin's (the same seed: the same motions and noise), the largest over
+    the effect's joints.  None without a twin."""
+    twin = twins.get(_twin_key(r))
+    if twin is None or twin.get("error") or r.get("error") or "joints" not in r:
+        return None
+    return max(r[key][j] - twin[key][j] for j in r["joints"])
+
+
+def _twin_key(r: dict) -> tuple:
+    return (r["robot"], r["seed"], r.get("group", "main"), r.get("encoder_bits"))
 
 
 def _pct(k: int, n: int) -> str:
@@ -205,12 +233,41 @@ def _figures(results: list[dict]) -> tuple[list[str], dict]:
         lines.append(
             f"  calibrated contribution {level:g}x noise: right {_pct(sum(r['correct'] for r in sel), len(sel))}"
         )
+    twins = {_twin_key(r): r for r in results if r["kind"] == "twin"}
+    added = {id(r): _added(r, twins) for r in singles}
+    if any(a is not None for a in added.values()):
+        seen = [r for r in singles if r.get("error") or (added[id(r)] is not None and added[id(r)] >= 1.0)]
+        ok = sum(r["correct"] for r in seen)
+        fig["right_added"] = ok / len(seen) if seen else None
+        lines.append(
+            "Right where the effect adds >= 1x the diagnosis' noise floor to the refit's held-out excess on its "
+            f"joints (the case minus its effect-free twin): {_pct(ok, len(seen))}  (target >= "
+            f"{100 * TARGETS['right']:.0f} %)"
+        )
+        seen_t = [
+            r for r in singles if r.get("error") or (_added(r, twins, "excess_true") or 0.0) >= 1.0
+        ]
+        lines.append(
+            "  the same over the true (injected, filtered) noise: "
+            f"{_pct(sum(r['correct'] for r in seen_t), len(seen_t))}"
+        )
+        for r in seen:
+            if not r["correct"]:
+                lines.append(
+                    f"    miss: {r['robot']} {r['injected'][0]} {r['level']:g}x seed {r['seed']} (adds "
+                    f"{added[id(r)]:.2f}x): {'/'.join(r.get('verdict', ['error']))} "
+                    f"({r.get('parametric', r.get('error'))})"
+                )
+        lines.append(
+            f"  adds < 1x (not counted): {sum(a is not None and a < 1.0 for a in added.values())} cases, of "
+            f"which named or found anyway {sum(r['correct'] for r in singles if (added[id(r)] or 0.0) < 1.0)}"
+        )
     vis = [r for r in singles if r.get("error") or _visible(r) >= 1.0]
     ok = sum(r["correct"] for r in vis)
     fig["right_visible"] = ok / len(vis) if vis else None
     lines.append(
-        f"Right where the visible excess on the effect's joints is >= 1x the diagnosis' noise floor: {_pct(ok, len(vis))}"
-        f"  (target >= {100 * TARGETS['right']:.0f} %)"
+        "Right where the refit's held-out excess on the effect's joints, background included, is >= 1x the "
+        f"diagnosis' noise floor: {_pct(ok, len(vis))}  (the lab benchmark's measure)"
     )
     vis_t = [r for r in singles if r.get("error") or _visible(r, "excess_true_joint") >= 1.0]
     ok_t = sum(r["correct"] for r in vis_t)
@@ -231,12 +288,13 @@ def _figures(results: list[dict]) -> tuple[list[str], dict]:
         f"{sum(r['correct'] for r in hidden)} ({sum(r['effect'] in ABSORBED for r in hidden)} are effects "
         "re-identification absorbs)"
     )
-    none = [r for r in results if r["kind"] == "none"]
+    none = [r for r in results if r["kind"] in ("none", "twin")]
     fa = sum(not r["correct"] for r in none)
     fig["false_alarm"] = fa / len(none) if none else None
     fig["false_alarm_upper95"] = _upper95(fa, len(none)) if none else None
     lines.append(
-        f"False alarms with nothing injected: {fa}/{len(none)} = {100 * fa / max(len(none), 1):.1f} %, one-sided "
+        f"False alarms with nothing injected ({sum(r['kind'] == 'twin' for r in none)} of them the twins): "
+        f"{fa}/{len(none)} = {100 * fa / max(len(none), 1):.1f} %, one-sided "
         f"95 % upper bound {100 * _upper95(fa, len(none)) if none else 100:.1f} %  (target <= "
         f"{100 * TARGETS['false_alarm']:.0f} %)"
     )
@@ -368,7 +426,7 @@ def main() -> None:
         unknown = keep - set(EFFECT_NAMES) - {"none"}
         if unknown:
             raise SystemExit(f"--only names {', '.join(sorted(unknown))}, not catalogue effects or none")
-        cases = [c for c in cases if c["effect"] in keep]
+        cases = [c for c in cases if c["effect"] in keep or (c["kind"] == "twin" and keep - {"none"})]
     from joblib import Parallel, delayed
 
     started = time.perf_counter()
