@@ -203,3 +203,37 @@ def test_an_effect_of_the_size_of_the_noise_is_named_on_the_cross_fitted_footing
     assert first.p_value == pytest.approx(2.0 * foot[CROSS]["p_value"], rel=1e-12)
     assert first.p_holm < 0.05
     assert first.closure >= 0.5
+
+
+def test_the_benchmark_counts_what_an_effect_adds_over_its_effect_free_twin() -> None:
+    """Each seed's single cases have a twin (same seed, nothing injected); an effect counts as visible by
+    the case's excess minus the twin's on the effect's joints, not by the background the refit leaves."""
+    import runpy
+    from pathlib import Path
+
+    bench = runpy.run_path(
+        str(Path(__file__).resolve().parents[1] / "benchmarks" / "field_diagnosis_benchmark.py"),
+        run_name="dynid_benchmark",
+    )
+    cases = bench["build_cases"](["ur5"], [1, 2], 1, effects=["stribeck"], levels=(1.0,), unknown_levels=())
+    twins = [c for c in cases if c["kind"] == "twin"]
+    assert [(c["seed"], c["injected"]) for c in twins] == [(1, []), (2, [])]
+
+    def result(kind, seed, excess, correct, joints=(1,)):
+        return {"robot": "ur5", "kind": kind, "effect": "stribeck" if kind == "single" else "none",
+                "injected": ["stribeck@2"] if kind == "single" else [], "level": 1.0, "seed": seed,
+                "excess": excess, "excess_true": excess, "excess_joint": [excess[j] for j in joints],
+                "excess_true_joint": [excess[j] for j in joints], "joints": list(joints), "correct": correct,
+                "label": "none", "verdict": ["none"], "parametric": "none", "provisional": False,
+                "floor_method": "training periods", "floor_over_true": [1.0], "undecided": []}  # fmt: skip
+
+    results = [
+        result("twin", 1, [1.0, 9.0], True),
+        result("single", 1, [1.0, 9.5], False),  # 8.5x with the background, adds 0.5x: not counted
+        result("twin", 2, [1.0, 1.2], True),
+        result("single", 2, [1.0, 3.4], True),  # adds 2.2x: counted, right
+    ]
+    lines, fig = bench["_figures"](results)
+    assert fig["right_added"] == 1.0
+    assert fig["right_visible"] == 0.5  # the background-included measure counts both
+    assert fig["false_alarm"] == 0.0 and any("2 of them the twins" in line for line in lines)
