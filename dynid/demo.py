@@ -595,7 +595,7 @@ def _diagnosis_html(result: Any, label: str) -> str:
         f"<p>Model '{html.escape(label)}' on the held-out run; verdict: "
         f"<strong>{html.escape(', '.join(doc.get('verdict', [])))}</strong>.</p><ul>{lines}</ul>"
         + html_table(
-            ["candidate effect", "joint", "accepted", "closure", "p (Holm)"],
+            ["candidate effect", "joint", "accepted", "closure", "p (adjusted)"],
             rows,
             table_id="diagnosis",
             text_columns=3,

@@ -45,6 +45,27 @@ def test_holm_matches_the_step_down_rule():
     np.testing.assert_allclose(adj, [0.04, 0.09, 0.09, 0.5])
 
 
+def test_screened_holm_tests_the_first_ranked_among_few_and_keeps_the_error_rate(rng):
+    # By hand: 58 candidates, the training data rank the third first; its held-out p of 0.0025 is 0.145
+    # among all 58 and 2 x 5 x 0.0025 = 0.025 among the first five.
+    p = np.full(58, 0.5)
+    p[2] = 0.0025
+    evidence = np.arange(58.0)
+    evidence[2] = -100.0
+    adj = st.screened_holm(p, evidence, 5)
+    assert adj[2] == pytest.approx(0.025)
+    assert adj[10] == 1.0  # outside the first five: 2 x its Holm among all, capped
+    np.testing.assert_allclose(st.screened_holm(p, evidence, 0), st.holm(p))
+    # Under the null (uniform p, a ranking that does not look at them) the family-wise error stays at
+    # alpha; ranked on the p-values themselves (the held-out data) it would not.
+    k, alpha = 60, 0.05
+    P = rng.uniform(size=(4000, k))
+    honest = np.mean([(st.screened_holm(q, rng.normal(size=k), 5) < alpha).any() for q in P])
+    peeking = np.mean([(st.screened_holm(q, q, 5) < alpha).any() for q in P])
+    assert honest < 0.06, honest  # about 0.05: the bound is nearly exact for independent tests
+    assert peeking > 0.15, peeking  # about 0.23
+
+
 def test_diebold_mariano_detects_a_lower_loss_and_not_an_equal_one(rng):
     ref = rng.normal(size=4000) ** 2
     better = ref - 0.2 + 0.1 * rng.normal(size=4000)

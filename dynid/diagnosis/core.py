@@ -24,8 +24,11 @@ Method, in the order it runs:
    by the chance gain that the refit's parameter error allows: fixed over the whole held-out run, so
    invisible to the serial correlation), and cross-fitted with the baseline on the training data and the
    other held-out folds (the same test, block means capped as the excess test's).  Its p-value is the
-   smaller of the two, doubled, Holm-corrected across the candidates; its gain and closure are those of
-   the footing that gave it, and so is the ranking's order.  The choice among the acceptable
+   smaller of the two, doubled, then corrected for the many candidates in two families at half the
+   level each: Holm across all of them, and Holm across the ``screen_top`` that the training data alone
+   rank first (the Wald test of their columns on the training residual, which the held-out noise does
+   not touch: :func:`dynid.diagnosis.stats.screened_holm`).  Its gain and closure are those of the
+   footing that gave it, and so is the ranking's order.  The choice among the acceptable
    candidates and the simpler-candidate test compare them on the training footing.
 4. Forward selection: among the significant candidates that close at least ``min_closure`` of the
    gap on their own joint(s) (in noise variances), the one that lowers the held-out loss of the whole
@@ -102,6 +105,7 @@ def diagnose(
     refit: bool = True,
     confound_deg: float = 15.0,
     stick_fraction: float = 0.02,
+    screen_top: int = 5,
 ) -> Diagnosis:
     """Diagnose the gap between an identified model and the robot on held-out data.
 
@@ -118,7 +122,7 @@ def diagnose(
         noise floor is then the spread across periods).
     robot : RobotModel, optional
         The robot, when ``model`` is None.
-    effects, alpha, max_effects, min_gain, min_closure, excess_tol, period, max_samples, block_seconds, refit, confound_deg, stick_fraction
+    effects, alpha, max_effects, min_gain, min_closure, excess_tol, period, max_samples, block_seconds, refit, confound_deg, stick_fraction, screen_top
         The settings, documented once in :class:`~dynid.diagnosis.settings.DiagnosisSettings` (the
         defaults there are the method's).
 
@@ -150,6 +154,7 @@ def diagnose(
         refit=refit,
         confound_deg=confound_deg,
         stick_fraction=stick_fraction,
+        screen_top=screen_top,
     )
     return run_diagnosis(model, train, heldout, settings, robot=robot)
 
@@ -252,6 +257,7 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
             "min_closure": settings.min_closure,
             "excess_tol": settings.excess_tol,
             "block_seconds": settings.block_seconds,
+            "screen_top": settings.screen_top,
             "samples_train": int(tr.y.shape[0]),
             "samples_heldout": int(ho.y.shape[0]),
             "weight_passes": base.passes,

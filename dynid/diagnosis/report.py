@@ -317,7 +317,7 @@ def render_diagnosis_html(
                 "significant",
                 "gain (noise var.)",
                 "closure",
-                "p (Holm)",
+                "p (adjusted)",
                 "not separable from",
             ],
             rows,

@@ -41,7 +41,8 @@ class RankedCandidate:
         ``sum_j (MSE_before_j - MSE_after_j) / noise_j`` over ``sum_j (MSE_before_j - noise_j) / noise_j``
         on its joint(s), held-out (per joint, in noise variances).
     p_value, p_holm : float
-        One-sided Diebold-Mariano p-value and its Holm-adjusted value.
+        One-sided Diebold-Mariano p-value and its value adjusted for the candidates tested (Holm in two
+        families: :func:`dynid.diagnosis.stats.screened_holm`).
     significant : bool
         ``p_holm < alpha`` and the gain is relevant (``gain >= min_gain``).
     round : int
@@ -52,6 +53,8 @@ class RankedCandidate:
         Candidates whose columns are nearly parallel to its own (not separable with this excitation).
     angle_deg : float or None
         Smallest principal angle (degrees) to the nearest other candidate.
+    training_rank : int or None
+        Its rank (1: first) by the evidence of the training data alone, in the round it was scored.
     """
 
     candidate: Candidate
@@ -69,6 +72,7 @@ class RankedCandidate:
     loss: NDArray[np.float64] | None = field(default=None, repr=False)  # (m, n): per sample and joint
     n_columns: int = 0
     gain_all: float = float("nan")
+    training_rank: int | None = None
 
     def to_dict(self) -> dict[str, Any]:
         c = self.candidate
@@ -89,6 +93,7 @@ class RankedCandidate:
             "confounded_with": list(self.confounded_with),
             "angle_deg": _num(self.angle_deg),
             "refit": self.refit,
+            "training_rank": self.training_rank,
         }
 
 
@@ -213,7 +218,8 @@ def heldout_needed(d: Diagnosis) -> float | None:
     An undecided candidate (:attr:`Diagnosis.undecided`) would close enough of its joints' gap but is not
     significant once every candidate tested is accounted for.  Its held-out gain grows with the length of
     the run and its standard deviation with the square root, so its z-score grows as ``sqrt(T)``: the run
-    that reaches the Holm threshold of the top candidate (``alpha / m``, one-sided) is
+    that reaches the threshold of the top candidate of its family (``alpha / 2K`` among the ``K``
+    candidates the training data rank first, else ``alpha / 2m`` among all ``m``; one-sided) is
     ``T (z_needed / z_now)^2``, with a margin of 1.5 for the chance that this run's z-score was lucky.
     None when there is no undecided candidate, or when its gain per sample is below ``min_gain``: no run
     of the same motion raises it, only a motion that shows the effect more
@@ -231,7 +237,11 @@ def heldout_needed(d: Diagnosis) -> float | None:
         return None
     alpha = float(d.settings.get("alpha", 0.05))
     z_now = float(norm.isf(top.p_value))
-    z_needed = float(norm.isf(alpha / len(d.ranking)))
+    # The threshold of the family it is tested in: the candidates the training data rank first, or all
+    # (each family at half the level, :func:`dynid.diagnosis.stats.screened_holm`).
+    k = int(d.settings.get("screen_top", 0))
+    family = len(d.ranking) if k <= 0 else 2 * (k if top.training_rank and top.training_rank <= k else len(d.ranking))
+    z_needed = float(norm.isf(alpha / family))
     return float((t[-1] - t[0]) * max(1.0, (z_needed / z_now) ** 2) * 1.5)
 
 
@@ -323,7 +333,7 @@ def _undecided_text(d: Diagnosis) -> list[str]:
         why = (
             f"its gain, {r.gain:.2g} noise variances per sample, is below the {min_gain:g} asked of an effect"
             if r.gain < min_gain
-            else f"not once the {len(d.ranking)} candidates tested are accounted for (Holm-adjusted p = "
+            else f"not once the {len(d.ranking)} candidates tested are accounted for (adjusted p = "
             f"{r.p_holm:.2g})"
         )
         lines.append(
@@ -365,7 +375,7 @@ def verdict_text(d: Diagnosis) -> str:
             hyper = _describe_refit(r)
             lines.append(
                 f"{r.candidate.label}{' (' + hyper + ')' if hyper else ''}: closes {100 * r.closure:.0f} % of the "
-                f"gap on its joint(s) (Holm-adjusted p = {r.p_holm:.2g})."
+                f"gap on its joint(s) (adjusted p = {r.p_holm:.2g})."
             )
         lines.append(
             f"Together the accepted effects close {100 * dec['closure_overall']:.0f} % of the gap overall."

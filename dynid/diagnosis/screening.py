@@ -101,6 +101,23 @@ def tune(ctx: Context, fit: WeightedFit, group: list[Candidate]) -> tuple[Candid
     return best[1], best[2]
 
 
+def training_evidence(ctx: Context, fit: WeightedFit, C_tr: NDArray[np.float64]) -> float:
+    """Log p-value of the Wald test of a candidate's columns fitted to the training residual (block
+    covariance): how strongly the training data alone point at it.  It ranks the candidates for the
+    screened family of :func:`dynid.diagnosis.stats.screened_holm`; the held-out data play no part."""
+    from scipy import stats
+
+    Cp = fit.projected(C_tr)
+    beta, *_ = np.linalg.lstsq(Cp, fit.r0, rcond=1e-10)
+    V = fit.projected_covariance(C_tr, ctx.block)
+    lam, U = np.linalg.eigh(0.5 * (V + V.T))
+    keep = lam > 1e-10 * max(float(lam.max(initial=0.0)), 1e-300)
+    if not keep.any():
+        return 0.0
+    z = U[:, keep].T @ beta
+    return float(stats.chi2.logsf(float(np.sum(z**2 / lam[keep])), int(keep.sum())))
+
+
 def _cogging_prescreen(ctx: Context, fit: WeightedFit, group: list[Candidate]) -> list[Candidate]:
     """Gear ratios from the angle-domain spectrum of the training residual of the joint (fast scan)."""
     j = group[0].joint

@@ -4,7 +4,8 @@ Each round screens every candidate not yet accepted on top of the current model 
 on two footings: fitted with the current model on the training data, and cross-fitted with it on the
 training data and the other held-out folds (the excess test's footing); a candidate passes on either,
 its p-value the smaller one doubled.  The round refines the leading nonlinear candidates
-(:mod:`.refinement`), Holm-corrects the p-values, and accepts, among the significant candidates that
+(:mod:`.refinement`), corrects the p-values for the candidates tested (Holm across all, and Holm across
+the ``screen_top`` that the training data alone rank first, each at half the level), and accepts, among the significant candidates that
 close at least ``min_closure`` of the gap on their joint(s), the one that lowers the held-out loss of
 the whole arm most (all compared on the training footing, whichever footing decided each; a simpler
 candidate on the same joints that it does not beat significantly there is preferred); the accepted
@@ -32,6 +33,7 @@ from dynid.diagnosis.screening import (
     on_training,
     parsimonious,
     score,
+    training_evidence,
     tune,
 )
 from dynid.diagnosis.settings import DiagnosisSettings
@@ -147,16 +149,26 @@ def select(
             break
         if settings.refit and rnd < max_effects:
             scored = refine_leaders(ctx, current_fit, acc_tr, acc_ho, scored, r_cur, mse_cur, rnd, cross)
-        p_adj = st.holm([s[1].p_value for s in scored])
+        # Two families at half the level each: all candidates, and those the training data alone rank
+        # first (their evidence does not touch the held-out noise the p-values come from).
+        evidence = np.array([training_evidence(ctx, current_fit, s[2]) for s in scored])
+        p_adj = st.screened_holm([s[1].p_value for s in scored], evidence, settings.screen_top)
+        rank = np.empty(len(scored), dtype=int)
+        rank[np.argsort(evidence, kind="stable")] = np.arange(1, len(scored) + 1)
         scored = [
             (
                 gi,
-                replace(rc, p_holm=float(pa), significant=bool(pa < alpha and rc.gain >= min_gain)),
+                replace(
+                    rc,
+                    p_holm=float(pa),
+                    significant=bool(pa < alpha and rc.gain >= min_gain),
+                    training_rank=int(rk),
+                ),
                 C_tr,
                 C_ho,
                 feet,
             )
-            for (gi, rc, C_tr, C_ho, feet), pa in zip(scored, p_adj, strict=True)
+            for (gi, rc, C_tr, C_ho, feet), pa, rk in zip(scored, p_adj, rank, strict=True)
         ]
         scored.sort(key=lambda s: -s[1].gain)
         if rnd == 0:
@@ -209,6 +221,7 @@ def select(
                     rc2,
                     p_holm=chosen.p_holm,
                     significant=chosen.significant,
+                    training_rank=chosen.training_rank,
                     refit={**rc2.refit, **info},
                     confounded_with=chosen.confounded_with,
                     angle_deg=chosen.angle_deg,

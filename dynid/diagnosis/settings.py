@@ -49,6 +49,10 @@ class DiagnosisSettings:
         Samples of a joint slower than this fraction of its top speed are left out of the fits and
         losses (sticking and presliding make Coulomb friction ill-defined there; the gap map still
         shows them in its stiction bin).
+    screen_top : int
+        The candidates that the training data alone rank first (by the Wald test of their columns on
+        the training residual) form a second family of this size, tested at half of ``alpha`` beside
+        the family of all candidates (:func:`dynid.diagnosis.stats.screened_holm`); 0: one family.
 
     Raises
     ------
@@ -68,6 +72,7 @@ class DiagnosisSettings:
     refit: bool = True
     confound_deg: float = 15.0
     stick_fraction: float = 0.02
+    screen_top: int = 5
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "effects", tuple(self.effects))
@@ -77,3 +82,8 @@ class DiagnosisSettings:
                 f"unknown effect {', '.join(repr(u) for u in unknown)}; the catalogue is "
                 f"{', '.join(EFFECT_NAMES)}: use those names."
             )
+        if int(self.screen_top) != self.screen_top or self.screen_top < 0:
+            raise UsageError(
+                f"screen_top is {self.screen_top}; give a whole number of candidates, at least 0 (default 5)."
+            )
+        object.__setattr__(self, "screen_top", int(self.screen_top))
