@@ -90,7 +90,7 @@ def diagnose_recording(name: str, split: float, decimate: int, out: Path, root: 
         )
     print("top of the ranking on the re-identified model:")
     for r in result.ranking[:6]:
-        print(f"  {r.candidate.key:<24} gain {r.gain:8.3g}  closure {r.closure:6.2f}  p(Holm) {r.p_holm:.2g}")
+        print(f"  {r.candidate.key:<24} gain {r.gain:8.3g}  closure {r.closure:6.2f}  p(adj.) {r.p_holm:.2g}")
     rate = 1.0 / float(np.median(np.diff(heldout.t)))
     settle = settling_excitation(result, robot=str(robot.source), dq_max=robot.dq_max, rate=rate)
     if settle is not None:
