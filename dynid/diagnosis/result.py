@@ -240,7 +240,11 @@ def heldout_needed(d: Diagnosis) -> float | None:
     # The threshold of the family it is tested in: the candidates the training data rank first, or all
     # (each family at half the level, :func:`dynid.diagnosis.stats.screened_holm`).
     k = int(d.settings.get("screen_top", 0))
-    family = len(d.ranking) if k <= 0 else 2 * (k if top.training_rank and top.training_rank <= k else len(d.ranking))
+    if k <= 0:
+        family = len(d.ranking)
+    else:
+        screened = top.training_rank is not None and top.training_rank <= k
+        family = 2 * (k if screened else len(d.ranking))
     z_needed = float(norm.isf(alpha / family))
     return float((t[-1] - t[0]) * max(1.0, (z_needed / z_now) ** 2) * 1.5)
 

@@ -147,11 +147,13 @@ def select(
             scored.append((gi, rc, C_tr, C_ho, feet))
         if not scored:
             break
+        # Two families at half the level each: all candidates, and those the training data alone rank
+        # first.  Their evidence is taken on the columns tuned on training data, before the leaders (chosen
+        # by their held-out gain) are refined: it must not touch the held-out noise the p-values come from.
+        evidence_of = {s[0]: training_evidence(ctx, current_fit, s[2]) for s in scored}
         if settings.refit and rnd < max_effects:
             scored = refine_leaders(ctx, current_fit, acc_tr, acc_ho, scored, r_cur, mse_cur, rnd, cross)
-        # Two families at half the level each: all candidates, and those the training data alone rank
-        # first (their evidence does not touch the held-out noise the p-values come from).
-        evidence = np.array([training_evidence(ctx, current_fit, s[2]) for s in scored])
+        evidence = np.array([evidence_of[s[0]] for s in scored])
         p_adj = st.screened_holm([s[1].p_value for s in scored], evidence, settings.screen_top)
         rank = np.empty(len(scored), dtype=int)
         rank[np.argsort(evidence, kind="stable")] = np.arange(1, len(scored) + 1)
