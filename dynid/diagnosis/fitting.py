@@ -144,11 +144,7 @@ class WeightedFit:
         D = np.array(moves)
         D -= D.mean(axis=0)
         cz = scipy.linalg.solve_triangular(self.R, scipy.linalg.solve_triangular(self.R, D.T @ D).T)
-        cz *= (groups - 1) / groups
-        cov = np.full((self.k, self.k), np.nan)
-        s = 1.0 / self.scale
-        cov[np.ix_(self.cols, self.cols)] = cz * np.outer(s, s)
-        self._cache[key] = cov
+        self._cache[key] = cov = self._embedded(cz * (groups - 1) / groups)
         return cov
 
     def _covariance(self, block: int) -> NDArray[np.float64]:
@@ -157,7 +153,11 @@ class WeightedFit:
         Qr = self.Q.reshape(m, n, -1)
         meat = _block_meat(np.einsum("mnk,mn->mk", Qr, e), block)
         Rinv = scipy.linalg.solve_triangular(self.R, np.eye(self.R.shape[0]))
-        cz = Rinv @ meat @ Rinv.T
+        return self._embedded(Rinv @ meat @ Rinv.T)
+
+    def _embedded(self, cz: NDArray[np.float64]) -> NDArray[np.float64]:
+        """A covariance of the scaled, kept coefficients (rank, rank) as one of all k coefficients (k, k),
+        NaN for the dropped columns."""
         cov = np.full((self.k, self.k), np.nan)
         s = 1.0 / self.scale
         cov[np.ix_(self.cols, self.cols)] = cz * np.outer(s, s)

@@ -53,8 +53,11 @@ class RankedCandidate:
         Candidates whose columns are nearly parallel to its own (not separable with this excitation).
     angle_deg : float or None
         Smallest principal angle (degrees) to the nearest other candidate.
+    training_evidence : float
+        Log p-value of the Wald test of its coefficients on the training residual (block covariance):
+        how strongly the training data alone point at it (:func:`dynid.diagnosis.stats.wald_logp`).
     training_rank : int or None
-        Its rank (1: first) by the evidence of the training data alone, in the round it was scored.
+        Its rank (1: first) by that evidence, in the round it was scored.
     """
 
     candidate: Candidate
@@ -72,6 +75,7 @@ class RankedCandidate:
     loss: NDArray[np.float64] | None = field(default=None, repr=False)  # (m, n): per sample and joint
     n_columns: int = 0
     gain_all: float = float("nan")
+    training_evidence: float = 0.0
     training_rank: int | None = None
 
     def to_dict(self) -> dict[str, Any]:

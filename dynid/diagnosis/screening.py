@@ -101,23 +101,6 @@ def tune(ctx: Context, fit: WeightedFit, group: list[Candidate]) -> tuple[Candid
     return best[1], best[2]
 
 
-def training_evidence(ctx: Context, fit: WeightedFit, C_tr: NDArray[np.float64]) -> float:
-    """Log p-value of the Wald test of a candidate's columns fitted to the training residual (block
-    covariance): how strongly the training data alone point at it.  It ranks the candidates for the
-    screened family of :func:`dynid.diagnosis.stats.screened_holm`; the held-out data play no part."""
-    from scipy import stats
-
-    Cp = fit.projected(C_tr)
-    beta, *_ = np.linalg.lstsq(Cp, fit.r0, rcond=1e-10)
-    V = fit.projected_covariance(C_tr, ctx.block)
-    lam, U = np.linalg.eigh(0.5 * (V + V.T))
-    keep = lam > 1e-10 * max(float(lam.max(initial=0.0)), 1e-300)
-    if not keep.any():
-        return 0.0
-    z = U[:, keep].T @ beta
-    return float(stats.chi2.logsf(float(np.sum(z**2 / lam[keep])), int(keep.sum())))
-
-
 def _cogging_prescreen(ctx: Context, fit: WeightedFit, group: list[Candidate]) -> list[Candidate]:
     """Gear ratios from the angle-domain spectrum of the training residual of the joint (fast scan)."""
     j = group[0].joint
@@ -252,7 +235,8 @@ def score(
     w = ctx.mask[:, js] / ctx.sigma[js][None, :] ** 2
     G = np.einsum("mjc,mj,mjk->ck", net[:, js], w, X_ho[:, js]) / X_ho.shape[0]
     cov = np.nan_to_num(fit.covariance(ctx.block))
-    chance_var = 4.0 * float(np.trace(fit.projected_covariance(C_tr, ctx.block) @ G @ cov @ G.T))
+    V_beta = fit.projected_covariance(C_tr, ctx.block)
+    chance_var = 4.0 * float(np.trace(V_beta @ G @ cov @ G.T))
     dm = st.diebold_mariano(L_cur, L, block=ctx.block, extra_variance=max(chance_var, 0.0))
     feet = [_figures(ctx, TRAINING, r, r_cur, mse_cur, js, dm.mean, dm.p_value)]
     if cross is not None:
@@ -287,6 +271,9 @@ def score(
         loss=by.loss,
         n_columns=int(C_tr.shape[2]),
         refit=refit,
+        # How strongly the training data alone point at it: the Wald test of its coefficients, fitted on
+        # the training residual (the held-out data play no part).
+        training_evidence=st.wald_logp(beta, V_beta),
     )
 
 

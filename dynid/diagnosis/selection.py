@@ -33,7 +33,6 @@ from dynid.diagnosis.screening import (
     on_training,
     parsimonious,
     score,
-    training_evidence,
     tune,
 )
 from dynid.diagnosis.settings import DiagnosisSettings
@@ -150,7 +149,7 @@ def select(
         # Two families at half the level each: all candidates, and those the training data alone rank
         # first.  Their evidence is taken on the columns tuned on training data, before the leaders (chosen
         # by their held-out gain) are refined: it must not touch the held-out noise the p-values come from.
-        evidence_of = {s[0]: training_evidence(ctx, current_fit, s[2]) for s in scored}
+        evidence_of = {s[0]: s[1].training_evidence for s in scored}
         if settings.refit and rnd < max_effects:
             scored = refine_leaders(ctx, current_fit, acc_tr, acc_ho, scored, r_cur, mse_cur, rnd, cross)
         evidence = np.array([evidence_of[s[0]] for s in scored])
@@ -223,6 +222,7 @@ def select(
                     rc2,
                     p_holm=chosen.p_holm,
                     significant=chosen.significant,
+                    training_evidence=chosen.training_evidence,
                     training_rank=chosen.training_rank,
                     refit={**rc2.refit, **info},
                     confounded_with=chosen.confounded_with,

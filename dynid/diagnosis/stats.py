@@ -238,6 +238,19 @@ def holm(p_values: ArrayLike) -> NDArray[np.float64]:
     return adj
 
 
+def wald_logp(beta: ArrayLike, cov: ArrayLike) -> float:
+    """Log p-value of the Wald test that ``beta`` is zero, with covariance ``cov`` (chi^2 on its rank;
+    directions of zero variance are left out; 0 when none is left)."""
+    beta = np.asarray(beta, dtype=float)
+    cov = np.asarray(cov, dtype=float)
+    lam, U = np.linalg.eigh(0.5 * (cov + cov.T))
+    keep = lam > 1e-10 * max(float(lam.max(initial=0.0)), 1e-300)
+    if not keep.any():
+        return 0.0
+    z = U[:, keep].T @ beta
+    return float(stats.chi2.logsf(float(np.sum(z**2 / lam[keep])), int(keep.sum())))
+
+
 def screened_holm(p_values: ArrayLike, evidence: ArrayLike, top: int) -> NDArray[np.float64]:
     """Holm over every test, and Holm over the ``top`` tests that independent evidence ranks first, at
     half the level each: ``min(1, 2 min(holm_all, holm_top))`` (1 for the others in the second family).
