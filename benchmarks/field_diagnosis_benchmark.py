@@ -172,6 +172,9 @@ def run_one(case: dict) -> dict:
         "floor_over_true": out["floor_over_true"],
         "top": [r.candidate.key for r in d.ranking[:3]],
         "undecided": [r.candidate.key for r in d.undecided],
+        "remainder_confirms": (
+            bool(np.any(d.remainder["predictable_joint"])) if d.remainder is not None else None
+        ),
         "seconds": time.perf_counter() - started,
         "cpu_seconds": time.process_time() - cpu,
     }
@@ -318,6 +321,18 @@ def _figures(results: list[dict]) -> tuple[list[str], dict]:
             lines.append(
                 f"    {r['robot']} {r['level']:g}x seed {r['seed']}: {r.get('verdict', r.get('error'))}"
             )
+    unexplained = [r for r in results if not r.get("error") and r.get("verdict") == ["unexplained"]]
+    if unexplained:
+        parts = []
+        for kind, label in (("unknown", "unknown effects"), ("none", "effect-free"), ("twin", "twins")):
+            rs = [r for r in unexplained if r["kind"] == kind]
+            parts.append(f"{label} {sum(bool(r.get('remainder_confirms')) for r in rs)}/{len(rs)}")
+        rs = [r for r in unexplained if r["kind"] == "single"]
+        parts.append(f"single effects {sum(bool(r.get('remainder_confirms')) for r in rs)}/{len(rs)}")
+        lines.append(
+            "'Unexplained' verdicts that the check without the floor confirms (a state model predicts the "
+            "residual on held-out folds it did not see): " + ", ".join(parts)
+        )
     done = [r for r in results if not r.get("error")]
     prov = sum(r["provisional"] for r in done)
     fig["provisional"] = prov / len(done) if done else None

@@ -45,7 +45,13 @@ Method, in the order it runs:
    (sticking leaves a small excess even on an effect-free robot) plus what differentiating quantised
    angles adds (the encoder's step read from the angles and propagated through the preparation and the
    refit's torque), with block means capped so that an excess on a few moves is not lost in its own
-   variance (:func:`dynid.diagnosis.stats.excess_test`); the sources counted as noise are listed.  Candidates whose columns are nearly parallel once the baseline is projected
+   variance (:func:`dynid.diagnosis.stats.excess_test`); the sources counted as noise are listed.
+   When the verdict is "unexplained", or the floor is only a spectral lower bound, a check that does
+   not rest on the floor runs (:mod:`.remainder`): gradient-boosted trees on the state, fitted on the
+   training run and the other held-out folds, predict each fold's residual of the final model; a
+   significant gain says that something the state predicts remains.  On a lower-bound floor only an
+   "unexplained" verdict that this check does not confirm is provisional: a lower floor can only
+   overstate the gap, so "none" and accepted effects stand.  Candidates whose columns are nearly parallel once the baseline is projected
    out (small principal angle) are reported as not separable with this excitation.
 6. Parametric test: identified minus nominal base parameters, with a block (HAC) covariance, against
    structured hypotheses (common drive gain, a torque gain on one joint, payload on the last link, an
@@ -74,6 +80,7 @@ from dynid.diagnosis.candidates import EFFECT_NAMES, enumerate_candidates
 from dynid.diagnosis.gapmap import gap_map
 from dynid.diagnosis.parameter_change import parameter_change_test
 from dynid.diagnosis.refinement import fitted_delay
+from dynid.diagnosis.remainder import Remainder, predictable_remainder
 from dynid.diagnosis.result import Diagnosis, RankedCandidate
 from dynid.diagnosis.screening import Context, confound_note, cross_fitted
 from dynid.diagnosis.selection import Selection, select
@@ -237,6 +244,24 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
         filter_gain=_filter_gain_function(ho.prep),
     )
     verdict, notes = _verdict(sel, excess, noise, base, settings)
+    measured = noise.method in MEASURED_FLOORS
+    remainder = None
+    if verdict == ["unexplained"] or not measured:
+        # What a flexible state model predicts of what the model leaves, on held-out folds it did not see:
+        # evidence that does not rest on the floor.
+        remainder = predictable_remainder(
+            sel.cross.fold,
+            (tr.src.q[tr.rows], tr.src.dq[tr.rows], tr.src.ddq[tr.rows]),
+            tr.moving,
+            (ho.src.q[ho.rows], ho.src.dq[ho.rows], ho.src.ddq[ho.rows]),
+            ho.t,
+            ho.moving,
+            sigma,
+            block,
+            settings.alpha,
+        )
+    provisional = _provisional(verdict, measured, remainder)
+    notes = _remainder_notes(verdict, measured, provisional, remainder, robot.joint_names) + notes
     undecided = [] if sel.accepted else _undecided(ctx, base, sel.ranking, settings)
     return Diagnosis(
         verdict=verdict,
@@ -270,8 +295,9 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
             "after": sel.residual if sel.accepted else held.residual,
             "noise_std": sigma,
         },
-        provisional=noise.method not in MEASURED_FLOORS,
+        provisional=provisional,
         undecided=undecided,
+        remainder=None if remainder is None else remainder.to_dict(),
     )
 
 
@@ -393,16 +419,87 @@ def _verdict(
             "across its periods, at the same rate and through the same filter: this assumes the torque noise "
             "of the robot did not change between the two recordings.",
         )
-    elif noise.method not in MEASURED_FLOORS:
+    notes.extend(confound_note(a) for a in sel.accepted if a.confounded_with)
+    return verdict, notes
+
+
+def _provisional(verdict: list[str], measured: bool, remainder: Remainder | None) -> bool:
+    """Does the verdict rest on a floor that is only a lower bound?
+
+    A spectral floor can only understate the noise.  "None" then stands (the excess is if anything
+    overstated, and still not significant), and so do accepted effects (each is tested on the loss it
+    removes, which the floor's level does not change, and the share of the gap it closes is if anything
+    understated).  "Unexplained" may be overstated, unless a state model predicts the residual on held-out
+    folds it did not see (:mod:`.remainder`): then something predictable remains, whatever the floor.
+    """
+    if measured or verdict != ["unexplained"]:
+        return False
+    return remainder is None or not bool(np.any(remainder.predictable))
+
+
+def _remainder_notes(
+    verdict: list[str],
+    measured: bool,
+    provisional: bool,
+    remainder: Remainder | None,
+    joint_names: Sequence[str],
+) -> list[str]:
+    """What the floor-free check says, and why the verdict is or is not provisional."""
+    notes = []
+    if remainder is not None:
+        hit = np.flatnonzero(remainder.predictable)
+        after = "After the accepted effects, a" if verdict not in (["none"], ["unexplained"]) else "A"
+        if hit.size:
+            parts = ", ".join(
+                f"{joint_names[j]} {100 * remainder.share[j]:.0f} % (adjusted p = {remainder.p_joint[j]:.2g})"
+                for j in hit
+            )
+            notes.append(
+                f"{after} flexible state model (trees on q, dq, ddq) fitted without each held-out fold predicts "
+                f"part of the residual there: {parts}.  Something the state predicts remains"
+                + (" that no catalogue effect captures." if verdict == ["unexplained"] else ".")
+            )
+        else:
+            notes.append(
+                f"{after} flexible state model (trees on q, dq, ddq) fitted without each held-out fold predicts "
+                "none of the residual there significantly"
+                + (
+                    ": what is left behaves as noise or drift (a time-varying effect, or noise the floor "
+                    "misses), or the held-out run is too short to show more."
+                    if verdict == ["unexplained"]
+                    else "."
+                )
+            )
+    if measured:
+        return notes
+    if provisional:
         notes.insert(
             0,
             "Provisional: the held-out data do not repeat a period, so the noise floor comes from the "
             "spectrum's high-frequency level, a lower bound when the noise is coloured; the excess over it, "
-            "and an 'unexplained' verdict, may be overstated.  Hold out at least three periods of a periodic "
-            "excitation for a measured floor.",
+            "and this 'unexplained' verdict, may be overstated, and the check that does not rest on the floor "
+            "does not confirm it.  Hold out at least three periods of a periodic excitation for a measured "
+            "floor.",
         )
-    notes.extend(confound_note(a) for a in sel.accepted if a.confounded_with)
-    return verdict, notes
+    elif verdict == ["unexplained"]:
+        notes.insert(
+            0,
+            "The held-out data do not repeat a period, so the noise floor is the spectrum's lower bound; the "
+            "verdict does not rest on it: a state model predicts the residual on held-out data it did not see.",
+        )
+    else:
+        notes.insert(
+            0,
+            "The held-out data do not repeat a period, so the noise floor is the spectrum's lower bound.  A lower "
+            "floor can only overstate the gap"
+            + (
+                ", and the excess is not significant even so: the verdict stands."
+                if verdict == ["none"]
+                else ": each accepted effect is tested on the loss it removes, which the floor's level does not "
+                "change, and the share it closes is if anything understated: the verdict stands."
+            ),
+        )
+    return notes
 
 
 def _decomposition(

@@ -62,6 +62,7 @@ class CrossFold:
         self.k, self.n, self.used, self.scale = k, n, used, scale
         self.w_tr, self.w_ho = w_tr, w_ho
         self.X_ho, self.y_ho = X_ho, y_ho
+        self.X_tr, self.y_tr = X_tr, y_tr
         self.A_tr = A_tr[:, used] / scale[used]
         self.b_tr = b_tr
         ku = int(used.sum())
@@ -97,6 +98,10 @@ class CrossFold:
         x = np.zeros(self.k)
         x[self.used] = z / self.scale[self.used]
         return x
+
+    def coefficients(self, fold: int) -> NDArray[np.float64]:
+        """The baseline's coefficients fitted without held-out fold ``fold`` (k,)."""
+        return self._coefficients(self.Rpinv[fold] @ self.u[fold])
 
     def residual(
         self, C_tr: NDArray[np.float64] | None = None, C_ho: NDArray[np.float64] | None = None

@@ -289,6 +289,29 @@ def render_diagnosis_html(
         f"<p>Noise floor: {html.escape(result.noise.detail)}. Closure overall: {format_number(dec['closure_overall'], 3)}. "
         "MSE on the filtered held-out torque, samples near zero speed left out (sticking).</p>"
     )
+    rem = doc.get("remainder")
+    if rem is not None:
+        parts.append("<h3>What a state model still predicts (a check that does not rest on the floor)</h3>")
+        parts.append(
+            _table(
+                ["joint", "share of the residual predicted", "gain (noise var.)", "p (Holm)", "predictable"],
+                [
+                    [
+                        f"{j + 1} ({result.joint_names[j]})",
+                        rem["share"][j],
+                        rem["gain"][j],
+                        rem["p_joint"][j],
+                        "yes" if rem["predictable_joint"][j] else "no",
+                    ]
+                    for j in range(n)
+                ],
+                text_columns=1,
+            )
+        )
+        parts.append(
+            f"<p>{html.escape(rem['model'])}; each held-out fold is predicted by trees that never saw it. A share "
+            "at or below zero: the trees learnt nothing that holds on data they did not see.</p>"
+        )
     for title_f, caption, png in diagnosis_figures(result):
         parts.append(figure_html(png, title=title_f, caption=caption, show_title=True))
     parts.append("<h2>Which effect: candidate ranking</h2>")

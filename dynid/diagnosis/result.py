@@ -137,14 +137,20 @@ class Diagnosis:
     notes : list of str
         Confounded candidates and the motion that would separate them; other remarks.
     provisional : bool
-        The noise floor was estimated from the spectrum (the held-out data do not repeat a period), a
-        lower bound when the noise is coloured: the excess, and an ``"unexplained"`` verdict, may be
-        overstated.
+        The verdict is ``"unexplained"`` on a noise floor estimated from the spectrum (the held-out data do
+        not repeat a period), a lower bound when the noise is coloured, so the excess may be overstated,
+        and the check that does not rest on the floor (``remainder``) does not confirm it.  "None" and
+        accepted effects are not provisional on such a floor: a lower floor can only overstate the gap.
     undecided : list of RankedCandidate
         When no effect is accepted: candidates that would close at least ``min_closure`` of their
         joints' gap and pass the test on their own (raw p below ``alpha``) but not once every candidate
         tested is accounted for, or not by ``min_gain``; most promising first (at most three).  The
         held-out run has too little of the motion that shows them: a recording of that motion decides.
+    remainder : dict or None
+        What a flexible state model, fitted without each held-out fold, predicts of the final model's
+        residual there (:mod:`dynid.diagnosis.remainder`: ``p_joint``, ``share``, ``gain``,
+        ``predictable_joint``): evidence that does not rest on the noise floor.  Computed when the verdict
+        is ``"unexplained"`` or the floor is not measured; None otherwise.
     """
 
     verdict: list[str]
@@ -161,6 +167,7 @@ class Diagnosis:
     residuals: dict[str, Any] = field(default_factory=dict, repr=False)
     provisional: bool = False
     undecided: list[RankedCandidate] = field(default_factory=list)
+    remainder: dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON-ready figures (``gap_map``, ``ranking``, ``verdict``, ``parametric``, and more)."""
@@ -171,6 +178,7 @@ class Diagnosis:
                 "ranking": [r.to_dict() for r in self.ranking],
                 "accepted": [r.to_dict() for r in self.accepted],
                 "undecided": [r.to_dict() for r in self.undecided],
+                "remainder": self.remainder,
                 "gap_map": self.gap_map,
                 "parametric": self.parametric,
                 "decomposition": self.decomposition,

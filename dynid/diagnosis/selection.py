@@ -60,6 +60,8 @@ class Selection:
         Per candidate group, the tuned variant and its training columns (m, n, c).
     notes : list of str
         Remarks (delays too short to be told apart from the state estimation).
+    cross : CrossFitted
+        The final model (the baseline and the accepted effects) cross-fitted on the held-out folds.
     """
 
     accepted: list[RankedCandidate]
@@ -69,6 +71,7 @@ class Selection:
     mse: NDArray[np.float64]
     tuned: dict[int, tuple[Candidate, NDArray[np.float64]]]
     notes: list[str]
+    cross: CrossFitted
 
 
 def select(
@@ -256,4 +259,5 @@ def select(
         mse=mse_cur,
         tuned=tuned,
         notes=notes,
+        cross=cross,
     )
