@@ -106,9 +106,9 @@ def test_tx40_diagnosis_points_at_the_coupled_wrist_and_is_provisional(shared_da
 def test_panda_diagnosis_names_a_transmission_effect_that_does_not_rest_on_the_spectral_floor(
     shared_data, tmp_path
 ):
-    # 7 s held out, aperiodic: the floor is the spectrum's lower bound.  An accepted effect is tested on
-    # the loss it removes, which the floor's level does not change, and a lower floor only understates the
-    # share it closes: the verdict is not provisional.  What it leaves is checked without the floor.
+    # 7 s held out, aperiodic: the floor is the spectrum's lower bound.  On joint 2 the accepted effect
+    # removes two thirds of the whole held-out error, a share no floor enters: the verdict is not
+    # provisional.  What it leaves is checked without the floor.
     script = runpy.run_path(str(REPO / "scripts" / "diagnose_real_robots.py"), run_name="dynid_script")
     split, decimate = script["RECORDINGS"]["panda_gaz2019"]
     with contextlib.redirect_stdout(io.StringIO()):
@@ -117,7 +117,7 @@ def test_panda_diagnosis_names_a_transmission_effect_that_does_not_rest_on_the_s
     assert doc["verdict"] == ["elasticity"] and doc["accepted"][0]["joint"] == 2, doc["verdict"]
     assert doc["accepted"][0]["closure"] > 0.5
     assert doc["provisional"] is False and "settle" not in doc
-    assert any("the verdict stands" in note for note in doc["notes"])
+    assert any("The verdict does not rest on its level" in note for note in doc["notes"])
     # The rest of the arm keeps a gap that a state model predicts on held-out folds it did not see.
     rem = doc["remainder"]
     assert sum(rem["predictable_joint"]) >= 3 and not rem["predictable_joint"][1], rem

@@ -89,5 +89,35 @@ def test_a_friction_on_the_sum_of_two_velocities_is_predictable_on_its_joint(see
     high = _run(seed, 0.1, floor=2 * SIGMA)
     np.testing.assert_allclose(high.p_joint, rem.p_joint, rtol=1e-6)
     np.testing.assert_allclose(high.gain, rem.gain / 4, rtol=1e-6)
-    d = rem.to_dict()
-    assert set(d) >= {"p_joint", "share", "gain", "predictable_joint", "model"}
+
+
+def test_on_a_spectral_floor_a_verdict_is_provisional_exactly_where_it_rests_on_the_floor():
+    """A lower-bound floor can only overstate the gap.  "None" stands; accepted effects stand when they
+    remove half of the whole held-out error on their joints (no floor enters); "unexplained" stands when
+    the floor-free check finds a joint with a significant excess predictable, and no significant candidate
+    was turned down for closing too little.  A measured floor is never provisional."""
+    from types import SimpleNamespace
+
+    from dynid.diagnosis.core import _provisional
+
+    settings = SimpleNamespace(min_closure=0.5)
+    mse = np.array([4.0, 10.0, 2.0])
+    cand = SimpleNamespace(candidate=SimpleNamespace(joints=(1,), label="stribeck on joint 2"), significant=True)
+    excess = {"significant_joint": np.array([False, True, False])}
+    rem_on = SimpleNamespace(predictable=np.array([False, True, False]))
+    rem_elsewhere = SimpleNamespace(predictable=np.array([True, False, False]))
+    none_sel = SimpleNamespace(accepted=[], ranking=[], mse=mse)
+
+    def status(verdict, sel, rem, measured=False):
+        return _provisional(verdict, measured, rem, sel, excess, settings, mse)[0]
+
+    assert not status(["none"], none_sel, None)
+    # Accepted on joint 2: 10 -> 4 removes 60 % of its whole error; 10 -> 6, 40 %.
+    assert not status(["stribeck"], SimpleNamespace(accepted=[cand], ranking=[cand], mse=np.array([4.0, 4.0, 2.0])), None)
+    assert status(["stribeck"], SimpleNamespace(accepted=[cand], ranking=[cand], mse=np.array([4.0, 6.0, 2.0])), None)
+    assert not status(["unexplained"], none_sel, rem_on)
+    assert status(["unexplained"], none_sel, rem_elsewhere)  # predictable, but not where the excess is
+    assert status(["unexplained"], none_sel, None)
+    partial = SimpleNamespace(accepted=[], ranking=[cand], mse=mse)  # significant, turned down
+    assert status(["unexplained"], partial, rem_on)
+    assert not status(["unexplained"], none_sel, None, measured=True)

@@ -49,9 +49,11 @@ Method, in the order it runs:
    When the verdict is "unexplained", or the floor is only a spectral lower bound, a check that does
    not rest on the floor runs (:mod:`.remainder`): gradient-boosted trees on the state, fitted on the
    training run and the other held-out folds, predict each fold's residual of the final model; a
-   significant gain says that something the state predicts remains.  On a lower-bound floor only an
-   "unexplained" verdict that this check does not confirm is provisional: a lower floor can only
-   overstate the gap, so "none" and accepted effects stand.  Candidates whose columns are nearly parallel once the baseline is projected
+   significant gain says that something the state predicts remains.  A lower-bound floor can only
+   overstate the gap: on it "none" stands; accepted effects stand when they remove at least
+   ``min_closure`` of the whole held-out error on the joints they act on (no floor enters); "unexplained"
+   stands when this check finds a joint with a significant excess predictable and no significant
+   candidate was turned down for closing too little.  Otherwise the verdict is provisional.  Candidates whose columns are nearly parallel once the baseline is projected
    out (small principal angle) are reported as not separable with this excitation.
 6. Parametric test: identified minus nominal base parameters, with a block (HAC) covariance, against
    structured hypotheses (common drive gain, a torque gain on one joint, payload on the last link, an
@@ -260,8 +262,9 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
             block,
             settings.alpha,
         )
-    provisional = _provisional(verdict, measured, remainder)
-    notes = _remainder_notes(verdict, measured, provisional, remainder, robot.joint_names) + notes
+    status = _provisional(verdict, measured, remainder, sel, excess, settings, held.mse)
+    provisional = status[0]
+    notes = _remainder_notes(verdict, measured, status, remainder, robot.joint_names) + notes
     undecided = [] if sel.accepted else _undecided(ctx, base, sel.ranking, settings)
     return Diagnosis(
         verdict=verdict,
@@ -423,24 +426,62 @@ def _verdict(
     return verdict, notes
 
 
-def _provisional(verdict: list[str], measured: bool, remainder: Remainder | None) -> bool:
-    """Does the verdict rest on a floor that is only a lower bound?
+def _provisional(
+    verdict: list[str],
+    measured: bool,
+    remainder: Remainder | None,
+    sel: Selection,
+    excess: dict[str, Any],
+    settings: DiagnosisSettings,
+    mse_refit: NDArray[np.float64],
+) -> tuple[bool, str]:
+    """Does the verdict rest on a floor that is only a lower bound?  The answer, and why, in a clause.
 
-    A spectral floor can only understate the noise.  "None" then stands (the excess is if anything
-    overstated, and still not significant), and so do accepted effects (each is tested on the loss it
-    removes, which the floor's level does not change, and the share of the gap it closes is if anything
-    understated).  "Unexplained" may be overstated, unless a state model predicts the residual on held-out
-    folds it did not see (:mod:`.remainder`): then something predictable remains, whatever the floor.
+    A spectral floor can only understate the noise, so the excess, and each joint's gap, are if anything
+    overstated.
+
+    * "None" stands: the excess is not significant even so.
+    * Accepted effects stand when, on the joints they act on, they remove at least ``min_closure`` of the
+      whole held-out error, each joint's error its own unit: that error bounds the joint's noise from
+      above, so no floor enters (and their gain in noise variances is then at least ``min_closure``, above
+      ``min_gain``).  The figures computed on the floor (the share of the gap, the gain) would otherwise
+      rest on it, joint by joint.
+    * "Unexplained" stands when the check that does not rest on the floor (:mod:`.remainder`) finds the
+      residual predictable on a joint whose excess is significant, and no significant candidate was turned
+      down for closing too little (the share it closes is understated on a lower floor: it might close
+      enough).
     """
-    if measured or verdict != ["unexplained"]:
-        return False
-    return remainder is None or not bool(np.any(remainder.predictable))
+    if measured or verdict == ["none"]:
+        return False, ""
+    if sel.accepted:
+        n = len(sel.mse)
+        acting = sorted({j for a in sel.accepted for j in (a.candidate.joints or range(n))})
+        before = np.maximum(mse_refit[acting], 1e-300)
+        share = float(np.mean((before - sel.mse[acting]) / before))
+        if share < settings.min_closure:
+            return True, (
+                f"on the joints they act on, the accepted effects remove {100 * share:.0f} % of the whole held-out "
+                f"error, less than the {100 * settings.min_closure:.0f} % that would hold whatever the floor"
+            )
+        return False, ""
+    partial = [r for r in sel.ranking if r.significant]
+    if partial:
+        return True, (
+            f"{partial[0].candidate.label} is significant but closes too little of a gap that the floor may "
+            "overstate"
+        )
+    confirmed = remainder is not None and bool(
+        np.any(remainder.predictable & np.asarray(excess["significant_joint"], dtype=bool))
+    )
+    if not confirmed:
+        return True, "the check that does not rest on the floor does not confirm the excess"
+    return False, ""
 
 
 def _remainder_notes(
     verdict: list[str],
     measured: bool,
-    provisional: bool,
+    provisional: tuple[bool, str],
     remainder: Remainder | None,
     joint_names: Sequence[str],
 ) -> list[str]:
@@ -449,55 +490,64 @@ def _remainder_notes(
     if remainder is not None:
         hit = np.flatnonzero(remainder.predictable)
         after = "After the accepted effects, a" if verdict not in (["none"], ["unexplained"]) else "A"
+        model = (
+            f"{after} flexible state model (trees on q, dq, ddq), fitted for each held-out fold on the training "
+            "run and the other folds, "
+        )
         if hit.size:
             parts = ", ".join(
                 f"{joint_names[j]} {100 * remainder.share[j]:.0f} % (adjusted p = {remainder.p_joint[j]:.2g})"
                 for j in hit
             )
-            notes.append(
-                f"{after} flexible state model (trees on q, dq, ddq) fitted without each held-out fold predicts "
-                f"part of the residual there: {parts}.  Something the state predicts remains"
-                + (" that no catalogue effect captures." if verdict == ["unexplained"] else ".")
-            )
+            tail = {
+                "unexplained": "  Something the state predicts remains that no catalogue effect was accepted for.",
+                "none": "  Something the state predicts remains, within what the excess test allows.",
+            }.get(verdict[0], "  Something the state predicts remains beyond the accepted effects.")
+            notes.append(model + f"predicts part of that fold's residual: {parts}." + tail)
         else:
             notes.append(
-                f"{after} flexible state model (trees on q, dq, ddq) fitted without each held-out fold predicts "
-                "none of the residual there significantly"
+                model
+                + "predicts no joint's residual significantly"
                 + (
                     ": what is left behaves as noise or drift (a time-varying effect, or noise the floor "
-                    "misses), or the held-out run is too short to show more."
+                    "misses), or the held-out run is too short to show more (the check is less sensitive than "
+                    "the excess test)."
                     if verdict == ["unexplained"]
                     else "."
                 )
             )
     if measured:
         return notes
-    if provisional:
+    is_provisional, why = provisional
+    if is_provisional:
         notes.insert(
             0,
             "Provisional: the held-out data do not repeat a period, so the noise floor comes from the "
-            "spectrum's high-frequency level, a lower bound when the noise is coloured; the excess over it, "
-            "and this 'unexplained' verdict, may be overstated, and the check that does not rest on the floor "
-            "does not confirm it.  Hold out at least three periods of a periodic excitation for a measured "
+            "spectrum's high-frequency level, a lower bound when the noise is coloured, and the verdict may "
+            f"rest on it ({why}).  Hold out at least three periods of a periodic excitation for a measured "
             "floor.",
         )
     elif verdict == ["unexplained"]:
         notes.insert(
             0,
-            "The held-out data do not repeat a period, so the noise floor is the spectrum's lower bound; the "
-            "verdict does not rest on it: a state model predicts the residual on held-out data it did not see.",
+            "The held-out data do not repeat a period, so the noise floor is the spectrum's lower bound.  "
+            "The verdict does not rest on its level: a state model predicts the residual of a joint with a "
+            "significant excess on held-out data it did not see.",
+        )
+    elif verdict == ["none"]:
+        notes.insert(
+            0,
+            "The held-out data do not repeat a period, so the noise floor is the spectrum's lower bound.  A "
+            "lower floor can only overstate the gap, and the excess is not significant even so: the verdict "
+            "stands.",
         )
     else:
         notes.insert(
             0,
-            "The held-out data do not repeat a period, so the noise floor is the spectrum's lower bound.  A lower "
-            "floor can only overstate the gap"
-            + (
-                ", and the excess is not significant even so: the verdict stands."
-                if verdict == ["none"]
-                else ": each accepted effect is tested on the loss it removes, which the floor's level does not "
-                "change, and the share it closes is if anything understated: the verdict stands."
-            ),
+            "The held-out data do not repeat a period, so the noise floor is the spectrum's lower bound.  The "
+            "verdict does not rest on its level: on the joints they act on, the accepted effects remove at "
+            "least half of the whole held-out error (each joint's error its own unit, which bounds its noise "
+            "from above).",
         )
     return notes
 

@@ -294,7 +294,7 @@ def render_diagnosis_html(
         parts.append("<h3>What a state model still predicts (a check that does not rest on the floor)</h3>")
         parts.append(
             _table(
-                ["joint", "share of the residual predicted", "gain (noise var.)", "p (Holm)", "predictable"],
+                ["joint", "share of the residual predicted", "gain (floor variances)", "p (Holm)", "predictable"],
                 [
                     [
                         f"{j + 1} ({result.joint_names[j]})",
