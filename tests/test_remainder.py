@@ -62,10 +62,10 @@ def _run(seed: int, coupled: float, floor: float = SIGMA):
         # The coupled wrist: friction on dq1 + dq2 acting on joint 2 only.
         y[:, 1] += coupled * np.tanh((dq[:, 0] + dq[:, 1]) / 0.02)
         sides.append((t, (q, dq, ddq), X, y, np.ones_like(y)))
-    (_, s_tr, X_tr, y_tr, m_tr), (t, s_ho, X_ho, y_ho, m_ho) = sides
+    (t_tr, s_tr, X_tr, y_tr, m_tr), (t, s_ho, X_ho, y_ho, m_ho) = sides
     sigma = np.full(2, floor)
     cf = CrossFold(X_tr, y_tr, m_tr / sigma, X_ho, y_ho, m_ho / sigma, 5)
-    return predictable_remainder(cf, s_tr, m_tr, s_ho, t, m_ho, sigma, round(0.1 * RATE), 0.05)
+    return predictable_remainder(cf, s_tr, t_tr, m_tr, s_ho, t, m_ho, sigma, round(0.1 * RATE), 0.05)
 
 
 def test_on_noise_alone_the_check_stays_quiet_at_its_level():

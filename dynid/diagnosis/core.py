@@ -254,6 +254,7 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
         remainder = predictable_remainder(
             sel.cross.fold,
             (tr.src.q[tr.rows], tr.src.dq[tr.rows], tr.src.ddq[tr.rows]),
+            tr.t,
             tr.moving,
             (ho.src.q[ho.rows], ho.src.dq[ho.rows], ho.src.ddq[ho.rows]),
             ho.t,

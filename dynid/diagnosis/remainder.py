@@ -12,7 +12,8 @@ Per contiguous held-out fold ``k`` (the cross-fitted footing's folds, :class:`~d
    gives its residual on every training and held-out row;
 2. per joint, the trees are fitted to that residual on the training rows and on the other folds' rows,
    leaving out those within ``GUARD_SECONDS`` of fold ``k`` (the torque noise is correlated over a tenth
-   of a second or so);
+   of a second or so, and the filter spreads it further); training rows too, when the two runs are parts
+   of one recording on one clock (a recording split in time);
 3. they predict fold ``k``'s residual.
 
 Nothing fitted for fold ``k`` has seen its rows, so on noise alone the prediction is independent of what
@@ -95,6 +96,7 @@ class Remainder:
 def predictable_remainder(
     cf: CrossFold,
     states_tr: tuple[NDArray[np.float64], ...],
+    t_tr: NDArray[np.float64],
     mask_tr: NDArray[np.float64],
     states_ho: tuple[NDArray[np.float64], ...],
     t: NDArray[np.float64],
@@ -113,6 +115,9 @@ def predictable_remainder(
         The model (baseline and accepted effects) factored per held-out fold.
     states_tr : tuple of ndarray, each (m_tr, n)
         Training angles, velocities and accelerations at the rows used.
+    t_tr : ndarray, shape (m_tr,)
+        Their times (s): when the held-out run follows the training run on one clock (or precedes it),
+        training rows near a fold are left out of its fit as held-out rows are.
     mask_tr : ndarray, shape (m_tr, n)
         Training rows that count per joint (moving).
     states_ho : tuple of ndarray, each (m, n)
@@ -142,6 +147,7 @@ def predictable_remainder(
     Z_tr = np.column_stack(states_tr)
     pred = np.zeros((m, n))
     resid = np.zeros((m, n))
+    one_clock = bool(t[0] >= t_tr[-1] or t_tr[0] >= t[-1])  # the two parts of one recording
     with threadpool_limits(limits=1, user_api="openmp"):  # small fits; a worker of a pool must not fan out
         for f, (a, b) in enumerate(itertools.pairwise(cf.edges)):
             x = cf.coefficients(f)
@@ -149,9 +155,10 @@ def predictable_remainder(
             R_tr = cf.y_tr - np.einsum("mnk,k->mn", cf.X_tr, x)
             resid[a:b] = R_ho[a:b]
             away = (t < t[a] - GUARD_SECONDS) | (t > t[b - 1] + GUARD_SECONDS)
+            away_tr = (t_tr < t[a] - GUARD_SECONDS) | (t_tr > t[b - 1] + GUARD_SECONDS) if one_clock else True
             for j in range(n):
                 rows_ho = np.flatnonzero(away & (mask[:, j] > 0))[::HELDOUT_STRIDE]
-                rows_tr = np.flatnonzero(mask_tr[:, j] > 0)[::TRAINING_STRIDE]
+                rows_tr = np.flatnonzero(away_tr & (mask_tr[:, j] > 0))[::TRAINING_STRIDE]
                 if rows_ho.size + rows_tr.size < MIN_ROWS:
                     continue
                 trees = HistGradientBoostingRegressor(
