@@ -111,12 +111,15 @@ class WeightedFit:
         bread = np.linalg.pinv(Cp.T @ Cp, rcond=1e-10)
         return bread @ meat @ bread
 
-    def covariance(self, block: int) -> NDArray[np.float64]:
-        """Block (HAC) sandwich covariance of the baseline coefficients (k, k), NaN for dropped columns."""
-        key = ("covariance", block)
+    def covariance(self, block: int, *, lags: bool = True) -> NDArray[np.float64]:
+        """Block (HAC) sandwich covariance of the baseline coefficients (k, k), NaN for dropped columns.
+
+        ``lags=False`` leaves out the lagged block sums (:func:`_block_meat`): the covariance the
+        parameter-change test's chi^2 allowances were set on."""
+        key = ("covariance", block, lags)
         if key in self._cache:
             return self._cache[key]
-        self._cache[key] = cov = self._covariance(block)
+        self._cache[key] = cov = self._covariance(block, lags)
         return cov
 
     def jackknife_covariance(self, groups: int) -> NDArray[np.float64]:
@@ -149,11 +152,11 @@ class WeightedFit:
         self._cache[key] = cov = self._embedded(cz * (groups - 1) / groups)
         return cov
 
-    def _covariance(self, block: int) -> NDArray[np.float64]:
+    def _covariance(self, block: int, lags: bool = True) -> NDArray[np.float64]:
         m, n = self.shape
         e = self.r0.reshape(m, n)
         Qr = self.Q.reshape(m, n, -1)
-        meat = _block_meat(np.einsum("mnk,mn->mk", Qr, e), block)
+        meat = _block_meat(np.einsum("mnk,mn->mk", Qr, e), block, lags=lags)
         Rinv = scipy.linalg.solve_triangular(self.R, np.eye(self.R.shape[0]))
         return self._embedded(Rinv @ meat @ Rinv.T)
 
@@ -166,7 +169,7 @@ class WeightedFit:
         return cov
 
 
-def _block_meat(g: NDArray[np.float64], block: int) -> NDArray[np.float64]:
+def _block_meat(g: NDArray[np.float64], block: int, *, lags: bool = True) -> NDArray[np.float64]:
     """Middle of a block (HAC) sandwich: the per-sample scores g (m, p) summed over blocks of ``block``
     samples, their outer products with Bartlett-weighted lags (Newey-West at :func:`default_lag` of the
     block count, as the Diebold-Mariano test weighs its block means), scaled to all m samples.
@@ -178,7 +181,7 @@ def _block_meat(g: NDArray[np.float64], block: int) -> NDArray[np.float64]:
     count = max(1, m // block)
     G = g[: count * block].reshape(count, block, -1).sum(axis=1)
     meat = G.T @ G
-    lag = min(default_lag(count), count - 1)
+    lag = min(default_lag(count), count - 1) if lags else 0
     for k in range(1, lag + 1):
         cross = G[k:].T @ G[:-k]
         meat += (1.0 - k / (lag + 1.0)) * (cross + cross.T)
