@@ -22,7 +22,9 @@ Method, in the order it runs:
    ``sum_j r_j^2 / sigma_j^2`` on two footings: refitted with the baseline on the training data (a
    one-sided Diebold-Mariano test on the per-sample loss difference with a Newey-West variance, widened
    by the chance gain that the refit's parameter error allows: fixed over the whole held-out run, so
-   invisible to the serial correlation), and cross-fitted with the baseline on the training data and the
+   invisible to the serial correlation; its covariance is a sandwich over blocks of the training data
+   with their lags weighed as the test weighs its block means, so noise correlated beyond a block
+   counts), and cross-fitted with the baseline on the training data and the
    other held-out folds (the same test, block means capped as the excess test's).  Its p-value is the
    smaller of the two, doubled, then corrected for the many candidates in two families at half the
    level each: Holm across all of them, and Holm across the ``screen_top`` that the training data alone
@@ -55,7 +57,8 @@ Method, in the order it runs:
    stands when this check finds a joint with a significant excess predictable and no significant
    candidate was turned down for closing too little.  Otherwise the verdict is provisional.  Candidates whose columns are nearly parallel once the baseline is projected
    out (small principal angle) are reported as not separable with this excitation.
-6. Parametric test: identified minus nominal base parameters, with a block (HAC) covariance, against
+6. Parametric test: identified minus nominal base parameters, with a block (HAC) covariance (the
+   block sums alone, the covariance its allowances were set on), against
    structured hypotheses (common drive gain, a torque gain on one joint, payload on the last link, an
    armature per joint) by chi^2 / BIC; then the model's own torque offsets and armatures against
    their nominal values.
