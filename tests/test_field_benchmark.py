@@ -205,6 +205,25 @@ def test_an_effect_of_the_size_of_the_noise_is_named_on_the_cross_fitted_footing
     assert first.closure >= 0.5
 
 
+@pytest.mark.slow
+def test_a_delay_the_training_footing_alone_shows_on_coloured_noise_is_not_taken(panda) -> None:
+    """An effect-free field Panda (seed 143 of the false-alarm run).  Fitted beside the baseline on the
+    training data, a "delay" of -4 ms on joint 6 closes 58 % of its gap; cross-fitted it gains nothing.
+    The training footing's allowance for the refit's parameter error took the baseline's covariance from
+    0.1 s block sums, which hold a third of the AR(1) noise's long-run variance: the delay passed, Holm
+    p 0.003, and the verdict was "delay".  With the lagged block sums it is not significant."""
+    from dynid.diagnosis.field_cases import run_field_case
+    from dynid.diagnosis.screening import CROSS
+
+    out = run_field_case(panda, [], level=0.0, seed=143)
+    d = out["diagnosis"]
+    delay = next(r for r in d.ranking if r.candidate.key == "delay@6")
+    assert delay.closure > 0.5 and delay.p_value < 0.01  # it still looks like a lead on its own
+    assert abs(delay.refit["footing"][CROSS]["gain"]) < 0.05
+    assert not delay.significant and delay.p_holm > 0.05
+    assert out["verdict"] == ["none"]
+
+
 def test_the_benchmark_counts_what_an_effect_adds_over_its_effect_free_twin() -> None:
     """Each seed's single cases have a twin (same seed, nothing injected); an effect counts as visible by
     the case's excess minus the twin's on the effect's joints, not by the background the refit leaves."""
