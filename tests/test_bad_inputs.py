@@ -448,7 +448,10 @@ def test_degrees_are_converted_when_asked(base: Path, tmp_path: Path) -> None:
     np.testing.assert_array_equal(ds.tau, load_dataset(base / "D.csv", 6).tau)  # torques untouched
 
 
-@pytest.mark.parametrize(("columns", "joint"), [(slice(7, 13), 2), (slice(12, 13), 6)], ids=["all", "wrist"])
+# One wrist joint alone: joint 5.  Joint 6 peaks at 0.12 N m on this short run, and in mN m (122) it stays
+# under its bound (20 times a tenth of the largest joint's scale: 200 N m, room for a payload), which no
+# check by magnitude can tell from a heavy tool.
+@pytest.mark.parametrize(("columns", "joint"), [(slice(7, 13), 2), (slice(11, 12), 5)], ids=["all", "wrist"])
 def test_torques_in_millinewton_metres_are_refused_given_the_robot(
     base: Path, tmp_path: Path, columns: slice, joint: int
 ) -> None:
