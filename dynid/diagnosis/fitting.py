@@ -174,9 +174,10 @@ def _block_meat(g: NDArray[np.float64], block: int, *, lags: bool = True) -> NDA
     samples, their outer products with Bartlett-weighted lags (Newey-West at :func:`default_lag` of the
     block count, as the Diebold-Mariano test weighs its block means), scaled to all m samples.
 
-    Noise correlated beyond a block carries over into the next blocks: AR(1) torque noise with a time
-    constant as long as the block leaves 37 % of its long-run variance in the block sums alone, 80 % with
-    the lags.  Bartlett weights keep the meat positive semi-definite."""
+    Noise correlated beyond a block carries over into the next blocks: of AR(1) torque noise with a time
+    constant as long as the block, the block sums alone hold 37 % of the long-run variance, and with the
+    four lags of 150 blocks (15 s of 0.1 s blocks) about 80 %.  Bartlett weights keep the meat positive
+    semi-definite."""
     m = g.shape[0]
     count = max(1, m // block)
     G = g[: count * block].reshape(count, block, -1).sum(axis=1)
