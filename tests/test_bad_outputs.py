@@ -487,6 +487,18 @@ def test_an_interrupted_save_leaves_the_old_pair_or_a_refused_one(folder, tmp_pa
         np.testing.assert_array_equal(loaded.params, old.params)
 
 
+def _catches(pid: int, sig: int) -> bool:
+    """Whether process ``pid`` has a handler for signal ``sig`` (Linux: the SigCgt mask of its status)."""
+    try:
+        with open(f"/proc/{pid}/status") as status:
+            for line in status:
+                if line.startswith("SigCgt:"):
+                    return bool(int(line.split()[1], 16) >> (int(sig) - 1) & 1)
+    except OSError:
+        pass
+    return False
+
+
 def test_sigterm_interrupts_a_command_without_leaving_files(folder, tmp_path):
     """A command terminated while it works ends with exit code 130 and one line, no temporary file."""
     import signal
@@ -504,9 +516,13 @@ def test_sigterm_interrupts_a_command_without_leaving_files(folder, tmp_path):
         "--method", "irls", "--friction", "seed", "--gmm", "auto", "--out", str(tmp_path / "M.json"),
     ]  # fmt: skip
     proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    # dynid's handler is in place within a fraction of a second: a signal at 2.5 s lands while the
-    # identification works, not after it returned (then Python ends with -15).
-    time.sleep(2.5)
+    # The signal must land once dynid's handler is in place (before it, Python ends with -15): wait until
+    # the process catches SIGTERM, which a loaded machine can delay by seconds (a fixed 2.5 s was not
+    # always enough), then let the identification work a moment.
+    deadline = time.monotonic() + 60.0
+    while proc.poll() is None and not _catches(proc.pid, signal.SIGTERM) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(0.5)
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=120)
     if proc.returncode == 0:
