@@ -34,8 +34,11 @@ over the true filtered noise); the share right where the refit's excess on the e
 included, is >= 1x (the lab benchmark's measure: on an aperiodic held-out run it counts the refit's own
 parameter error, so effects that add nothing visible are counted as visible); false alarms (the
 effect-free cases and the twins) with the one-sided 95 % upper bound, unknown effects called "unexplained", the share of provisional verdicts, the noise-floor
-method per case (periods / training periods / spectrum) and how often the floor covers the true noise
-(the simulator's injected torque noise put through the diagnosis' filter and trim).  The issue's targets
+method per case (periods / training periods / spectrum), how often the floor covers the true noise
+(the simulator's injected torque noise put through the diagnosis' filter and trim), and how often the
+floor's 95 % interval (:meth:`dynid.validation.metrics.NoiseFloor.std_interval`) covers the std of the
+noise process (:func:`dynid.diagnosis.field_cases.process_noise_std`: what a floor measured on another
+run of the robot estimates).  The issue's targets
 are printed beside the figures; nothing is tuned to them and nothing is asserted.
 
 Run::
@@ -170,6 +173,8 @@ def run_one(case: dict) -> dict:
         "floor": out["floor"],
         "true_noise": out["true_noise"],
         "floor_over_true": out["floor_over_true"],
+        "floor_interval": out["floor_interval"],
+        "process_noise": out["process_noise"],
         "top": [r.candidate.key for r in d.ranking[:3]],
         "undecided": [r.candidate.key for r in d.undecided],
         "remainder_confirms": (
@@ -359,6 +364,20 @@ def _figures(results: list[dict]) -> tuple[list[str], dict]:
                 lines.append(
                     f"  {m}: covers {100 * np.mean(rr >= 1.0):.0f} %, median ratio {np.median(rr):.2f}"
                 )
+    spans = [r for r in done if r.get("floor_interval") and r.get("process_noise")]
+    if spans:
+        lo = np.concatenate([r["floor_interval"][0] for r in spans])
+        hi = np.concatenate([r["floor_interval"][1] for r in spans])
+        proc = np.concatenate([r["process_noise"] for r in spans])
+        known = np.isfinite(lo) & np.isfinite(hi)
+        if known.any():
+            inside = (lo[known] <= proc[known]) & (proc[known] <= hi[known])
+            fig["floor_interval_covers"] = float(np.mean(inside))
+            half = np.median((hi[known] - lo[known]) / 2 / (0.5 * (hi[known] + lo[known])))
+            lines.append(
+                f"Floor's 95 % interval covers the noise process' std (per case and joint, {int(known.sum())}): "
+                f"{100 * np.mean(inside):.1f} % (nominal 95 %); median half-width {100 * half:.0f} % of the std"
+            )
     clos = [r["closure"] for r in results if r["correct"] and r.get("closure") is not None]
     if clos:
         lines.append(f"Closure of the right diagnoses: median {np.median(clos):.2f} over {len(clos)} cases")

@@ -490,6 +490,13 @@ def test_a_floor_from_the_spectrum_makes_the_verdict_provisional(ur5, small):
     lent = diagnose(model, train, slow, max_samples=3000, max_effects=1)
     assert lent.noise.method == "training periods" and not lent.provisional
     assert "did not change between the two recordings" in lent.summary()
+    # The training run's periods also say how well they measure the floor; a spectral bound cannot.
+    floor = lent.to_dict()["noise_floor"]
+    lo, hi = floor["std_interval_95"]
+    known = [j for j, r in enumerate(floor["rel_se"]) if r is not None]
+    assert known, floor
+    assert all(0 < floor["rel_se"][j] < 0.5 and lo[j] < floor["std"][j] < hi[j] for j in known)
+    assert d.to_dict()["noise_floor"]["rel_se"] is None
     np.testing.assert_allclose(lent.noise.std, periodic.noise.std, rtol=0.25)
     assert np.all(lent.noise.std >= d.noise.std * 0.5)
 

@@ -49,6 +49,42 @@ def test_noise_floor_from_repeated_periods(rng, coloured):
     np.testing.assert_allclose(floor.std, noise, rtol=0.05)
 
 
+@pytest.mark.parametrize("periods", [2, 3])
+def test_the_floor_s_interval_covers_the_variance_of_filtered_coloured_noise(periods):
+    # AR(1) torque noise with a 100 ms time constant beside an equal white part, low-passed at 20 Hz as
+    # the preparation does: neighbouring phases are far from independent.  The floor's 95 % interval
+    # must cover the noise's true variance about 95 % of the time; a standard error that took the 5000
+    # phases as independent would be several times too small and cover about one run in six.
+    from scipy.signal import butter, filtfilt, lfilter
+
+    rng = np.random.default_rng(11)
+    fs, period, a = 1000.0, 5.0, np.exp(-1.0 / 100.0)
+    b_lp, a_lp = butter(4, 20.0 / (fs / 2))
+
+    def noise(m):
+        coloured = lfilter([np.sqrt(1 - a * a)], [1, -a], rng.normal(size=m + 3000))[3000:]
+        return filtfilt(b_lp, a_lp, rng.normal(size=m) + coloured)
+
+    true_var = np.var(noise(400_000)[2000:-2000])
+    t = np.arange(round(periods * period * fs)) / fs
+    ratio, rel, covered = [], [], 0
+    for _ in range(300):
+        floor = noise_floor(t, noise(t.size)[:, None], period=period)
+        ratio.append(floor.std[0] ** 2 / true_var)
+        rel.append(floor.rel_se[0])
+        lo, hi = floor.std_interval(0.95)
+        covered += lo[0] ** 2 <= true_var <= hi[0] ** 2
+    assert 0.90 <= covered / 300 <= 0.99
+    # The standard error it states is the spread the floor really has, within 15 %.
+    assert np.mean(rel) == pytest.approx(np.std(ratio), rel=0.15)
+
+
+def test_a_floor_from_the_spectrum_states_no_interval(rng):
+    t, tau, _ = _periodic(rng, periods=3, noise=np.array([0.05, 0.2]))
+    lo, hi = noise_floor(t, tau).std_interval()
+    assert np.all(np.isnan(lo)) and np.all(np.isnan(hi))
+
+
 def test_noise_floor_from_the_spectrum_for_white_noise(rng):
     noise = np.array([0.05, 0.2])
     t, tau, _ = _periodic(rng, periods=3, noise=noise)

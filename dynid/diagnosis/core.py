@@ -47,7 +47,9 @@ Method, in the order it runs:
    (sticking leaves a small excess even on an effect-free robot) plus what differentiating quantised
    angles adds (the encoder's step read from the angles and propagated through the preparation and the
    refit's torque), with block means capped so that an excess on a few moves is not lost in its own
-   variance (:func:`dynid.diagnosis.stats.excess_test`); the sources counted as noise are listed.
+   variance (:func:`dynid.diagnosis.stats.excess_test`); the sources counted as noise are listed.  A
+   "none" notes how far the measured floor's own 95 % interval reaches
+   (:meth:`dynid.validation.metrics.NoiseFloor.std_interval`).
    When the verdict is "unexplained", or the floor is only a spectral lower bound, a check that does
    not rest on the floor runs (:mod:`.remainder`): gradient-boosted trees on the state, fitted on the
    training run and the other held-out folds, predict each fold's residual of the final model; a
@@ -366,7 +368,10 @@ def _noise_floor(train_prep, heldout_prep, period: float | None) -> NoiseFloor:
     if np.any(higher):
         joints = ", ".join(str(j + 1) for j in np.flatnonzero(higher))
         detail += f"; the held-out spectral level is higher on joint(s) {joints} and is used there"
-    return NoiseFloor(std=np.maximum(noise.std, trained.std), method="training periods", detail=detail)
+    rel = None if trained.rel_se is None else np.where(higher, np.nan, trained.rel_se)
+    return NoiseFloor(
+        std=np.maximum(noise.std, trained.std), method="training periods", detail=detail, rel_se=rel
+    )
 
 
 def _block_rows(ho: bl.Sample, block_seconds: float) -> int:
@@ -419,6 +424,15 @@ def _verdict(
             )
     else:
         verdict = ["none"]
+        _, high = noise.std_interval(0.95)
+        reach = np.square(high / np.maximum(noise.std, 1e-300))
+        if np.isfinite(reach).any():
+            j = int(np.nanargmax(reach))
+            notes.append(
+                f"The floor is itself measured, from the spread across periods: its 95 % interval reaches "
+                f"{reach[j]:.2g} times its variance (joint {j + 1}), so a held-out error up to about that "
+                "many times the floor can be the floor's own error, not an effect.  More periods narrow it."
+            )
     if noise.method == "training periods":
         notes.insert(
             0,

