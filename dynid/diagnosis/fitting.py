@@ -15,6 +15,7 @@ import scipy.linalg
 from numpy.typing import NDArray
 
 from dynid.diagnosis.stats import default_lag
+from dynid.identify.estimators import bartlett_weights
 
 __all__ = ["WeightedFit", "losses", "mse", "predict"]
 
@@ -183,9 +184,9 @@ def _block_meat(g: NDArray[np.float64], block: int, *, lags: bool = True) -> NDA
     G = g[: count * block].reshape(count, block, -1).sum(axis=1)
     meat = G.T @ G
     lag = min(default_lag(count), count - 1) if lags else 0
-    for k in range(1, lag + 1):
+    for k, w in enumerate(bartlett_weights(lag), start=1):
         cross = G[k:].T @ G[:-k]
-        meat += (1.0 - k / (lag + 1.0)) * (cross + cross.T)
+        meat += w * (cross + cross.T)
     return meat * (m / (count * block))
 
 

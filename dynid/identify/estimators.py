@@ -63,6 +63,7 @@ __all__ = [
     "WLS",
     "IdentificationWarning",
     "LinkEstimator",
+    "bartlett_weights",
     "bounded_triangular",
     "check_is_fitted",
     "long_run_factor",
@@ -430,7 +431,7 @@ def long_run_factor(E: NDArray[np.float64], floor: float = 1.0) -> tuple[NDArray
     acov = _autocovariance(E, lag)
     var = np.where(acov[0] > 0, acov[0], 1.0)
     rho = acov[1:] / var
-    kappa = 1.0 + 2.0 * (_bartlett(lag) @ rho)
+    kappa = 1.0 + 2.0 * (bartlett_weights(lag) @ rho)
     return np.maximum(kappa, max(floor, 1.0)), lag
 
 
@@ -465,7 +466,7 @@ def long_run_variance(E: NDArray[np.float64], lag: int) -> NDArray[np.float64]:
         )
     D = (E - E.mean(axis=0)).reshape(m, -1)
     acov = _autocovariance(D, lag)
-    out = (acov[0] + 2.0 * (_bartlett(lag) @ acov[1:])) / m
+    out = (acov[0] + 2.0 * (bartlett_weights(lag) @ acov[1:])) / m
     return out.reshape(E.shape[1:])
 
 
@@ -476,8 +477,9 @@ def _autocovariance(E: NDArray[np.float64], lag: int) -> NDArray[np.float64]:
     return np.fft.irfft(np.abs(F) ** 2, n=size, axis=0)[: lag + 1]
 
 
-def _bartlett(lag: int) -> NDArray[np.float64]:
-    """Bartlett weights ``1 - k / (L + 1)`` for k = 1..L, (L,)."""
+def bartlett_weights(lag: int) -> NDArray[np.float64]:
+    """Bartlett weights ``1 - k / (L + 1)`` for k = 1..L, (L,): the Newey-West weights of lags 1..L, which
+    keep a long-run variance (or a sandwich's meat) non-negative."""
     return 1.0 - np.arange(1, lag + 1) / (lag + 1.0)
 
 
