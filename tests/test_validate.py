@@ -104,6 +104,53 @@ def test_noise_floor_of_a_filtered_torque_is_the_filtered_noise(rng, period):
     np.testing.assert_allclose(floor.std, truth, rtol=0.15)
 
 
+def test_a_robot_playing_the_excite_csv_gets_its_floor_from_the_periods(ur5):
+    # The CSV of dynid excite is a rest, an approach, three periods, a retreat and a rest: the run as a
+    # whole does not repeat, its middle does.  The floor comes from that stretch (it fell back to the
+    # spectrum's lower bound before) and agrees with the floor of the same periods recorded alone.
+    from dynid.optim.approach import executable_trajectory
+    from dynid.sim.cases import case_excitation
+    from dynid.sim.simulator import simulate
+    from dynid.validation.noise import measure_noise, repeating_stretch
+
+    exc = case_excitation(ur5, 3, base_freq=0.2)  # 5 s period
+    played = executable_trajectory(ur5, exc, rate=500.0, periods=3, rest=2.0)
+    pre = Preprocessing(cutoff=20.0)
+    prep = prepare(simulate(ur5, played, friction="linear", seed=5).to_dataset(), pre)
+    floor = measure_noise(prep)
+    assert floor.method == "periods" and "the stretch that repeats" in floor.detail, floor.detail
+    alone = measure_noise(
+        prepare(simulate(ur5, exc, duration=15.0, friction="linear", seed=6).to_dataset(), pre)
+    )
+    assert alone.method == "periods"
+    # Within three standard errors of the two floors' variances (about 5 % and 8 % here).
+    tol = 3 * np.hypot(floor.rel_se, alone.rel_se)
+    assert np.all(np.abs(floor.std**2 / alone.std**2 - 1) < tol), (floor.std / alone.std, tol)
+    # The stretch lies within the excitation (the approach's and the retreat's torque differs), and
+    # spans nearly all of its three periods.
+    a, b, period = repeating_stretch(prep.q, prep.fs, ddq=prep.ddq)
+    excitation = next(s for s in played.meta["segments"] if s["kind"] == "excitation")
+    start, stop = excitation["start"], excitation["start"] + excitation["duration"]
+    assert period == pytest.approx(5.0, abs=2 / prep.fs)
+    assert start - 0.01 <= prep.t[a] and prep.t[b - 1] <= stop + 0.01
+    assert prep.t[b - 1] - prep.t[a] > 2.8 * period
+
+
+def test_an_aperiodic_run_with_rests_has_no_stretch_that_repeats(ur5):
+    # Minimum-jerk moves between random waypoints, with rests: a rest repeats itself, but no motion does.
+    from dynid.diagnosis.field_cases import min_jerk_motion
+    from dynid.sim.simulator import simulate
+    from dynid.validation.noise import measure_noise, repeating_stretch
+
+    motion = min_jerk_motion(ur5, np.random.default_rng(3), 20.0)
+    prep = prepare(
+        simulate(ur5, motion, duration=20.0, friction="linear", seed=3).to_dataset(),
+        Preprocessing(cutoff=20.0),
+    )
+    assert repeating_stretch(prep.q, prep.fs, ddq=prep.ddq) is None
+    assert measure_noise(prep).method == "spectrum"
+
+
 def test_noise_floor_of_a_raw_torque_is_its_white_level(rng):
     t, q, clean, noise = _noisy_sine(rng)
     prep = prepare(Dataset(t, q, clean + noise, dq=q * 0, ddq=q * 0), Preprocessing(cutoff=None))

@@ -110,23 +110,25 @@ field's AR(1) torque noise); longer lags add estimation noise, not information."
 
 
 def variance_rel_se(deviations: np.ndarray, rows_per_lag_window: int) -> np.ndarray:
-    """Relative standard error of a floor's variance: the spread across periods averaged over the phase.
+    """Relative standard error of a floor's variance: the spread across periods pooled over the phase.
 
     The spread at neighbouring phases is correlated (coloured noise, the filter), so its samples are not
     independent.  For Gaussian noise with autocovariance ``g(h)`` along the phase, independent between
     periods, the spread ``s_k`` across ``P`` periods at phase ``k`` has ``cov(s_i, s_j) = 2 g(i - j)^2 /
     (P - 1)`` (Isserlis), so its mean over ``K`` phases has variance
-    ``2 / ((P - 1) K) [g(0)^2 + 2 sum_h (1 - h / K) g(h)^2]``.  ``g`` is estimated from the deviations from
-    the period mean (all ``P K`` samples, scaled by ``P / (P - 1)`` for the mean removed) and summed up
-    to ``rows_per_lag_window`` lags (Bartlett weights there would drop a sixth of the sum for the field's noise).
-    On AR(1) + white noise, filtered, 2 or 3 periods, it is within 5 % of the spread of the floor over
-    400 runs, and the 95 % interval of :meth:`NoiseFloor.std_interval` covers the true variance in
-    93-96 % of them.  Heavy-tailed noise (spikes) makes it optimistic.
+    ``2 / ((P - 1) K) [g(0)^2 + 2 sum_h (1 - h / K) g(h)^2]``; with a different number of periods per
+    phase, ``(P - 1) K`` is the pooled degrees of freedom ``D``.  ``g`` is estimated from the deviations
+    from the period mean (the products of the samples present, scaled by samples over ``D`` for the mean
+    removed) and summed up to ``rows_per_lag_window`` lags (Bartlett weights there would drop a sixth of
+    the sum for the field's noise).  On AR(1) + white noise, filtered, 2 or 3 periods, it is within 5 % of
+    the spread of the floor over 400 runs, and the 95 % interval of :meth:`NoiseFloor.std_interval`
+    covers the true variance in 93-96 % of them.  Heavy-tailed noise (spikes) makes it optimistic.
 
     Parameters
     ----------
     deviations : ndarray, shape (P, K, n)
-        The torque minus its mean over the periods, per period and phase.
+        The torque minus its mean over the periods, per period and phase; NaN where a period holds no
+        sample at that phase (the same phases for every joint).
     rows_per_lag_window : int
         Largest lag summed (rows).
 
@@ -138,15 +140,24 @@ def variance_rel_se(deviations: np.ndarray, rows_per_lag_window: int) -> np.ndar
     dev = np.asarray(deviations, dtype=float)
     if dev.ndim == 2:
         dev = dev[:, :, None]
-    count, per, _ = dev.shape
+    present = np.isfinite(dev[:, :, 0])
+    dev = np.where(np.isfinite(dev), dev, 0.0)
+    per = dev.shape[1]
+    dof = float(np.sum(np.maximum(present.sum(axis=0) - 1, 0)))
+    if dof <= 0:
+        return np.full(dev.shape[2], np.nan)
     lag = int(min(max(rows_per_lag_window, 0), per - 1))
     size = 1 << int(np.ceil(np.log2(2 * per)))
-    F = np.fft.rfft(dev, n=size, axis=1)
-    acov = np.fft.irfft(np.abs(F) ** 2, n=size, axis=1)[:, : lag + 1].sum(axis=0)  # (lag + 1, n)
-    g = acov / (count * (per - np.arange(lag + 1)))[:, None] * count / (count - 1)
+
+    def lagged(x):
+        F = np.fft.rfft(x, n=size, axis=1)
+        return np.fft.irfft(np.abs(F) ** 2, n=size, axis=1)[:, : lag + 1].sum(axis=0)
+
+    pairs = lagged(present.astype(float)[:, :, None])  # samples paired at each lag, (lag + 1, 1)
+    g = lagged(dev) / np.maximum(pairs, 1.0) * (present.sum() / dof)
     weight = 1.0 - np.arange(1, lag + 1) / per
     total = g[0] ** 2 + 2.0 * (weight @ g[1:] ** 2)
-    var_mean = 2.0 * total / ((count - 1) * per)
+    var_mean = 2.0 * total / dof
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(g[0] > 0, np.sqrt(var_mean) / g[0], np.nan)
 
@@ -157,6 +168,7 @@ def noise_floor(
     *,
     period: float | None = None,
     band_start: float | None = None,
+    lead: int = 0,
 ) -> NoiseFloor:
     """Measure the noise floor of a torque recording.
 
@@ -175,6 +187,10 @@ def noise_floor(
         quarter of the Nyquist frequency.  The level of the Welch spectrum there (its median, robust
         to leftover harmonics) extended to the whole band gives the variance: right for white noise,
         a lower bound for noise coloured towards low frequencies.
+    lead : int
+        Samples before the whole periods at the end that repeat too (a part of one more period: what
+        trimming the ends of a run of whole periods leaves); they join the spread at their phases.  The
+        caller checks that they repeat (:func:`dynid.validation.noise.measure_noise`).
     """
     t = np.asarray(t, dtype=float)
     tau = np.atleast_2d(np.asarray(tau, dtype=float))
@@ -190,10 +206,18 @@ def noise_floor(
         count = t.size // per
         if count >= 2 and abs(per * dt - period) < 0.01 * dt * per:
             start = t.size - count * per  # whole periods at the end (the start may hold an approach)
-            stack = tau[start:].reshape(count, per, -1)
-            # Unbiased spread across periods, averaged over the phase.
-            var = np.mean(np.var(stack, axis=0, ddof=1), axis=0)
-            rel = variance_rel_se(stack - stack.mean(axis=0), round(CORRELATION_SECONDS / dt))
+            lead = int(min(max(lead, 0), start))
+            # The whole periods, and the ``lead`` samples before them at the last phases of one more:
+            # NaN where a period holds no sample.
+            stack = np.full((count + (lead > 0), per, tau.shape[1]), np.nan)
+            stack[int(lead > 0) :] = tau[start:].reshape(count, per, -1)
+            if lead:
+                stack[0, per - lead :] = tau[start - lead : start]
+            dev = stack - np.nanmean(stack, axis=0)
+            dof = np.sum(np.isfinite(stack[:, :, 0]), axis=0) - 1
+            # Unbiased spread across periods at each phase, pooled over the phase.
+            var = np.nansum(dev**2, axis=(0, 1)) / dof.sum()
+            rel = variance_rel_se(dev, round(CORRELATION_SECONDS / dt))
             known = np.isfinite(rel)
             precision = (
                 f"; its variance known to +-{100 * float(np.median(rel[known])):.0f} % (one standard error, "
@@ -204,7 +228,9 @@ def noise_floor(
             return NoiseFloor(
                 std=np.sqrt(var),
                 method="periods",
-                detail=f"spread across {count} periods of {period:g} s{precision}",
+                detail=f"spread across {count} periods of {period:g} s"
+                + (f" and {lead * dt:.3g} s of one more" if lead else "")
+                + precision,
                 rel_se=rel,
             )
     fs = 1.0 / dt

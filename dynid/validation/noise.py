@@ -3,8 +3,9 @@
 Both :func:`dynid.validation.validate.reference_noise_floor` and the gap diagnosis
 (:func:`dynid.diagnosis.core.diagnose`) measure it here, so a validation and a diagnosis of the same data
 agree: the spread of the filtered torque across the periods of a periodic excitation
-(:func:`dynid.validation.metrics.noise_floor`), else the spectral level of the raw torque through the
-filter's noise gain.
+(:func:`dynid.validation.metrics.noise_floor`), over the stretch of the run that repeats when the run
+also holds rests and moves that do not (:func:`repeating_stretch`), else the spectral level of the raw
+torque through the filter's noise gain.
 
 >>> floor = measure_noise(model.prepare(heldout))      # NoiseFloor: std (N m) per joint
 >>> detect_period(prep.t, prep.q)                       # s, or None
@@ -17,6 +18,7 @@ import math
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.ndimage import binary_opening, uniform_filter1d
 
 from dynid.exceptions import DataError
 from dynid.identify.periodic import period_of
@@ -30,6 +32,7 @@ __all__ = [
     "encoder_step",
     "filter_noise_gain",
     "measure_noise",
+    "repeating_stretch",
 ]
 
 MIN_SPECTRAL_SAMPLES = 2048
@@ -84,9 +87,12 @@ def measure_noise(prep: Prepared, *, period: float | None = None) -> NoiseFloor:
     prep : Prepared
         The data as the model sees them.
     period : float, optional
-        Period (s) of the excitation; detected from the angles when not given.  A period after which
-        neither the angles nor the filtered torque repeat (to :data:`REPEAT_TOL`) is not used, and the
-        floor's detail says so.
+        Period (s) of the excitation; detected from the angles when not given.  When the run as a whole
+        does not repeat (to :data:`REPEAT_TOL`), the stretch of it that does is used
+        (:func:`repeating_stretch`: a robot playing the CSV of ``dynid excite`` records a rest and an
+        approach before the periods, a retreat and a rest after them), with the part period it holds
+        beyond its whole periods; without such a stretch a given period is not used, and the floor's
+        detail says so.
 
     Returns
     -------
@@ -103,6 +109,7 @@ def measure_noise(prep: Prepared, *, period: float | None = None) -> NoiseFloor:
     span = slice(int(rows[0]), int(rows[-1]) + 1)
     t = prep.t[span]
     ignored = ""
+    given = period
     if period is not None and not (
         _repeats(prep.q[span], period * prep.fs) or _repeats(prep.filter(prep.tau)[span], period * prep.fs)
     ):
@@ -118,6 +125,23 @@ def measure_noise(prep: Prepared, *, period: float | None = None) -> NoiseFloor:
         floor = noise_floor(t, tau_f, period=period)
         if floor.method == "periods":
             return floor
+    # A periodic excitation recorded between rests and moves that do not repeat (a robot playing the CSV
+    # of dynid excite: rest, approach, the periods, retreat, rest): the stretch that repeats.
+    found = repeating_stretch(prep.q[span], prep.fs, ddq=prep.ddq[span], period=given)
+    if found is not None:
+        a, b, per = found
+        sub = slice(span.start + a, span.start + b)
+        # The stretch holds whole periods and part of one more, which repeats too: it joins the spread.
+        lead = (b - a) % round(per * prep.fs)
+        floor = noise_floor(prep.t[sub], prep.filter(prep.tau)[sub], period=per, lead=lead)
+        if floor.method == "periods":
+            return NoiseFloor(
+                std=floor.std,
+                method="periods",
+                detail=f"{floor.detail}; over t = {prep.t[sub.start]:.4g}..{prep.t[sub.stop - 1]:.4g} s, the "
+                "stretch that repeats (the rest of the run does not)",
+                rel_se=floor.rel_se,
+            )
     m = run.stop - run.start
     if m < MIN_SPECTRAL_SAMPLES:
         have = f"{(t[-1] - t[0]) / period:.2f} periods of {period:.3g} s" if period else "no repeated period"
@@ -133,6 +157,132 @@ def measure_noise(prep: Prepared, *, period: float | None = None) -> NoiseFloor:
         method="spectrum",
         detail=raw.detail + (f", times the filter's noise gain {gain:.3g}" if gain != 1.0 else "") + ignored,
     )
+
+
+STRETCH_TOL = 1e-4
+"""Largest mismatch of the angles one period apart, sample by sample, relative to their spread, inside a
+stretch that repeats (:func:`repeating_stretch`)."""
+STRETCH_TOL_DDQ = 1e-3
+"""The same for the filtered accelerations."""
+
+
+def repeating_stretch(
+    q: NDArray[np.float64],
+    fs: float,
+    *,
+    ddq: NDArray[np.float64] | None = None,
+    period: float | None = None,
+    min_period: float = 0.5,
+) -> tuple[int, int, float] | None:
+    """The longest stretch of a run whose angles repeat a period, and the period.
+
+    A robot playing an excitation records more than its periods: a rest, an approach, the periods, a
+    retreat, a rest.  The run as a whole then does not repeat, but the middle does.  For each candidate
+    lag (the period given, else the peaks of the overlap-normalised autocorrelation of the angles from
+    ``min_period`` to half the run, shortest first) the angles are compared one lag apart sample by
+    sample; the longest stretch within :data:`STRETCH_TOL` of their spread that spans at least two
+    periods, and moves (its spread at least a tenth of the run's: a long rest also repeats), is taken.
+    With ``ddq``, the accelerations must repeat too: their mismatch, averaged over 0.05 s, may exceed
+    :data:`STRETCH_TOL_DDQ` of their spread (and ten times its median where the angles repeat) for less
+    than 0.2 s only, the bursts of differentiated quantised angles.  Where a retreat leaves the periodic
+    motion, the angles stay within a few microradians for a tenth of a second while the accelerations, and
+    so the torque, already differ.  A detected lag is refined to the least
+    mismatch over the stretch within 1 %.
+
+    Parameters
+    ----------
+    q : ndarray, shape (m, n)
+        Joint angles (rad), uniformly sampled.
+    fs : float
+        Sample rate (Hz).
+    ddq : ndarray, shape (m, n), optional
+        Joint accelerations (rad/s^2), filtered.
+    period : float, optional
+        Period (s) of the excitation, if known.
+    min_period : float
+        Shortest period considered when detecting (s).
+
+    Returns
+    -------
+    (start, stop, period) or None
+        Sample indices of the stretch (``stop`` exclusive) and the period (s).
+    """
+    x = np.asarray(q, dtype=float)
+    x = x - x.mean(axis=0)
+    m = len(x)
+    spread = float(np.mean(np.sum(x**2, axis=1))) if m else 0.0
+    if spread <= 0 or m < 8:
+        return None
+    if period is not None:
+        candidates = [round(period * fs)]
+    else:
+        lo, hi = max(1, int(min_period * fs)), m // 2
+        if hi <= lo + 2:
+            return None
+        nfft = 1 << math.ceil(math.log2(2 * m))
+        f = np.fft.rfft(x, nfft, axis=0)
+        ac = np.fft.irfft(np.sum(np.abs(f) ** 2, axis=1), nfft)[: hi + 2]
+        lags = np.arange(lo, hi + 1)
+        score = ac[lags] / (m - lags)
+        peak = np.flatnonzero((score[1:-1] >= score[:-2]) & (score[1:-1] >= score[2:])) + 1
+        candidates = sorted(int(k) for k in lags[peak[np.argsort(score[peak])[::-1][:10]]])
+
+    if ddq is not None:
+        a2 = np.asarray(ddq, dtype=float)
+        a2 = a2 - a2.mean(axis=0)
+        spread2 = max(float(np.mean(np.sum(a2**2, axis=1))), 1e-300)
+
+    def stretch(k: int, accelerations: bool) -> tuple[int, int] | None:
+        good = np.sum((x[k:] - x[:-k]) ** 2, axis=1) <= STRETCH_TOL * spread
+        if accelerations and ddq is not None and good.any():
+            # Where the accelerations differ for a fifth of a second or more, the motion differs; shorter
+            # bursts are the noise of differentiated quantised angles (an angle one count off in one
+            # period), which the torque does not share.
+            e2 = uniform_filter1d(np.sum((a2[k:] - a2[:-k]) ** 2, axis=1), max(1, round(0.05 * fs)))
+            bad = e2 > max(STRETCH_TOL_DDQ * spread2, 10.0 * float(np.median(e2[good])))
+            good &= ~binary_opening(bad, structure=np.ones(max(1, round(0.2 * fs)), dtype=bool))
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], good.astype(np.int8), [0]])))
+        if not edges.size:
+            return None
+        starts, stops = edges[0::2], edges[1::2]
+        i = int(np.argmax(stops - starts))
+        return int(starts[i]), int(stops[i])
+
+    def refine(k: int, a: int, b: int) -> int:
+        """The lag within 1 % of ``k`` whose angles match best over ``a:b``."""
+        width = max(2, int(0.01 * k))
+        ks = range(max(1, k - width), min(m // 2, k + width) + 1)
+        return min(
+            ks,
+            key=lambda j: float(
+                np.mean(np.sum((x[a + j : min(b, m - j) + j] - x[a : min(b, m - j)]) ** 2, axis=1))
+            ),
+        )
+
+    for k in candidates:
+        if not 0 < k <= m // 2:
+            continue
+        if period is None:  # the autocorrelation's peak is only near the period: the lag that repeats most
+            width = max(2, int(0.01 * k))
+            ks = range(max(1, k - width), min(m // 2, k + width) + 1)
+            k = max(
+                ks, key=lambda j: int(np.sum(np.sum((x[j:] - x[:-j]) ** 2, axis=1) <= STRETCH_TOL * spread))
+            )
+        found = stretch(k, False)
+        if found is None or found[1] - found[0] < k:
+            continue
+        a, b = found
+        if period is None:  # the exact lag: the best match over the stretch
+            k = refine(k, a, b)
+        found = stretch(k, True)
+        if found is None or found[1] - found[0] < k:
+            continue
+        a, b = found
+        seg = x[a : b + k]
+        if float(np.mean(np.sum((seg - seg.mean(axis=0)) ** 2, axis=1))) < 0.1 * spread:
+            continue  # a rest repeats too
+        return a, b + k, k / fs
+    return None
 
 
 REPEAT_TOL = 1e-2
