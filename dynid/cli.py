@@ -71,6 +71,22 @@ def _terminate(signum: int, frame: object) -> None:
     raise KeyboardInterrupt(signal.Signals(signum).name)
 
 
+def _forget_nested_interrupt() -> None:
+    """Clear CPython's record of an uncaught KeyboardInterrupt, once dynid has caught it.
+
+    An interrupt that lands while an extension runs Python code through ``PyRun_String`` leaves that
+    code uncaught, and CPython records it; at exit the interpreter then kills itself with SIGINT
+    (status -2) instead of returning dynid's exit code 130, though dynid caught the interrupt, removed
+    its files and said so.  Every ``PyRun_*`` evaluation clears the record: one of ``pass`` does.
+    """
+    try:
+        import ctypes
+
+        ctypes.pythonapi.PyRun_SimpleStringFlags(b"pass", None)
+    except (AttributeError, OSError):  # not CPython: no such record
+        pass
+
+
 def build_parser() -> argparse.ArgumentParser:
     from dynid import __version__
 
@@ -147,6 +163,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt as exc:
         reason = f" by {exc.args[0]}" if exc.args else ""
         print(f"dynid {args.command}: interrupted{reason}; no file was left half written", file=sys.stderr)
+        _forget_nested_interrupt()
         return 130
     finally:
         for sig, handler in previous.items():
