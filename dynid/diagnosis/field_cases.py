@@ -151,15 +151,16 @@ def min_jerk_motion(
     )
 
 
-def injected_noise(result: SimulationResult) -> NDArray[np.float64]:
+def injected_noise(result: SimulationResult, rng: np.random.Generator | None = None) -> NDArray[np.float64]:
     """The torque noise (m, n) (N m) the simulator added to the measured torque of ``result``.
 
     Drawn again from the run's noise seed (:func:`dynid.sim.sensors.measured_torque`), at the control
     rate, and kept at the output samples.  The current quantisation (``current_lsb``) is not included.
+    With ``rng``, a fresh draw of the same noise model instead.
     """
     ticks = round(float(result.t[-1] - result.t[0]) * result.control_rate) + 1
     stride = round(result.control_rate / result.rate)
-    rng = np.random.default_rng([result.seed, 1])
+    rng = np.random.default_rng([result.seed, 1]) if rng is None else rng
     return torque_noise(result.noise, result.truth.scales.torque, ticks, rng)[::stride][: len(result.t)]
 
 
@@ -304,41 +305,33 @@ def true_noise_std(model, case: FieldCase) -> NDArray[np.float64]:
     The noise is put through the preprocessing the diagnosis gives the held-out torque (the model's,
     :func:`dynid.diagnosis.baseline.model_structure`), at the rows it keeps.
     """
-    from dynid.diagnosis.baseline import model_structure
-    from dynid.identify.preparation import Preprocessing, prepare
-
-    structure = model_structure(model, None, case.train, case.heldout)
-    ho = case.heldout
-    prep = prepare(
-        Dataset(ho.t, ho.q, case.heldout_noise),
-        Preprocessing.from_settings(structure.preprocessing),
-        n_joints=structure.robot.n,
-    )
-    return np.std(prep.filter(prep.tau)[prep.rows], axis=0)
+    return np.sqrt(_filtered_variance(model, case, [case.heldout_noise]))
 
 
 def process_noise_std(model, case: FieldCase, draws: int = 16) -> NDArray[np.float64]:
     """Std (n,) (N m) of the noise process itself after the diagnosis' filter and trim: the variance
     :func:`true_noise_std` averaged over ``draws`` fresh realisations of the held-out run's noise (the
     same model, other seeds), which is what a floor measured on another run of the robot estimates."""
+    run = case.heldout_run
+    noises = (injected_noise(run, np.random.default_rng([run.seed, 2, k])) for k in range(draws))
+    return np.sqrt(_filtered_variance(model, case, noises))
+
+
+def _filtered_variance(model, case: FieldCase, noises) -> NDArray[np.float64]:
+    """Mean over ``noises`` (each (m, n), N m, at the held-out run's samples) of their variance per joint
+    through the diagnosis' preprocessing of the held-out run, at the rows it keeps."""
     from dynid.diagnosis.baseline import model_structure
     from dynid.identify.preparation import Preprocessing, prepare
 
     structure = model_structure(model, None, case.train, case.heldout)
-    run = case.heldout_run
-    ticks = round(float(run.t[-1] - run.t[0]) * run.control_rate) + 1
-    stride = round(run.control_rate / run.rate)
-    total = np.zeros(structure.robot.n)
-    for k in range(draws):
-        rng = np.random.default_rng([run.seed, 2, k])
-        noise = torque_noise(run.noise, run.truth.scales.torque, ticks, rng)[::stride][: len(run.t)]
-        prep = prepare(
-            Dataset(run.t, case.heldout.q, noise),
-            Preprocessing.from_settings(structure.preprocessing),
-            n_joints=structure.robot.n,
-        )
+    settings = Preprocessing.from_settings(structure.preprocessing)
+    ho = case.heldout
+    total, count = np.zeros(structure.robot.n), 0
+    for noise in noises:
+        prep = prepare(Dataset(ho.t, ho.q, noise), settings, n_joints=structure.robot.n)
         total += np.var(prep.filter(prep.tau)[prep.rows], axis=0)
-    return np.sqrt(total / draws)
+        count += 1
+    return total / count
 
 
 def run_field_case(

@@ -63,6 +63,7 @@ __all__ = [
     "WLS",
     "IdentificationWarning",
     "LinkEstimator",
+    "autocovariance",
     "bartlett_weights",
     "bounded_triangular",
     "check_is_fitted",
@@ -428,7 +429,7 @@ def long_run_factor(E: NDArray[np.float64], floor: float = 1.0) -> tuple[NDArray
     lag = int(min(max(np.ceil(8 * floor), np.floor(4 * (m / 100.0) ** (2 / 9))), m // 4))
     if lag < 1:
         return np.full(E.shape[1], max(floor, 1.0)), 0
-    acov = _autocovariance(E, lag)
+    acov = autocovariance(E, lag)
     var = np.where(acov[0] > 0, acov[0], 1.0)
     rho = acov[1:] / var
     kappa = 1.0 + 2.0 * (bartlett_weights(lag) @ rho)
@@ -465,13 +466,14 @@ def long_run_variance(E: NDArray[np.float64], lag: int) -> NDArray[np.float64]:
             f"the Newey-West lag is {lag}; with {m} samples it must be from 0 to {m - 1}: give a lag in that range."
         )
     D = (E - E.mean(axis=0)).reshape(m, -1)
-    acov = _autocovariance(D, lag)
+    acov = autocovariance(D, lag)
     out = (acov[0] + 2.0 * (bartlett_weights(lag) @ acov[1:])) / m
     return out.reshape(E.shape[1:])
 
 
-def _autocovariance(E: NDArray[np.float64], lag: int) -> NDArray[np.float64]:
-    """``sum_t e_t e_{t+k}`` for k = 0..lag of each column of E (m, n) (zero-padded FFT), (lag + 1, n)."""
+def autocovariance(E: NDArray[np.float64], lag: int) -> NDArray[np.float64]:
+    """``sum_t e_t e_{t+k}`` for k = 0..lag of each column of E (m, n) (zero-padded FFT), (lag + 1, n): the
+    lagged products, not divided by their count."""
     size = 1 << int(np.ceil(np.log2(2 * len(E))))
     F = np.fft.rfft(E, n=size, axis=0)
     return np.fft.irfft(np.abs(F) ** 2, n=size, axis=0)[: lag + 1]

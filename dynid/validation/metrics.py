@@ -137,6 +137,8 @@ def variance_rel_se(deviations: np.ndarray, rows_per_lag_window: int) -> np.ndar
     ndarray, shape (n,)
         NaN for a joint whose spread is zero.
     """
+    from dynid.identify.estimators import autocovariance  # here: torque_metrics' users need not load it
+
     dev = np.asarray(deviations, dtype=float)
     if dev.ndim == 2:
         dev = dev[:, :, None]
@@ -147,11 +149,12 @@ def variance_rel_se(deviations: np.ndarray, rows_per_lag_window: int) -> np.ndar
     if dof <= 0:
         return np.full(dev.shape[2], np.nan)
     lag = int(min(max(rows_per_lag_window, 0), per - 1))
-    size = 1 << int(np.ceil(np.log2(2 * per)))
 
-    def lagged(x):
-        F = np.fft.rfft(x, n=size, axis=1)
-        return np.fft.irfft(np.abs(F) ** 2, n=size, axis=1)[:, : lag + 1].sum(axis=0)
+    def lagged(x: np.ndarray) -> np.ndarray:
+        """Lagged products along the phase, summed over the periods: (lag + 1, columns)."""
+        count, _, cols = x.shape
+        acov = autocovariance(x.transpose(1, 0, 2).reshape(per, count * cols), lag)
+        return acov.reshape(lag + 1, count, cols).sum(axis=1)
 
     pairs = lagged(present.astype(float)[:, :, None])  # samples paired at each lag, (lag + 1, 1)
     g = lagged(dev) / np.maximum(pairs, 1.0) * (present.sum() / dof)

@@ -15,6 +15,7 @@ torque through the filter's noise gain.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -110,8 +111,9 @@ def measure_noise(prep: Prepared, *, period: float | None = None) -> NoiseFloor:
     t = prep.t[span]
     ignored = ""
     given = period
+    tau_f = prep.filter(prep.tau)[span]
     if period is not None and not (
-        _repeats(prep.q[span], period * prep.fs) or _repeats(prep.filter(prep.tau)[span], period * prep.fs)
+        _repeats(prep.q[span], period * prep.fs) or _repeats(tau_f, period * prep.fs)
     ):
         ignored = (
             f"; neither the angles nor the torque repeat after the period of {period:g} s given, so it is "
@@ -121,7 +123,6 @@ def measure_noise(prep: Prepared, *, period: float | None = None) -> NoiseFloor:
     elif period is None:
         period = detect_period(t, prep.q[span])
     if period is not None and (t[-1] - t[0]) >= 2 * period - 1.5 / prep.fs:
-        tau_f = prep.filter(prep.tau)[span]
         floor = noise_floor(t, tau_f, period=period)
         if floor.method == "periods":
             return floor
@@ -130,17 +131,14 @@ def measure_noise(prep: Prepared, *, period: float | None = None) -> NoiseFloor:
     found = repeating_stretch(prep.q[span], prep.fs, ddq=prep.ddq[span], period=given)
     if found is not None:
         a, b, per = found
-        sub = slice(span.start + a, span.start + b)
         # The stretch holds whole periods and part of one more, which repeats too: it joins the spread.
         lead = (b - a) % round(per * prep.fs)
-        floor = noise_floor(prep.t[sub], prep.filter(prep.tau)[sub], period=per, lead=lead)
+        floor = noise_floor(t[a:b], tau_f[a:b], period=per, lead=lead)
         if floor.method == "periods":
-            return NoiseFloor(
-                std=floor.std,
-                method="periods",
-                detail=f"{floor.detail}; over t = {prep.t[sub.start]:.4g}..{prep.t[sub.stop - 1]:.4g} s, the "
-                "stretch that repeats (the rest of the run does not)",
-                rel_se=floor.rel_se,
+            return replace(
+                floor,
+                detail=f"{floor.detail}; over t = {t[a]:.4g}..{t[b - 1]:.4g} s, the stretch that repeats (the "
+                "rest of the run does not)",
             )
     m = run.stop - run.start
     if m < MIN_SPECTRAL_SAMPLES:
@@ -272,14 +270,14 @@ def repeating_stretch(
     for k in candidates:
         if not 0 < k <= m // 2:
             continue
-        if period is None:  # the autocorrelation's peak is only near the period: the lag that repeats most
+        if period is None:
+            # The autocorrelation's peak is only near the period: the lag that repeats most, then the one
+            # that matches best over the stretch of the angles alone.
             k = max(near(k), key=repeating)
-        found = stretch(k, False)
-        if found is None or found[1] - found[0] < k:
-            continue
-        a, b = found
-        if period is None:  # the exact lag: the best match over the stretch
-            k = refine(k, a, b)
+            found = stretch(k, False)
+            if found is None or found[1] - found[0] < k:
+                continue
+            k = refine(k, *found)
         found = stretch(k, True)
         if found is None or found[1] - found[0] < k:
             continue
