@@ -144,7 +144,13 @@ def run_one(case: dict) -> dict:
     started, cpu = time.perf_counter(), time.process_time()
     try:
         out = run_field_case(
-            robot, case["injected"], level=case["level"], seed=case["seed"], catalogue=catalogue, noise=noise
+            robot,
+            case["injected"],
+            level=case["level"],
+            seed=case["seed"],
+            catalogue=catalogue,
+            noise=noise,
+            train_periods=case.get("train_periods", 3),
         )
     except Exception as err:  # a failed case is reported, not hidden
         return {**case, "error": f"{type(err).__name__}: {err}", "correct": False, "label": "error"}
@@ -437,6 +443,12 @@ def main() -> None:
         default=14,
         help="resolution of the stress group's angles (bits/rev; 0: no stress group)",
     )
+    parser.add_argument(
+        "--train-periods",
+        type=int,
+        default=3,
+        help="periods of the training run (default 3, what dynid simulate records by default)",
+    )
     parser.add_argument("--n-jobs", type=int, default=2)
     parser.add_argument("--json", default=None, help="write every case's result and the figures to this file")
     args = parser.parse_args()
@@ -450,11 +462,12 @@ def main() -> None:
     for c in cases:
         c["encoder_bits"] = args.encoder_bits
         c["group"] = "main"
+        c["train_periods"] = args.train_periods
     if args.stress_bits:
         stress = build_cases(
             robots, seeds[:1], 2, effects=QUICK_EFFECTS, levels=(3.0,), unknown_levels=(3.0,)
         )
-        cases += [{**c, "encoder_bits": args.stress_bits, "group": "stress"} for c in stress]
+        cases += [{**c, "encoder_bits": args.stress_bits, "group": "stress", "train_periods": args.train_periods} for c in stress]
     if args.only:
         keep = set(args.only.split(","))
         unknown = keep - set(EFFECT_NAMES) - {"none"}

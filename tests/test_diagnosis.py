@@ -417,7 +417,7 @@ def test_an_excess_left_by_uncertain_parameters_is_not_called_a_gap(ur5):
     assert d.excess["estimation"][0] > 1.0
     r = d.residuals["before"][:, 0] / d.residuals["noise_std"][0]
     block = round(d.settings["block_seconds"] / float(np.median(np.diff(d.residuals["t"]))))
-    level = 1 + d.excess["tolerance"]
+    level = 1 + d.excess["tolerance"][0]
     assert st.excess_test(r**2, level, block=block) < 0.01  # significant without the estimation term
     assert d.excess["p_joint"][0] > 0.05
     assert case["verdict"] == ["none"]

@@ -220,3 +220,26 @@ def test_the_excess_test_takes_a_level_per_sample(rng):
     assert excess_test(loss, 1.0 * mask, block=10) == pytest.approx(excess_test(loss - mask, 0.0, block=10))
     assert excess_test(loss, 1.0, block=10) > 0.99  # the old constant level: a quarter of the rows below it
     assert excess_test(loss + 0.05 * mask, 1.0 * mask, block=10) < 1e-6
+
+
+def test_the_excess_test_allows_for_a_floor_measured_with_its_own_error():
+    """The loss is scaled by a measured floor whose variance has a 20 % standard error: a floor drawn
+    too low lifts the loss over it, which the floor taken as exact calls an excess.  The true mean sits
+    exactly at the level (1.3 true noise variances), so a right test rejects about alpha of the time."""
+    rng = np.random.default_rng(11)
+    rel, level, block, trials = 0.2, 1.3, 10, 400
+    nu = 2.0 / rel**2
+    plain = aware = 0
+    for _ in range(trials):
+        u = rng.chisquare(nu) / nu  # the floor's variance over the true one
+        loss = level * rng.chisquare(1, size=block * 300) / u
+        plain += excess_test(loss, level, block=block) < 0.05
+        aware += excess_test(loss, level, block=block, scaled=level, rel_se=rel, draws=4000) < 0.05
+    assert plain / trials > 0.25  # the floor's error alone fires the test taken as exact
+    assert 0.01 <= aware / trials <= 0.08
+    # an excess well beyond what the floor's error can explain is still found
+    loss = 2.0 * level * rng.chisquare(1, size=block * 300)
+    assert excess_test(loss, level, block=block, scaled=level, rel_se=rel) < 0.01
+    # the cap, applied per draw of the floor's error, keeps the same answer when it does not bite
+    capped = excess_test(loss, level, block=block, scaled=level, rel_se=rel, cap=1e6)
+    assert capped == pytest.approx(excess_test(loss, level, block=block, scaled=level, rel_se=rel), rel=1e-9)

@@ -507,13 +507,19 @@ def excess_over_floor(
     *,
     crossfit: NDArray[np.float64] | None = None,
     state_variance: NDArray[np.float64] | None = None,
+    floor_rel_se: NDArray[np.float64] | None = None,
 ) -> dict[str, Any]:
     """Excess of the refit's held-out error over the noise floor, per joint, and its significance.
 
-    Per joint: is the excess above ``1 + excess_tol`` noise variances (plus the state estimation's share,
+    Per joint: is the excess above ``1 + tol`` noise variances (plus the state estimation's share,
     ``state_variance``), beyond the serial correlation and beyond what the baseline's own parameters
-    explain on held-out data?  A training run that excites a joint poorly leaves its parameters uncertain,
-    and the held-out motion can see that error at many times the noise floor (an effect-free UR5 run on
+    explain on held-out data?  Where the floor states its precision (``floor_rel_se``, the relative
+    standard error of its variance per joint: a floor measured across periods), the test integrates the
+    floor's own error (:func:`dynid.diagnosis.stats.excess_test`'s ``rel_se``) and ``tol`` is
+    ``settings.measured_excess_tol``; elsewhere the floor is taken as exact and the wider
+    ``settings.excess_tol`` absorbs its error.
+
+    A training run that excites a joint poorly leaves its parameters uncertain, and the held-out motion can see that error at many times the noise floor (an effect-free UR5 run on
     an aperiodic held-out motion showed 16 noise variances of it on joint 2, 17 times what the refit's
     covariance allows: what the training run's noise cannot show).  With ``crossfit`` (the residual of
     :func:`crossfit_residual`) the test runs on what a baseline that has seen the rest of the held-out run
@@ -525,14 +531,17 @@ def excess_over_floor(
     dict
         ``ratio`` (per joint: the refit's held-out MSE over the floor), ``ratio_tested`` (what the test
         ran on: the cross-fitted residual's), ``ratio_overall``, ``p_joint`` (Holm-adjusted), ``p_value``,
-        ``significant_joint``, ``significant``, ``tolerance``, ``estimation`` (the share of the refit's
+        ``significant_joint``, ``significant``, ``tolerance`` (per joint), ``floor_rel_se`` (per joint,
+        None where not integrated), ``estimation`` (the share of the refit's
         parameter error, noise variances per joint: expected from its covariance, or, cross-fitted, what
         the refit on the other held-out folds removes), ``state_estimation`` (noise variances per joint),
         ``explainable`` (the sources counted as noise-like).
     """
     mh = ho.moving
     n = mh.shape[1]
-    tol = settings.excess_tol
+    rel = np.full(n, np.nan) if floor_rel_se is None else np.asarray(floor_rel_se, dtype=float)
+    known = np.isfinite(rel) & (rel > 0)
+    tol = np.where(known, settings.measured_excess_tol, settings.excess_tol)
     ratio_joint = base.mse / sigma**2
     ratio_all = float(np.sum(base.loss) / np.sum(mh))
     state = np.zeros(n) if state_variance is None else np.asarray(state_variance, dtype=float)
@@ -552,10 +561,12 @@ def excess_over_floor(
         [
             st.excess_test(
                 mh[:, j] * (r_test[:, j] / sigma[j]) ** 2,
-                (1 + tol + state[j]) * mh[:, j],
+                (1 + tol[j] + state[j]) * mh[:, j],
                 share[j] * est_w[j],
                 block=block,
                 cap=_CAP,
+                scaled=(1 + tol[j]) * mh[:, j],
+                rel_se=float(rel[j]) if known[j] else None,
             )
             for j in range(n)
         ]
@@ -571,6 +582,7 @@ def excess_over_floor(
         "significant_joint": sig_joint,
         "significant": bool(sig_joint.any()),
         "tolerance": tol,
+        "floor_rel_se": [float(r) if k else None for r, k in zip(rel, known, strict=True)],
         "estimation": (
             np.array([float(np.sum(wj)) for wj in est_w])
             if crossfit is None

@@ -43,8 +43,10 @@ Method, in the order it runs:
    noise floor is significant, ``["none"]`` when not.  The excess is tested on what the baseline cannot
    predict even when refitted with the rest of the held-out run (contiguous folds, cross-fitted: an
    aperiodic held-out motion that leaves the training states shows the refit's parameter error at many
-   times the floor, which its covariance does not foresee), above ``1 + excess_tol`` noise variances
-   (sticking leaves a small excess even on an effect-free robot) plus what differentiating quantised
+   times the floor, which its covariance does not foresee), above ``1 + measured_excess_tol`` noise
+   variances with the floor's own sampling error integrated where the floor is measured across periods
+   and states its precision, else above ``1 + excess_tol`` with the floor taken as exact (sticking leaves
+   a small excess even on an effect-free robot), plus what differentiating quantised
    angles adds (the encoder's step read from the angles and propagated through the preparation and the
    refit's torque), with block means capped so that an excess on a few moves is not lost in its own
    variance (:func:`dynid.diagnosis.stats.excess_test`); the sources counted as noise are listed.  A
@@ -113,6 +115,7 @@ def diagnose(
     min_gain: float = 0.15,
     min_closure: float = 0.5,
     excess_tol: float = 1.0,
+    measured_excess_tol: float = 0.5,
     period: float | None = None,
     max_samples: int = 12000,
     block_seconds: float = 0.1,
@@ -136,7 +139,7 @@ def diagnose(
         noise floor is then the spread across periods).
     robot : RobotModel, optional
         The robot, when ``model`` is None.
-    effects, alpha, max_effects, min_gain, min_closure, excess_tol, period, max_samples, block_seconds, refit, confound_deg, stick_fraction, screen_top
+    effects, alpha, max_effects, min_gain, min_closure, excess_tol, measured_excess_tol, period, max_samples, block_seconds, refit, confound_deg, stick_fraction, screen_top
         The settings, documented once in :class:`~dynid.diagnosis.settings.DiagnosisSettings` (the
         defaults there are the method's).
 
@@ -162,6 +165,7 @@ def diagnose(
         min_gain=min_gain,
         min_closure=min_closure,
         excess_tol=excess_tol,
+        measured_excess_tol=measured_excess_tol,
         period=period,
         max_samples=max_samples,
         block_seconds=block_seconds,
@@ -215,7 +219,15 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
     # (:func:`~dynid.diagnosis.baseline.crossfit_residual`) and the first round's cross-fitted footing.
     cross0 = cross_fitted(ctx, base.fit, tr.X0, ho.X0, bl.FOLDS)
     excess = bl.excess_over_floor(
-        base.fit, ho, held, sigma, block, settings, crossfit=cross0.residual, state_variance=state_var
+        base.fit,
+        ho,
+        held,
+        sigma,
+        block,
+        settings,
+        crossfit=cross0.residual,
+        state_variance=state_var,
+        floor_rel_se=noise.rel_se,
     )
 
     skip = _in_model(structure)
@@ -290,6 +302,7 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
             "min_gain": settings.min_gain,
             "min_closure": settings.min_closure,
             "excess_tol": settings.excess_tol,
+            "measured_excess_tol": settings.measured_excess_tol,
             "block_seconds": settings.block_seconds,
             "screen_top": settings.screen_top,
             "samples_train": int(tr.y.shape[0]),

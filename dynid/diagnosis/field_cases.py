@@ -211,6 +211,7 @@ def field_case(
     friction: str = "linear",
     armature: bool = True,
     noise: NoiseModel | None = None,
+    train_periods: int = TRAIN_PERIODS,
 ) -> FieldCase:
     """Simulate the training and held-out runs of a field case.
 
@@ -227,13 +228,16 @@ def field_case(
     heldout_seconds : float
         Length (s) of the aperiodic held-out motion.
     base_freq : float
-        Base frequency (Hz) of the training excitation; it runs for three periods.
+        Base frequency (Hz) of the training excitation.
     friction : str
         Truth friction.
     armature : bool
         Whether the model will identify an armature (the calibration leaves the motor inertia out then).
     noise : NoiseModel, optional
         The sensor model; :func:`field_noise` by default.
+    train_periods : int
+        Periods of the training run (the effects' level is calibrated on :data:`TRAIN_PERIODS` of them
+        whatever this is, so that a case differs only in what was recorded).
 
     Returns
     -------
@@ -270,7 +274,7 @@ def field_case(
     tr = simulate(
         robot,
         train_traj,
-        duration=TRAIN_PERIODS * period,
+        duration=train_periods * period,
         friction=friction,
         effects=effects,
         seed=seed,
@@ -346,13 +350,14 @@ def run_field_case(
     armature: bool = True,
     noise: NoiseModel | None = None,
     diagnose_options: dict[str, Any] | None = None,
+    train_periods: int = TRAIN_PERIODS,
 ) -> dict[str, Any]:
     """Simulate a field case, identify a model without the effects, diagnose and classify it.
 
     Parameters
     ----------
     robot : RobotModel
-    injected, level, seed, heldout_seconds, friction, armature, noise
+    injected, level, seed, heldout_seconds, friction, armature, noise, train_periods
         As in :func:`field_case`.
     catalogue : sequence of str
         Effects the diagnosis is told about; an injected effect outside it is an unknown effect.
@@ -373,7 +378,7 @@ def run_field_case(
 
     case = field_case(
         robot, injected, level=level, seed=seed, heldout_seconds=heldout_seconds, friction=friction,
-        armature=armature, noise=noise,
+        armature=armature, noise=noise, train_periods=train_periods,
     )  # fmt: skip
     truth_injected = []
     for req in parse_effects(list(case.specs)):

@@ -33,7 +33,12 @@ class DiagnosisSettings:
         excess is significant and none does, the verdict is ``["unexplained"]``.
     excess_tol : float
         The baseline's excess counts only when its ratio to the noise floor exceeds ``1 + excess_tol``
-        (state estimation leaves a small excess even on an effect-free robot).
+        (state estimation leaves a small excess even on an effect-free robot), where the floor's own
+        precision is unknown (a spectral lower bound): the tolerance then also absorbs the floor's error.
+    measured_excess_tol : float
+        The same where the floor states its precision (a floor measured across periods,
+        :attr:`dynid.validation.metrics.NoiseFloor.rel_se`): the excess test then integrates the floor's
+        error itself, and the tolerance only allows for the model's small misfit.
     period : float or None
         Period (s) of the held-out excitation; detected from the angles when None.
     max_samples : int
@@ -66,6 +71,7 @@ class DiagnosisSettings:
     min_gain: float = 0.15
     min_closure: float = 0.5
     excess_tol: float = 1.0
+    measured_excess_tol: float = 0.5
     period: float | None = None
     max_samples: int = 12000
     block_seconds: float = 0.1

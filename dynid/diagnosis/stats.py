@@ -169,6 +169,8 @@ def excess_test(
     lag: int | None = None,
     draws: int = 20000,
     cap: float | None = None,
+    scaled: ArrayLike | None = None,
+    rel_se: float | None = None,
 ) -> float:
     """One-sided p-value of "the mean of ``loss`` is above ``level`` plus the estimation term".
 
@@ -200,16 +202,41 @@ def excess_test(
         Monte Carlo draws of the estimation term.
     cap : float, optional
         Upper bound of a block mean of ``loss - level`` (same unit as the loss); None: no bound.
+    scaled, rel_se
+        The part of ``level`` (same shape) that is a multiple of the true noise variance, when the loss
+        is scaled by a noise floor that is itself measured, its variance with relative standard error
+        ``rel_se`` (:attr:`dynid.validation.metrics.NoiseFloor.rel_se`).  A floor measured too low raises
+        the loss over it and the true level alike, so that part of the level is divided by the floor's
+        error ``u`` (measured over true variance), taken as ``chi^2_nu / nu`` with ``nu = 2 / rel_se^2``
+        (Satterthwaite, as :meth:`~dynid.validation.metrics.NoiseFloor.std_interval`), and integrated by
+        Monte Carlo with the estimation term.  None, zero or NaN: the floor is taken as exact.
     """
     x = np.asarray(loss, dtype=float) - np.asarray(level, dtype=float)
     mean, var_mean, _, count = _block_mean(x, block, lag, "the loss", "an excess test", cap=cap)
     se = math.sqrt(var_mean)
     w = np.asarray(weights, dtype=float).ravel()
     w = w[w > 1e-12 * max(float(w.max()), 1e-300)] if w.size else w
-    if not w.size:
+    floor_known = scaled is not None and rel_se is not None and math.isfinite(rel_se) and rel_se > 0
+    if not w.size and not floor_known:
         return float(stats.t.sf(mean / se, df=count - 1))
-    z = np.random.default_rng(0).standard_normal((draws, w.size))
-    q = (z**2) @ w
+    rng = np.random.default_rng(0)
+    q = (rng.standard_normal((draws, w.size)) ** 2) @ w if w.size else np.zeros(draws)
+    if floor_known:
+        nu = 2.0 / float(rel_se) ** 2
+        u = rng.chisquare(nu, draws) / nu
+        b = max(1, int(block))
+        xb = x[: count * b].reshape(count, b).mean(axis=1)
+        sb = np.broadcast_to(np.asarray(scaled, dtype=float), x.shape)[: count * b].reshape(count, b).mean(axis=1)
+        if cap is None:
+            mean = xb.mean() - (1.0 / u - 1.0) * sb.mean()
+        else:  # capped block means, a few million at a time
+            step = max(1, 2_000_000 // count)
+            mean = np.concatenate(
+                [
+                    np.minimum(xb[None, :] - np.outer(1.0 / u[i : i + step] - 1.0, sb), float(cap)).mean(axis=1)
+                    for i in range(0, draws, step)
+                ]
+            )
     return float(np.mean(stats.t.sf((mean - q) / se, df=count - 1)))
 
 
