@@ -553,6 +553,14 @@ def excess_over_floor(
         r_test = crossfit
         est_w = [np.zeros(0) for _ in range(n)]
         sources = ["torque noise (floor)", "the baseline's parameters refitted on the other held-out folds"]
+    if known.any():
+        sources.insert(
+            1,
+            f"the floor's own sampling error (its variance known to +-{100 * float(np.median(rel[known])):.0f} %; "
+            f"{settings.measured_excess_tol:g} noise variance of misfit allowed beside it"
+            + (f", {settings.excess_tol:g} where its precision is unknown" if not known.all() else "")
+            + ")",
+        )
     if np.any(state > 0):
         sources.append("state estimation from quantised angles")
     ratio_test = mse(r_test, mh) / sigma**2
