@@ -497,6 +497,12 @@ def test_a_floor_from_the_spectrum_makes_the_verdict_provisional(ur5, small):
     assert known, floor
     assert all(0 < floor["rel_se"][j] < 0.5 and lo[j] < floor["std"][j] < hi[j] for j in known)
     assert d.to_dict()["noise_floor"]["rel_se"] is None
+    # The excess test draws a measured floor's error and then allows half a noise variance of misfit; a
+    # spectral bound, of unknown precision, keeps the wider tolerance that absorbs its error.
+    tol = lent.to_dict()["excess"]["tolerance"]
+    assert [tol[j] for j in known] == [0.5] * len(known)
+    assert [lent.excess["floor_rel_se"][j] for j in known] == [floor["rel_se"][j] for j in known]
+    assert list(d.excess["tolerance"]) == [1.0] * len(tol) and set(d.excess["floor_rel_se"]) == {None}
     np.testing.assert_allclose(lent.noise.std, periodic.noise.std, rtol=0.25)
     assert np.all(lent.noise.std >= d.noise.std * 0.5)
 

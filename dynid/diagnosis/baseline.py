@@ -519,9 +519,10 @@ def excess_over_floor(
     ``settings.measured_excess_tol``; elsewhere the floor is taken as exact and the wider
     ``settings.excess_tol`` absorbs its error.
 
-    A training run that excites a joint poorly leaves its parameters uncertain, and the held-out motion can see that error at many times the noise floor (an effect-free UR5 run on
-    an aperiodic held-out motion showed 16 noise variances of it on joint 2, 17 times what the refit's
-    covariance allows: what the training run's noise cannot show).  With ``crossfit`` (the residual of
+    A training run that excites a joint poorly leaves its parameters uncertain, and the held-out motion
+    can see that error at many times the noise floor (an effect-free UR5 run on an aperiodic held-out
+    motion showed 16 noise variances of it on joint 2, 17 times what the refit's covariance allows: what
+    the training run's noise cannot show).  With ``crossfit`` (the residual of
     :func:`crossfit_residual`) the test runs on what a baseline that has seen the rest of the held-out run
     still leaves; without it, the refit's parameter error is allowed for through its block covariance.
     Block means are capped at ``_CAP`` noise variances above the level (:func:`dynid.diagnosis.stats.excess_test`).

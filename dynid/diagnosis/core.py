@@ -444,7 +444,10 @@ def _verdict(
             notes.append(
                 f"The floor is itself measured, from the spread across periods: its 95 % interval reaches "
                 f"{reach[j]:.2g} times its variance (joint {j + 1}), so a held-out error up to about that "
-                "many times the floor can be the floor's own error, not an effect.  More periods narrow it."
+                "many times the floor can be the floor's own error, not an effect; the excess test allows for "
+                "it, so an effect of about that size can hide in it.  More periods narrow it: on simulated "
+                "field recordings, eight periods measured it about twice as precisely as three "
+                "(dynid simulate --periods, dynid excite --csv --periods)."
             )
     if noise.method == "training periods":
         notes.insert(
