@@ -34,7 +34,7 @@ import numpy as np
 UNKNOWN = "coupled_friction"
 
 
-def run_one(robot_name: str, kind: str, seed: int) -> dict:
+def run_one(robot_name: str, kind: str, seed: int, train_periods: int = 3) -> dict:
     from dynid.diagnosis.field_cases import field_noise, run_field_case
     from dynid.sim.effects import EFFECT_NAMES
     from dynid.symbolic import load_robot
@@ -43,7 +43,13 @@ def run_one(robot_name: str, kind: str, seed: int) -> dict:
     injected = [UNKNOWN] if kind == "unknown" else []
     catalogue = [e for e in EFFECT_NAMES if e != UNKNOWN] if kind == "unknown" else list(EFFECT_NAMES)
     out = run_field_case(
-        robot, injected, level=1.0 if injected else 0.0, seed=seed, catalogue=catalogue, noise=field_noise()
+        robot,
+        injected,
+        level=1.0 if injected else 0.0,
+        seed=seed,
+        catalogue=catalogue,
+        noise=field_noise(),
+        train_periods=train_periods,
     )
     d = out["diagnosis"]
     tested = np.asarray(d.excess["ratio_tested"], dtype=float)
@@ -52,6 +58,7 @@ def run_one(robot_name: str, kind: str, seed: int) -> dict:
     joint = robot.n - 1 if injected else int(np.argmax(tested))
     return {
         "robot": robot_name,
+        "train_periods": train_periods,
         "kind": kind,
         "seed": seed,
         "verdict": out["verdict"],
@@ -67,17 +74,31 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=6, help="seeds of the unknown effect at 1x per robot")
     parser.add_argument("--none", type=int, default=25, help="effect-free cases per robot")
     parser.add_argument("--robots", default="ur5,panda")
+    parser.add_argument(
+        "--train-periods",
+        default="3",
+        help="comma-separated periods of the training run, each a setting of its own (e.g. 3,8)",
+    )
     parser.add_argument("--n-jobs", type=int, default=2)
     args = parser.parse_args()
+    settings = [int(v) for v in args.train_periods.split(",")]
     from joblib import Parallel, delayed
 
     jobs = []
-    for name in args.robots.split(","):
-        jobs += [(name, "unknown", s) for s in range(1, args.seeds + 1)]
-        jobs += [(name, "none", 101 + 20 * k) for k in range(args.none)]
+    for periods in settings:
+        for name in args.robots.split(","):
+            jobs += [(name, "unknown", s, periods) for s in range(1, args.seeds + 1)]
+            jobs += [(name, "none", 101 + 20 * k, periods) for k in range(args.none)]
     started = time.perf_counter()
-    rows = Parallel(n_jobs=args.n_jobs)(delayed(run_one)(*j) for j in jobs)
-    for name in args.robots.split(","):
+    results = Parallel(n_jobs=args.n_jobs)(delayed(run_one)(*j) for j in jobs)
+    for periods in settings:
+        print(f"##### training run of {periods} periods")
+        summarise([r for r in results if r["train_periods"] == periods], args.robots.split(","))
+    print(f"{len(results)} cases, wall time {(time.perf_counter() - started) / 60:.1f} min on {args.n_jobs} workers")
+
+
+def summarise(rows: list[dict], robots: list[str]) -> None:
+    for name in robots:
         print(f"=== {name} ===")
         for kind, label in (("unknown", f"{UNKNOWN} at 1x (its last joint)"), ("none", "effect-free (largest joint)")):
             sel = [r for r in rows if r["robot"] == name and r["kind"] == kind]
@@ -106,7 +127,6 @@ def main() -> None:
             + "/".join(f"{v:.2f}" for v in np.quantile(ratio, [0.1, 0.5, 0.9]))
             + ")"
         )
-    print(f"{len(rows)} cases, wall time {(time.perf_counter() - started) / 60:.1f} min on {args.n_jobs} workers")
 
 
 if __name__ == "__main__":
