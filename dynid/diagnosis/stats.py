@@ -142,6 +142,11 @@ def diebold_mariano(
     return DMResult(mean=mean, stat=stat, p_value=p, lag=lag, blocks=count)
 
 
+def _means_of_blocks(x: NDArray[np.float64], block: int, count: int) -> NDArray[np.float64]:
+    """Means of the first ``count`` blocks of ``block`` samples of ``x``."""
+    return x[: count * block].reshape(count, block).mean(axis=1)
+
+
 def _block_mean(x: NDArray[np.float64], block: int, lag: int | None, what: str, test: str, cap=None):
     """Mean of a series, the variance of that mean from its block means (Newey-West), the lag used and
     the block count; a clear error when there are fewer than 8 blocks.  With ``cap``, every block mean is
@@ -153,7 +158,7 @@ def _block_mean(x: NDArray[np.float64], block: int, lag: int | None, what: str, 
             f"{what} has {x.size} samples, {count} blocks of {block}; {test} needs at least 8 blocks: give "
             "longer held-out data."
         )
-    means = x[: count * block].reshape(count, block).mean(axis=1)
+    means = _means_of_blocks(x, block, count)
     if cap is not None:
         means = np.minimum(means, float(cap))
     lag = default_lag(count) if lag is None else int(lag)
@@ -225,8 +230,8 @@ def excess_test(
         nu = 2.0 / float(rel_se) ** 2
         u = rng.chisquare(nu, draws) / nu
         b = max(1, int(block))
-        xb = x[: count * b].reshape(count, b).mean(axis=1)
-        sb = np.broadcast_to(np.asarray(scaled, dtype=float), x.shape)[: count * b].reshape(count, b).mean(axis=1)
+        xb = _means_of_blocks(x, b, count)
+        sb = _means_of_blocks(np.broadcast_to(np.asarray(scaled, dtype=float), x.shape), b, count)
         if cap is None:
             mean = xb.mean() - (1.0 / u - 1.0) * sb.mean()
         else:  # capped block means, a few million at a time

@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 
 from dynid.exceptions import UsageError
 
-__all__ = ["PERIOD_RULES", "period_of"]
+__all__ = ["PERIOD_RULES", "overlap_autocorrelation", "period_of"]
 
 PERIOD_RULES = ("correlation", "repeat")
 """The rules :func:`period_of` knows."""
@@ -99,6 +99,18 @@ def _correlation_period(u: NDArray[np.float64]) -> int | None:
     return lag if m >= 1.5 * lag else None
 
 
+def overlap_autocorrelation(x: NDArray[np.float64], lo: int, hi: int) -> NDArray[np.float64]:
+    """Autocorrelation of the signals ``x`` (m, d), summed over the columns and divided by the overlap
+    ``m - k``, at the lags ``k = lo..hi`` (``hi < m``): it peaks at multiples of a period.  ``x`` is taken
+    as given (centre it first)."""
+    m = len(x)
+    nfft = 1 << math.ceil(math.log2(2 * m))
+    f = np.fft.rfft(x, nfft, axis=0)
+    ac = np.fft.irfft(np.sum(np.abs(f) ** 2, axis=1), nfft)
+    lags = np.arange(lo, hi + 1)
+    return ac[lags] / (m - lags)
+
+
 def _repeat_period(u: NDArray[np.float64], min_lag: int) -> int | None:
     q = np.asarray(u, dtype=float)
     m = len(q)
@@ -108,16 +120,13 @@ def _repeat_period(u: NDArray[np.float64], min_lag: int) -> int | None:
     spread = float(np.sum(x**2) / m)
     if spread <= 0:
         return None
-    nfft = 1 << math.ceil(math.log2(2 * m))
-    f = np.fft.rfft(x, nfft, axis=0)
-    ac = np.fft.irfft(np.sum(np.abs(f) ** 2, axis=1), nfft)[:m]
     lo = max(1, int(min_lag))
     hi = m // 2
     if hi <= lo:
         return None
     # Normalised by the overlap, the autocorrelation peaks at multiples of the period.
     lags = np.arange(lo, hi + 1)
-    score = ac[lags] / (m - lags)
+    score = overlap_autocorrelation(x, lo, hi)
     order = np.argsort(score)[::-1][:20]
 
     def mismatch(k: int) -> float:

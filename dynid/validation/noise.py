@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 from scipy.ndimage import binary_opening, uniform_filter1d
 
 from dynid.exceptions import DataError
-from dynid.identify.periodic import period_of
+from dynid.identify.periodic import overlap_autocorrelation, period_of
 from dynid.identify.preparation import Prepared
 from dynid.validation.metrics import NoiseFloor, noise_floor
 
@@ -217,11 +217,8 @@ def repeating_stretch(
         lo, hi = max(1, int(min_period * fs)), m // 2
         if hi <= lo + 2:
             return None
-        nfft = 1 << math.ceil(math.log2(2 * m))
-        f = np.fft.rfft(x, nfft, axis=0)
-        ac = np.fft.irfft(np.sum(np.abs(f) ** 2, axis=1), nfft)[: hi + 2]
         lags = np.arange(lo, hi + 1)
-        score = ac[lags] / (m - lags)
+        score = overlap_autocorrelation(x, lo, hi)
         peak = np.flatnonzero((score[1:-1] >= score[:-2]) & (score[1:-1] >= score[2:])) + 1
         candidates = sorted(int(k) for k in lags[peak[np.argsort(score[peak])[::-1][:10]]])
 
