@@ -188,6 +188,7 @@ def run_one(case: dict) -> dict:
         "process_noise": out["process_noise"],
         "top": [r.candidate.key for r in d.ranking[:3]],
         "undecided": [r.candidate.key for r in d.undecided],
+        "consistency_lead": [j + 1 for j, hit in enumerate(d.consistency["lead_joint"]) if hit],
         "remainder_confirms": (
             bool(np.any(d.remainder["predictable_joint"])) if d.remainder is not None else None
         ),
@@ -263,9 +264,7 @@ def _figures(results: list[dict]) -> tuple[list[str], dict]:
             f"joints (the case minus its effect-free twin): {_pct(ok, len(seen))}  (target >= "
             f"{100 * TARGETS['right']:.0f} %)"
         )
-        seen_t = [
-            r for r in singles if r.get("error") or (_added(r, twins, "excess_true") or 0.0) >= 1.0
-        ]
+        seen_t = [r for r in singles if r.get("error") or (_added(r, twins, "excess_true") or 0.0) >= 1.0]
         lines.append(
             "  the same over the true (injected, filtered) noise: "
             f"{_pct(sum(r['correct'] for r in seen_t), len(seen_t))}"
@@ -341,7 +340,13 @@ def _figures(results: list[dict]) -> tuple[list[str], dict]:
         if not r["correct"]:
             lines.append(
                 f"    {r['robot']} {r['level']:g}x seed {r['seed']}: {r.get('verdict', r.get('error'))}"
+                + (
+                    f", consistency lead on joint {r['consistency_lead']}"
+                    if r.get("consistency_lead")
+                    else ""
+                )
             )
+    lines.append(_lead_line(results))
     unexplained = [r for r in results if not r.get("error") and r.get("verdict") == ["unexplained"]]
     if unexplained:
         parts = []
@@ -401,6 +406,18 @@ def _figures(results: list[dict]) -> tuple[list[str], dict]:
         if r.get("error"):
             lines.append(f"ERROR {r['robot']} {r['injected']} {r['level']}x seed {r['seed']}: {r['error']}")
     return lines, fig
+
+
+def _lead_line(results: list[dict]) -> str:
+    """How often a "none" verdict carries a consistency lead (:mod:`dynid.diagnosis.consistency`)."""
+    parts = []
+    for kind, label in (("none", "effect-free"), ("twin", "twins"), ("unknown", "unknown effect")):
+        rs = [r for r in results if r["kind"] == kind and not r.get("error") and r.get("verdict") == ["none"]]
+        if rs:
+            parts.append(f"{label} {sum(bool(r.get('consistency_lead')) for r in rs)}/{len(rs)}")
+    return 'Consistency leads under a "none" verdict (the runs disagree on a joint\'s parameters): ' + (
+        ", ".join(parts) or "no such verdict"
+    )
 
 
 def report(results: list[dict]) -> tuple[str, dict]:
@@ -482,7 +499,10 @@ def main() -> None:
         stress = build_cases(
             robots, seeds[:1], 2, effects=QUICK_EFFECTS, levels=(3.0,), unknown_levels=(3.0,)
         )
-        cases += [{**c, "encoder_bits": args.stress_bits, "group": "stress", "train_periods": args.train_periods} for c in stress]
+        cases += [
+            {**c, "encoder_bits": args.stress_bits, "group": "stress", "train_periods": args.train_periods}
+            for c in stress
+        ]
     if args.only:
         keep = set(args.only.split(","))
         unknown = keep - set(EFFECT_NAMES) - {"none", "unknown"}

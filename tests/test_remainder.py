@@ -95,7 +95,8 @@ def test_on_a_spectral_floor_a_verdict_is_provisional_exactly_where_it_rests_on_
     """A lower-bound floor can only overstate the gap.  "None" stands; accepted effects stand when they
     remove half of the whole held-out error on their joints (no floor enters); "unexplained" stands when
     the floor-free check finds a joint with a significant excess predictable, and no significant candidate
-    was turned down for closing too little.  A measured floor is never provisional."""
+    was turned down for closing too little, or when the two runs disagree on a joint's parameters (no
+    floor enters there either).  A measured floor is never provisional."""
     from types import SimpleNamespace
 
     from dynid.diagnosis.core import _provisional
@@ -108,8 +109,8 @@ def test_on_a_spectral_floor_a_verdict_is_provisional_exactly_where_it_rests_on_
     rem_elsewhere = SimpleNamespace(predictable=np.array([True, False, False]))
     none_sel = SimpleNamespace(accepted=[], ranking=[], mse=mse)
 
-    def status(verdict, sel, rem, measured=False):
-        return _provisional(verdict, measured, rem, sel, excess, settings, mse)[0]
+    def status(verdict, sel, rem, measured=False, disagree=(False, False, False)):
+        return _provisional(verdict, measured, rem, sel, excess, settings, mse, np.array(disagree))[0]
 
     assert not status(["none"], none_sel, None)
     # Accepted on joint 2: 10 -> 4 removes 60 % of its whole error; 10 -> 6, 40 %.
@@ -118,6 +119,8 @@ def test_on_a_spectral_floor_a_verdict_is_provisional_exactly_where_it_rests_on_
     assert not status(["unexplained"], none_sel, rem_on)
     assert status(["unexplained"], none_sel, rem_elsewhere)  # predictable, but not where the excess is
     assert status(["unexplained"], none_sel, None)
+    assert not status(["unexplained"], none_sel, None, disagree=(True, False, False))
     partial = SimpleNamespace(accepted=[], ranking=[cand], mse=mse)  # significant, turned down
     assert status(["unexplained"], partial, rem_on)
+    assert status(["unexplained"], partial, None, disagree=(False, True, False))
     assert not status(["unexplained"], none_sel, None, measured=True)

@@ -40,7 +40,10 @@ Method, in the order it runs:
    part of the gap; the continuous hyper-parameters of the others), and the screen repeats on top of
    it, up to ``max_effects``.
 5. Verdict: the accepted effects; else ``["unexplained"]`` when the excess of some joint over the
-   noise floor is significant, ``["none"]`` when not.  The excess is tested on what the baseline cannot
+   noise floor is significant, or the training and held-out runs disagree on a joint's parameters
+   (:mod:`.consistency`: the cross-fitted coefficients fit the training run worse than noise and state
+   estimation explain, as when the cross-fitted baseline absorbs an effect the model lacks; no floor
+   enters), ``["none"]`` when neither.  The excess is tested on what the baseline cannot
    predict even when refitted with the rest of the held-out run (contiguous folds, cross-fitted: an
    aperiodic held-out motion that leaves the training states shows the refit's parameter error at many
    times the floor, which its covariance does not foresee), above ``1 + measured_excess_tol`` noise
@@ -86,6 +89,7 @@ from numpy.typing import NDArray
 from dynid._threads import single_blas_thread
 from dynid.diagnosis import baseline as bl
 from dynid.diagnosis.candidates import EFFECT_NAMES, enumerate_candidates
+from dynid.diagnosis.consistency import MEMORY_SECONDS, Consistency, parameter_consistency
 from dynid.diagnosis.gapmap import gap_map
 from dynid.diagnosis.parameter_change import parameter_change_test
 from dynid.diagnosis.refinement import fitted_delay
@@ -218,6 +222,10 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
     # The baseline cross-fitted on the held-out folds: the excess test's residual
     # (:func:`~dynid.diagnosis.baseline.crossfit_residual`) and the first round's cross-fitted footing.
     cross0 = cross_fitted(ctx, base.fit, tr.X0, ho.X0, bl.FOLDS)
+    # Do the two runs agree on the baseline's parameters?  Evidence that does not rest on the floor.
+    consistency = parameter_consistency(
+        cross0.fold, max(1, round(MEMORY_SECONDS / settings.block_seconds * block))
+    )
     excess = bl.excess_over_floor(
         base.fit,
         ho,
@@ -262,7 +270,7 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
         gear_ratio=_gear_ratio(sel.accepted),
         filter_gain=_filter_gain_function(ho.prep),
     )
-    verdict, notes = _verdict(sel, excess, noise, base, settings)
+    verdict, notes = _verdict(sel, excess, consistency, noise, base, settings, robot.joint_names)
     measured = noise.method in MEASURED_FLOORS
     remainder = None
     if verdict == ["unexplained"] or not measured:
@@ -280,7 +288,9 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
             block,
             settings.alpha,
         )
-    status = _provisional(verdict, measured, remainder, sel, excess, settings, held.mse)
+    status = _provisional(
+        verdict, measured, remainder, sel, excess, settings, held.mse, consistency.leads(settings.alpha)
+    )
     provisional = status[0]
     notes = _remainder_notes(verdict, measured, status, remainder, robot.joint_names) + notes
     undecided = [] if sel.accepted else _undecided(ctx, base, sel.ranking, settings)
@@ -320,7 +330,36 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
         provisional=provisional,
         undecided=undecided,
         remainder=None if remainder is None else remainder.to_dict(),
+        consistency=consistency.to_dict(settings.alpha),
     )
+
+
+def _consistency_notes(c: Consistency, alpha: float, joint_names: list[str], excess: bool) -> list[str]:
+    """Under an "unexplained" verdict: the joints on which the two runs disagree on the baseline's
+    parameters (:mod:`.consistency`), and what that says."""
+    lead = np.flatnonzero(c.leads(alpha))
+    if not lead.size:
+        return []
+    joints = ", ".join(
+        f"{joint_names[j]} ({100 * c.cost[j]:.0f} % of its training residual, {c.cost[j] / c.null_mean[j]:.1f} "
+        f"times what torque noise gives, adjusted p = {c.p_joint[j]:.2g})"
+        for j in lead
+    )
+    return [
+        "The training and held-out runs disagree on the baseline's parameters: refitted with the held-out "
+        f"run, they fit the training run worse on {joints}.  An effect the model lacks, absorbed differently "
+        "on two motions, does that; a parameter the training run leaves uncertain does not"
+        + (
+            "."
+            if excess
+            else (
+                ", and the cross-fitted excess test, which lets the parameters move, does not see it: this "
+                "evidence does not rest on the noise floor.  A floor measured across eight periods would "
+                "also let the excess test weigh it: dynid simulate --periods 8, or dynid excite --csv "
+                "--periods 8 played on the robot."
+            )
+        )
+    ]
 
 
 UNDECIDED_SHOWN = 3
@@ -413,7 +452,13 @@ def _in_model(structure: bl.ModelStructure) -> tuple[str, ...]:
 
 
 def _verdict(
-    sel: Selection, excess: dict[str, Any], noise: NoiseFloor, base: bl.Baseline, settings: DiagnosisSettings
+    sel: Selection,
+    excess: dict[str, Any],
+    consistency: Consistency,
+    noise: NoiseFloor,
+    base: bl.Baseline,
+    settings: DiagnosisSettings,
+    joint_names: list[str],
 ) -> tuple[list[str], list[str]]:
     """The verdict and the notes that go with it."""
     notes: list[str] = []
@@ -423,10 +468,12 @@ def _verdict(
             "passes: the split of the gap between joints is uncertain."
         )
     notes.extend(sel.notes)
+    disagree = consistency.leads(settings.alpha)
     if sel.accepted:
         verdict = [a.candidate.effect for a in sel.accepted]
-    elif excess["significant"]:
+    elif excess["significant"] or disagree.any():
         verdict = ["unexplained"]
+        notes.extend(_consistency_notes(consistency, settings.alpha, joint_names, excess["significant"]))
         partial = [r for r in sel.ranking if r.significant]
         if partial:
             notes.append(
@@ -468,6 +515,7 @@ def _provisional(
     excess: dict[str, Any],
     settings: DiagnosisSettings,
     mse_refit: NDArray[np.float64],
+    disagree: NDArray[np.bool_],
 ) -> tuple[bool, str]:
     """Does the verdict rest on a floor that is only a lower bound?  The answer, and why, in a clause.
 
@@ -481,9 +529,10 @@ def _provisional(
       ``min_gain``).  The figures computed on the floor (the share of the gap, the gain) would otherwise
       rest on it, joint by joint.
     * "Unexplained" stands when the check that does not rest on the floor (:mod:`.remainder`) finds the
-      residual predictable on a joint whose excess is significant, and no significant candidate was turned
-      down for closing too little (the share it closes is understated on a lower floor: it might close
-      enough).
+      residual predictable on a joint whose excess is significant, or the two runs disagree on a joint's
+      parameters (``disagree``, :mod:`.consistency`: no floor enters either), and no significant candidate
+      was turned down for closing too little (the share it closes is understated on a lower floor: it might
+      close enough).
     """
     if measured or verdict == ["none"]:
         return False, ""
@@ -504,8 +553,9 @@ def _provisional(
             f"{partial[0].candidate.label} is significant but closes too little of a gap that the floor may "
             "overstate"
         )
-    confirmed = remainder is not None and bool(
-        np.any(remainder.predictable & np.asarray(excess["significant_joint"], dtype=bool))
+    confirmed = bool(np.any(disagree)) or (
+        remainder is not None
+        and bool(np.any(remainder.predictable & np.asarray(excess["significant_joint"], dtype=bool)))
     )
     if not confirmed:
         return True, "the check that does not rest on the floor does not confirm the excess"

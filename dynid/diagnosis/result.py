@@ -151,6 +151,11 @@ class Diagnosis:
         residual there (:mod:`dynid.diagnosis.remainder`: ``p_joint``, ``share``, ``gain``,
         ``predictable_joint``): evidence that does not rest on the noise floor.  Computed when the verdict
         is ``"unexplained"`` or the floor is not measured; None otherwise.
+    consistency : dict or None
+        Whether the training and held-out runs agree on the baseline's parameters
+        (:mod:`dynid.diagnosis.consistency`: ``cost``, ``null_mean``, ``p_joint``, ``lead_joint``,
+        ``lead_cost``): a joint in ``lead_joint`` makes the verdict "unexplained" when no effect is
+        accepted; evidence that does not rest on the noise floor.
     """
 
     verdict: list[str]
@@ -168,6 +173,7 @@ class Diagnosis:
     provisional: bool = False
     undecided: list[RankedCandidate] = field(default_factory=list)
     remainder: dict[str, Any] | None = None
+    consistency: dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON-ready figures (``gap_map``, ``ranking``, ``verdict``, ``parametric``, and more)."""
@@ -179,6 +185,7 @@ class Diagnosis:
                 "accepted": [r.to_dict() for r in self.accepted],
                 "undecided": [r.to_dict() for r in self.undecided],
                 "remainder": self.remainder,
+                "consistency": self.consistency,
                 "gap_map": self.gap_map,
                 "parametric": self.parametric,
                 "decomposition": self.decomposition,
@@ -379,9 +386,21 @@ def verdict_text(d: Diagnosis) -> str:
             f"(p = {d.excess['p_value']:.2g})."
         )
     elif d.verdict == ["unexplained"]:
+        if d.excess["significant"]:
+            evidence = f"the held-out error is {ratio:.2f} times the noise floor (significant)"
+        else:
+            lead = [
+                n
+                for n, hit in zip(d.joint_names, (d.consistency or {}).get("lead_joint", []), strict=False)
+                if hit
+            ]
+            evidence = (
+                f"the training and held-out runs disagree on the parameters of {', '.join(lead)} (the held-out "
+                f"error, {ratio:.2f} times the noise floor, is not significant over it)"
+            )
         lines.append(
-            f"Unexplained gap: the held-out error is {ratio:.2f} times the noise floor (significant), and no "
-            "candidate effect of the catalogue both closes enough of it and passes the significance test."
+            f"Unexplained gap: {evidence}, and no candidate effect of the catalogue both closes enough of it and "
+            "passes the significance test."
         )
         if d.ranking and not d.undecided:
             top = d.ranking[0]

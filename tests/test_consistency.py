@@ -1,0 +1,106 @@
+"""The parameter-constancy test between the training and the held-out run (dynid.diagnosis.consistency)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dynid.diagnosis.consistency import LEAD_COST, parameter_consistency
+from dynid.diagnosis.crossfold import CrossFold
+
+RATE = 100.0  # Hz
+
+
+def _motion(freqs, amps, seconds, phase):
+    t = np.arange(0.0, seconds, 1.0 / RATE)
+    dq = np.stack(
+        [
+            sum(a * np.cos(2 * np.pi * f * t + p) for f, a, p in zip(fr, am, ph, strict=True))
+            for fr, am, ph in zip(freqs, amps, phase, strict=True)
+        ],
+        axis=1,
+    )
+    ddq = np.gradient(dq, 1.0 / RATE, axis=0)
+    return dq, ddq
+
+
+def _columns(dq, ddq):
+    """Two joints, each its own inertia, viscous and Coulomb friction and offset: (m, 2, 8)."""
+    m = dq.shape[0]
+    X = np.zeros((m, 2, 8))
+    for j in range(2):
+        X[:, j, 4 * j : 4 * j + 4] = np.column_stack(
+            [ddq[:, j], dq[:, j], np.tanh(dq[:, j] / 0.02), np.ones(m)]
+        )
+    return X
+
+
+def _noise(rng, m, std=0.05, tau=0.1):
+    """White plus AR(1) noise of equal std, per joint."""
+    a = np.exp(-1.0 / (RATE * tau))
+    e = rng.standard_normal((m, 2)) * std * np.sqrt(1 - a**2)
+    ar = np.zeros((m, 2))
+    for i in range(1, m):
+        ar[i] = a * ar[i - 1] + e[i]
+    return ar + rng.standard_normal((m, 2)) * std
+
+
+def _case(seed: int, quadratic: float, noise_seed: int | None = None):
+    """A periodic training run (3 x 5 s) and a held-out run of other, faster motion (20 s); ``quadratic``: a
+    drag on joint 2 growing with the square of its speed, which the columns lack (N m s^2/rad^2).  Its best
+    linear stand-in (viscous and Coulomb friction) is steeper on the faster run."""
+    rng = np.random.default_rng(seed)
+    noise_rng = rng if noise_seed is None else np.random.default_rng(10_000 + noise_seed)
+    theta = np.array([0.8, 0.5, 0.3, 0.1, 0.4, 0.3, 0.2, -0.05])
+    runs = []
+    for freqs, gain, seconds in (
+        ([[0.2, 0.6], [0.4, 0.8]], 1.0, 15.0),
+        ([[0.13, 0.37], [0.29, 0.71]], 2.0, 20.0),
+    ):
+        phase = rng.uniform(0, 2 * np.pi, (2, 2))
+        dq, ddq = _motion(freqs, gain * np.array([[1.0, 0.5], [1.2, 0.4]]), seconds, phase)
+        X = _columns(dq, ddq)
+        y = np.einsum("mnk,k->mn", X, theta) + _noise(noise_rng, dq.shape[0])
+        y[:, 1] += quadratic * dq[:, 1] * np.abs(dq[:, 1])
+        runs.append((X, y))
+    (X_tr, y_tr), (X_ho, y_ho) = runs
+    w_tr = np.ones_like(y_tr) / 0.07
+    w_ho = np.ones_like(y_ho) / 0.07
+    return CrossFold(X_tr, y_tr, w_tr, X_ho, y_ho, w_ho, 5)
+
+
+def test_an_effect_the_columns_lack_makes_the_runs_disagree_on_its_joint_only():
+    cf = _case(1, quadratic=0.1)
+    c = parameter_consistency(cf, order=10)
+    assert c.cost[1] >= LEAD_COST and c.p_joint[1] < 1e-3
+    assert c.cost[0] < LEAD_COST and c.p_joint[0] > 0.05
+    assert c.leads(0.05).tolist() == [False, True]
+    # The cross-fitted baseline absorbs most of the drag on the held-out run: about 2.3 noise variances
+    # are left there, while the training run pays 0.5-0.7 of its residual for it.
+    left = np.mean(cf.residual() ** 2, axis=0) / 0.05**2 / 2
+    assert left[1] < 3.0
+
+
+def test_a_smaller_effect_is_found_where_the_cross_fitted_baseline_leaves_little_of_it():
+    cf = _case(2, quadratic=0.05)
+    c = parameter_consistency(cf, order=10)
+    left = np.mean(cf.residual() ** 2, axis=0) / 0.05**2 / 2
+    assert left[1] < 1.5  # inside the excess test's tolerance of 0.5 noise variance
+    assert c.p_joint[1] < 1e-3 and c.cost[1] > 5 * c.null_mean[1]
+
+
+def test_on_the_right_model_the_test_keeps_its_size_and_no_lead_is_raised():
+    p = np.array([parameter_consistency(_case(seed, quadratic=0.0), order=10).p_joint for seed in range(40)])
+    costs = np.array([parameter_consistency(_case(seed, quadratic=0.0), order=10).cost for seed in range(5)])
+    # Holm over two joints at 5 %: at most one run in 20 in expectation; 5 of 40 allows for the
+    # bootstrap's gamma tail.
+    assert np.sum(p.min(axis=1) < 0.05) <= 5
+    assert np.all(costs < LEAD_COST)
+
+
+@pytest.mark.parametrize("quadratic", [0.0, 0.05])
+def test_the_result_is_reproducible(quadratic):
+    a = parameter_consistency(_case(3, quadratic), order=10)
+    b = parameter_consistency(_case(3, quadratic), order=10)
+    np.testing.assert_array_equal(a.p_joint, b.p_joint)
+    np.testing.assert_array_equal(a.cost, b.cost)
