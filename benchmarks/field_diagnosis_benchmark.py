@@ -189,6 +189,7 @@ def run_one(case: dict) -> dict:
         "top": [r.candidate.key for r in d.ranking[:3]],
         "undecided": [r.candidate.key for r in d.undecided],
         "consistency_lead": [j + 1 for j, hit in enumerate(d.consistency["lead_joint"]) if hit],
+        "excess_significant": bool(d.excess["significant"]),
         "remainder_confirms": (
             bool(np.any(d.remainder["predictable_joint"])) if d.remainder is not None else None
         ),
@@ -409,14 +410,23 @@ def _figures(results: list[dict]) -> tuple[list[str], dict]:
 
 
 def _lead_line(results: list[dict]) -> str:
-    """How often a "none" verdict carries a consistency lead (:mod:`dynid.diagnosis.consistency`)."""
+    """How many "unexplained" verdicts rest on the runs' disagreement alone (:mod:`dynid.diagnosis.consistency`:
+    the excess over the floor not significant), and how often the disagreement is found at all."""
     parts = []
     for kind, label in (("none", "effect-free"), ("twin", "twins"), ("unknown", "unknown effect")):
-        rs = [r for r in results if r["kind"] == kind and not r.get("error") and r.get("verdict") == ["none"]]
+        rs = [r for r in results if r["kind"] == kind and not r.get("error")]
         if rs:
-            parts.append(f"{label} {sum(bool(r.get('consistency_lead')) for r in rs)}/{len(rs)}")
-    return 'Consistency leads under a "none" verdict (the runs disagree on a joint\'s parameters): ' + (
-        ", ".join(parts) or "no such verdict"
+            alone = sum(
+                r.get("verdict") == ["unexplained"]
+                and bool(r.get("consistency_lead"))
+                and not r.get("excess_significant")
+                for r in rs
+            )
+            parts.append(
+                f"{label} {alone}/{len(rs)} (disagreement found in {sum(bool(r.get('consistency_lead')) for r in rs)})"
+            )
+    return "Unexplained on the runs' disagreement alone (no significant excess): " + (
+        ", ".join(parts) or "no case"
     )
 
 
