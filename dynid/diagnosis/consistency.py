@@ -35,8 +35,8 @@ import itertools
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.fft
 import scipy.linalg
-import scipy.signal
 from numpy.typing import NDArray
 from scipy import stats
 
@@ -49,7 +49,7 @@ DRAWS = 200
 """Bootstrap draws of the null distribution."""
 MEMORY_SECONDS = 0.1
 """The autoregressive noise model reaches this far back (rows; the field noise has a 0.1 s time constant)."""
-_BURN = 500  # rows of each drawn noise series discarded before it is used
+_BURN = 500  # rows of each drawn noise series that the circular wrap of its filtering may reach
 LEAD_COST = 0.2
 """A joint whose cost (training loss added, over the training residual's variance) reaches this, and whose
 bootstrap p-value is below ``alpha``, is a lead: the two runs disagree on its parameters.  The bootstrap draws the torque noise, not the state
@@ -171,11 +171,14 @@ def parameter_consistency(cf: CrossFold, order: int, *, draws: int = DRAWS, seed
     rng = np.random.default_rng(seed)
 
     def series(length: int, d: int) -> NDArray[np.float64]:
-        out = np.empty((d, length, n))
-        for j, (a, scale_j) in enumerate(ar):
-            e = rng.standard_normal((d, length + _BURN)) * scale_j
-            out[:, :, j] = scipy.signal.lfilter([1.0], a, e, axis=1)[:, _BURN:]
-        return out
+        """``d`` draws of the noise of every joint, (d, length, n): white noise through each joint's AR
+        filter, in the frequency domain (the first ``_BURN`` rows, where the circular wrap reaches, are
+        discarded)."""
+        size = scipy.fft.next_fast_len(length + _BURN, real=True)
+        gains = np.stack([scale_j / scipy.fft.rfft(a, size) for a, scale_j in ar])  # (n, f)
+        white = scipy.fft.rfft(rng.standard_normal((d, n, size)), axis=2)
+        drawn = scipy.fft.irfft(white * gains[None], size, axis=2)[:, :, size - length :]
+        return drawn.transpose(0, 2, 1)
 
     null = []
     for start in range(0, draws, _CHUNK):
