@@ -134,7 +134,6 @@ def parameter_consistency(cf: CrossFold, order: int, *, draws: int = DRAWS, seed
     A, n, used, scale = cf.A_tr, cf.n, cf.used, cf.scale
     m_tr = cf.X_tr.shape[0]
     w_tr = cf.w_tr
-    counts = np.maximum(np.sum(w_tr > 0, axis=0), 1)
     Rp_tr = np.linalg.pinv(_r_factor(A.copy()), rcond=1e-9)
     folds = cf.folds
 
@@ -158,14 +157,12 @@ def parameter_consistency(cf: CrossFold, order: int, *, draws: int = DRAWS, seed
     b_fold = [bf[:, None] for bf in cf.b_fold]
     observed = costs(cf.b_tr[:, None], b_fold)[:, 0]
 
-    # The noise proxy: the training refit's residual (torque units), where the joint moves; rescaled so
-    # that the rows a joint does not move on do not dilute it.
+    # The noise proxy: the training refit's residual (torque units) on the rows where the joint moves.
     z_T = _solve(Rp_tr, A.T @ cf.b_tr)
     x_T = np.zeros(cf.k)
     x_T[used] = z_T / scale[used]
     resid = cf.y_tr - np.einsum("mnk,k->mn", cf.X_tr, x_T)
     moving = w_tr > 0
-    resid = np.where(moving, resid, 0.0) * np.sqrt(m_tr / counts)[None, :]
     m_ho = cf.y_ho.shape[0]
     ar = [_ar_model(resid[moving[:, j], j], order) for j in range(n)]
     rng = np.random.default_rng(seed)
