@@ -33,7 +33,9 @@ diagnosis' noise floor to the refit's held-out excess on its joints (the case mi
 over the true filtered noise); the share right where the refit's excess on the effect's joints, background
 included, is >= 1x (the lab benchmark's measure: on an aperiodic held-out run it counts the refit's own
 parameter error, so effects that add nothing visible are counted as visible); false alarms (the
-effect-free cases and the twins) with the one-sided 95 % upper bound, unknown effects called "unexplained", the share of provisional verdicts, the noise-floor
+effect-free cases and the twins) with the one-sided 95 % upper bound, unknown effects called "unexplained",
+how many "unexplained" verdicts rest on the two runs' disagreement on a joint's parameters alone
+(:mod:`dynid.diagnosis.consistency`), the share of provisional verdicts, the noise-floor
 method per case (periods / training periods / spectrum), how often the floor covers the true noise
 (the simulator's injected torque noise put through the diagnosis' filter and trim), and how often the
 floor's 95 % interval (:meth:`dynid.validation.metrics.NoiseFloor.std_interval`) covers the std of the
