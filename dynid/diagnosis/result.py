@@ -420,7 +420,10 @@ def verdict_text(d: Diagnosis) -> str:
         )
     lines.extend(_undecided_text(d))
     est = np.asarray(d.excess.get("estimation", ()), dtype=float)
-    loud = [j for j in range(est.size) if est[j] >= 0.25]
+    # On a joint where the two runs disagree on the parameters, what the refit on the other folds
+    # predicts is an effect the parameters absorb, not their uncertainty: said in the consistency note.
+    disagree = (d.consistency or {}).get("lead_joint") or [False] * est.size
+    loud = [j for j in range(est.size) if est[j] >= 0.25 and not disagree[j]]
     if loud:
         names = ", ".join(f"{d.joint_names[j]} ({est[j]:.2g})" for j in loud)
         lines.append(
