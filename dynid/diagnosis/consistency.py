@@ -41,7 +41,7 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from dynid.diagnosis import stats as st
-from dynid.diagnosis.crossfold import CrossFold, _r_factor
+from dynid.diagnosis.crossfold import CrossFold
 
 __all__ = ["DRAWS", "LEAD_COST", "MEMORY_SECONDS", "Consistency", "parameter_consistency"]
 
@@ -136,7 +136,7 @@ def parameter_consistency(cf: CrossFold, order: int, *, draws: int = DRAWS, seed
     A, n, used, scale = cf.A_tr, cf.n, cf.used, cf.scale
     m_tr = cf.X_tr.shape[0]
     w_tr = cf.w_tr
-    Rp_tr = np.linalg.pinv(_r_factor(A.copy()), rcond=1e-9)
+    Rp_tr = cf.Rpinv_tr
     folds = cf.folds
 
     def costs(e_tr: NDArray[np.float64], e_fold: list[NDArray[np.float64]]) -> NDArray[np.float64]:

@@ -69,6 +69,8 @@ class CrossFold:
         # The training rows once, as the triangular factor of [A | b]: R and Q^T b, without Q.
         Rb = _r_factor(np.column_stack([self.A_tr, b_tr]))
         R_tr, qb_tr = Rb[:ku, :ku], Rb[:ku, ku]
+        # The training rows alone: pseudo-inverse of their factor (the training refit, in scaled columns).
+        self.Rpinv_tr = np.linalg.pinv(R_tr, rcond=_RCOND)
         self.edges = np.linspace(0, m, max(2, int(folds)) + 1).astype(int)
         self.A_fold = [
             A_ho[a:b][:, :, used].reshape(-1, ku) / scale[used] for a, b in itertools.pairwise(self.edges)
