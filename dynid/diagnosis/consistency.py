@@ -42,6 +42,7 @@ from scipy import stats
 
 from dynid.diagnosis import stats as st
 from dynid.diagnosis.crossfold import CrossFold
+from dynid.identify.estimators import autocovariance
 
 __all__ = ["DRAWS", "LEAD_COST", "MEMORY_SECONDS", "Consistency", "parameter_consistency"]
 
@@ -103,11 +104,9 @@ def _solve(Rp: NDArray[np.float64], g: NDArray[np.float64]) -> NDArray[np.float6
 def _ar_model(x: NDArray[np.float64], order: int) -> tuple[NDArray[np.float64], float]:
     """Yule-Walker AR(``order``) of a series: the filter denominator ``[1, -phi_1, ...]`` and the
     innovations' std."""
-    x = x - x.mean()
     m = x.size
     order = max(1, min(int(order), m // 10))
-    f = np.fft.rfft(x, 2 * m)
-    acov = np.fft.irfft(f * np.conj(f))[: order + 1] / m
+    acov = autocovariance((x - x.mean())[:, None], order)[:, 0] / m
     if acov[0] <= 0:
         return np.array([1.0]), 0.0
     phi = scipy.linalg.solve_toeplitz(acov[:order], acov[1 : order + 1])
