@@ -69,6 +69,13 @@ def _case(seed: int, quadratic: float, noise_seed: int | None = None):
     return CrossFold(X_tr, y_tr, w_tr, X_ho, y_ho, w_ho, 5)
 
 
+def _period_noise(cf: CrossFold) -> np.ndarray:
+    """The training run's deviation from its mean over its three periods, scaled to the noise's variance
+    (what :func:`dynid.validation.noise.periodic_deviation` gives on prepared data)."""
+    y = cf.y_tr.reshape(3, -1, cf.n)
+    return ((y - y.mean(axis=0)) * np.sqrt(3 / 2)).reshape(-1, cf.n)
+
+
 def test_an_effect_the_columns_lack_makes_the_runs_disagree_on_its_joint_only():
     cf = _case(1, quadratic=0.1)
     c = parameter_consistency(cf, order=10)
@@ -96,6 +103,24 @@ def test_on_the_right_model_the_test_keeps_its_size_and_no_lead_is_raised():
     # bootstrap's gamma tail.
     assert np.sum(p.min(axis=1) < 0.05) <= 5
     assert np.all(costs < LEAD_COST)
+
+
+def test_noise_modelled_on_the_training_periods_holds_none_of_the_effect():
+    # The drag is periodic in the periodic training run, so it drops out of the deviation over the periods:
+    # the null is the same with and without it (same motion, same noise), and the drag is still found.
+    free, drag = _case(1, 0.0, noise_seed=1), _case(1, 0.1, noise_seed=1)
+    a = parameter_consistency(free, order=10, noise=_period_noise(free))
+    b = parameter_consistency(drag, order=10, noise=_period_noise(drag))
+    np.testing.assert_allclose(b.null_mean, a.null_mean, rtol=1e-9)
+    assert b.noise_source == "training periods" and b.to_dict(0.05)["noise_source"] == "training periods"
+    assert b.leads(0.05).tolist() == [False, True] and b.p_joint[1] < 1e-3
+    assert parameter_consistency(drag, order=10).noise_source == "training residual"
+
+
+def test_noise_modelled_on_the_training_periods_keeps_the_size():
+    p = np.array([parameter_consistency(cf, order=10, noise=_period_noise(cf)).p_joint
+                  for cf in (_case(seed, quadratic=0.0) for seed in range(40))])  # fmt: skip
+    assert np.sum(p.min(axis=1) < 0.05) <= 5
 
 
 @pytest.mark.parametrize("quadratic", [0.0, 0.05])

@@ -136,6 +136,43 @@ def test_a_robot_playing_the_excite_csv_gets_its_floor_from_the_periods(ur5):
     assert prep.t[b - 1] - prep.t[a] > 2.8 * period
 
 
+def test_the_periodic_deviation_of_a_played_excitation_is_its_noise(ur5):
+    # A robot playing the CSV of dynid excite (rest, approach, three periods, retreat, rest): the torque's
+    # deviation from its mean over the periods holds the noise's variance (as the floor measures it), and
+    # none of the motion's torque.
+    from dynid.optim.approach import executable_trajectory
+    from dynid.sim.cases import case_excitation
+    from dynid.sim.simulator import simulate
+    from dynid.validation.noise import measure_noise, periodic_deviation
+
+    exc = case_excitation(ur5, 3, base_freq=0.2)
+    played = executable_trajectory(ur5, exc, rate=500.0, periods=3, rest=2.0)
+    pre = Preprocessing(cutoff=20.0)
+    prep = prepare(simulate(ur5, played, friction="linear", seed=5).to_dataset(), pre)
+    dev, start = periodic_deviation(prep)
+    assert dev.shape[1] == 6 and dev.shape[0] > 2.8 * 5.0 * prep.fs  # nearly all of the three periods
+    floor = measure_noise(prep)
+    # The same periods as the floor's spread: their variances agree to a per cent or two (the floor pools
+    # the squares over the degrees of freedom, the deviation scales each phase).
+    np.testing.assert_allclose(np.mean(dev**2, axis=0), floor.std**2, rtol=0.02)
+    # The motion's torque is 2-3 orders of magnitude larger than the noise; none of it is left.
+    tau = prep.filter(prep.tau)[start : start + dev.shape[0]]
+    assert np.all(np.std(dev, axis=0) < 0.05 * np.std(tau, axis=0))
+
+
+def test_an_aperiodic_run_has_no_periodic_deviation(ur5):
+    from dynid.diagnosis.field_cases import min_jerk_motion
+    from dynid.sim.simulator import simulate
+    from dynid.validation.noise import periodic_deviation
+
+    motion = min_jerk_motion(ur5, np.random.default_rng(3), 20.0)
+    prep = prepare(
+        simulate(ur5, motion, duration=20.0, friction="linear", seed=3).to_dataset(),
+        Preprocessing(cutoff=20.0),
+    )
+    assert periodic_deviation(prep) is None
+
+
 def test_an_aperiodic_run_with_rests_has_no_stretch_that_repeats(ur5):
     # Minimum-jerk moves between random waypoints, with rests: a rest repeats itself, but no motion does.
     from dynid.diagnosis.field_cases import min_jerk_motion

@@ -102,7 +102,7 @@ from dynid.exceptions import DataError
 from dynid.identify.dataset import Dataset
 from dynid.identify.preparation import Prepared
 from dynid.validation.metrics import NoiseFloor
-from dynid.validation.noise import measure_noise
+from dynid.validation.noise import measure_noise, periodic_deviation
 
 __all__ = ["Diagnosis", "DiagnosisSettings", "RankedCandidate", "diagnose", "run_diagnosis"]
 
@@ -224,7 +224,9 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
     cross0 = cross_fitted(ctx, base.fit, tr.X0, ho.X0, bl.FOLDS)
     # Do the two runs agree on the baseline's parameters?  Evidence that does not rest on the floor.
     consistency = parameter_consistency(
-        cross0.fold, max(1, round(MEMORY_SECONDS / settings.block_seconds * block))
+        cross0.fold,
+        max(1, round(MEMORY_SECONDS / settings.block_seconds * block)),
+        noise=_training_noise(tr),
     )
     excess = bl.excess_over_floor(
         base.fit,
@@ -342,7 +344,8 @@ def _consistency_notes(c: Consistency, alpha: float, joint_names: list[str], exc
         return []
     joints = ", ".join(
         f"{joint_names[j]} ({100 * c.cost[j]:.0f} % of its training residual, {c.cost[j] / c.null_mean[j]:.1f} "
-        f"times what torque noise gives, adjusted p = {c.p_joint[j]:.2g})"
+        f"times what torque noise gives (noise modelled on the {c.noise_source}), adjusted p = "
+        f"{c.p_joint[j]:.2g})"
         for j in lead
     )
     return [
@@ -394,6 +397,16 @@ def _undecided(
 
 MEASURED_FLOORS = ("periods", "training periods")
 """Noise-floor methods that measure the noise (not a lower bound): a verdict on them is not provisional."""
+
+
+def _training_noise(tr: bl.Side) -> NDArray[np.float64] | None:
+    """The training run's noise at its rows' rate: its deviation from the mean over its periods, or None
+    when it does not repeat a period."""
+    found = periodic_deviation(tr.prep)
+    if found is None or len(tr.rows) < 2:
+        return None
+    stride = int(tr.rows[1] - tr.rows[0])
+    return found[0][::stride]
 
 
 def _noise_floor(train_prep, heldout_prep, period: float | None) -> NoiseFloor:

@@ -33,6 +33,7 @@ __all__ = [
     "encoder_step",
     "filter_noise_gain",
     "measure_noise",
+    "periodic_deviation",
     "repeating_stretch",
 ]
 
@@ -155,6 +156,55 @@ def measure_noise(prep: Prepared, *, period: float | None = None) -> NoiseFloor:
         method="spectrum",
         detail=raw.detail + (f", times the filter's noise gain {gain:.3g}" if gain != 1.0 else "") + ignored,
     )
+
+
+def periodic_deviation(prep: Prepared) -> tuple[NDArray[np.float64], int] | None:
+    """The filtered torque's deviation from its mean over the periods: the part that does not repeat.
+
+    Found as :func:`measure_noise` finds the periods (the whole run, else the stretch that repeats, with
+    the part of one more period it holds); at a phase held by ``K`` periods the deviation is scaled by
+    ``sqrt(K / (K - 1))``, so that it has the noise's variance.  Any effect of the state is periodic in a periodic run and drops out: what is left is noise
+    (and drift), over the whole band, the motion's frequencies included (bar narrow notches at its
+    harmonics).  :mod:`dynid.diagnosis.consistency` models the training noise on it.
+
+    Parameters
+    ----------
+    prep : Prepared
+        The prepared data.
+
+    Returns
+    -------
+    (deviation, start) or None
+        The deviation, shape (M, n) at the full rate over the ``M`` samples that repeat, and the index in
+        ``prep`` of its first sample; None when the data do not repeat at least two whole periods.
+    """
+    run = max(prep.runs, key=lambda r: r.stop - r.start)
+    rows = prep.rows[(prep.rows >= run.start) & (prep.rows < run.stop)]
+    if rows.size < 8:
+        return None
+    a0, b0 = int(rows[0]), int(rows[-1]) + 1
+    tau_f = prep.filter(prep.tau)[a0:b0]
+    per_s = detect_period(prep.t[a0:b0], prep.q[a0:b0])
+    a, b = 0, b0 - a0
+    if per_s is None:
+        found = repeating_stretch(prep.q[a0:b0], prep.fs, ddq=prep.ddq[a0:b0])
+        if found is None:
+            return None
+        a, b, per_s = found
+    per = round(per_s * prep.fs)
+    count = (b - a) // per if per > 0 else 0
+    if count < 2:
+        return None
+    start = b - count * per  # whole periods at the end (the start may hold an approach)
+    lead = start - a  # part of one more period before them, at its last phases
+    stack = np.full((count + (lead > 0), per, tau_f.shape[1]), np.nan)
+    stack[int(lead > 0) :] = tau_f[start:b].reshape(count, per, -1)
+    if lead:
+        stack[0, per - lead :] = tau_f[a:start]
+    have = np.sum(np.isfinite(stack[:, :, 0]), axis=0)  # periods holding each phase: 2 or more
+    dev = (stack - np.nanmean(stack, axis=0)) * np.sqrt(have / (have - 1))[None, :, None]
+    dev = dev.reshape(-1, tau_f.shape[1])
+    return dev[np.isfinite(dev[:, 0])], a0 + a  # time order: the lead, then the whole periods
 
 
 STRETCH_TOL = 1e-4
