@@ -23,8 +23,9 @@ drops out, and the noise in the motion's band, which is what moves the parameter
 is fitted on the training refit's residual, which lacks the noise in the span of the columns (resampling
 its blocks understated the null by about a third on a synthetic run; the autoregressive model smooths over
 that) and holds an unmodelled effect too, which widens the null: the test is conservative then.  On the
-simulated field runs (coloured noise with a 100 ms time constant) the periods' model raised the null's mean
-by about a third on effect-free runs, closer to the costs seen.
+simulated field runs (coloured noise with a 100 ms time constant; 40 effect-free tuning runs) the cost was
+1.00 times the null's mean at the median with the periods' model, 1.23 with the residual's, and 6 runs
+against 16 had a joint at adjusted p < 0.05.
 
 The statistic is a ratio of losses, so no noise floor enters.
 
