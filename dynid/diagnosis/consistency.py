@@ -198,13 +198,16 @@ def parameter_consistency(
         ar = [_ar_model(noise[:, j], order) for j in range(n)]
         source = "training periods"
     rng = np.random.default_rng(seed)
+    gain_cache: dict[int, NDArray[np.complex128]] = {}
 
     def series(length: int, d: int) -> NDArray[np.float64]:
         """``d`` draws of the noise of every joint, (d, length, n): white noise through each joint's AR
         filter, in the frequency domain (the first ``_BURN`` rows, where the circular wrap reaches, are
         discarded)."""
         size = scipy.fft.next_fast_len(length + _BURN, real=True)
-        gains = np.stack([scale_j / scipy.fft.rfft(a, size) for a, scale_j in ar])  # (n, f)
+        if size not in gain_cache:  # two lengths: the training run's and the held-out run's
+            gain_cache[size] = np.stack([scale_j / scipy.fft.rfft(a, size) for a, scale_j in ar])  # (n, f)
+        gains = gain_cache[size]
         white = scipy.fft.rfft(rng.standard_normal((d, n, size)), axis=2)
         drawn = scipy.fft.irfft(white * gains[None], size, axis=2)[:, :, size - length :]
         return drawn.transpose(0, 2, 1)
