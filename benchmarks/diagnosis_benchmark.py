@@ -71,6 +71,13 @@ def _upper95(k: int, n: int) -> float:
     return 1.0 if k >= n else float(beta.ppf(0.95, k + 1, n - k))
 
 
+def _lower95(k: int, n: int) -> float:
+    """One-sided 95 % lower confidence bound of a rate seen k times in n (Clopper-Pearson)."""
+    from scipy.stats import beta
+
+    return 0.0 if k <= 0 else float(beta.ppf(0.05, k, n - k + 1))
+
+
 def _joint(effect: str, seed: int, n: int, avoid: int | None = None) -> int | None:
     """A joint (1-based) drawn per seed; joint 1's armature is not identifiable apart from Izz1."""
     if effect in WHOLE_ARM:

@@ -77,7 +77,7 @@ os.environ.setdefault("DYNID_NUM_THREADS", "1")
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from diagnosis_benchmark import ABSORBED, SHAKE_ARM, UNKNOWN, _joint, _upper95, undecided_lines
+from diagnosis_benchmark import ABSORBED, SHAKE_ARM, UNKNOWN, _joint, _lower95, _upper95, undecided_lines
 
 LEVELS = (1.0, 3.0)
 QUICK_EFFECTS = ("stribeck", "cogging", "delay")
@@ -330,8 +330,10 @@ def _figures(results: list[dict]) -> tuple[list[str], dict]:
     unk = [r for r in results if r["kind"] == "unknown"]
     ok = sum(r["correct"] for r in unk)
     fig["unknown_unexplained"] = ok / len(unk) if unk else None
+    fig["unknown_unexplained_lower95"] = _lower95(ok, len(unk)) if unk else None
     lines.append(
-        f"Unknown effect ({UNKNOWN} not in the catalogue) called unexplained: {_pct(ok, len(unk))}  (target >= "
+        f"Unknown effect ({UNKNOWN} not in the catalogue) called unexplained: {_pct(ok, len(unk))}, one-sided 95 % "
+        f"lower bound {100 * _lower95(ok, len(unk)) if unk else 0:.0f} %  (target >= "
         f"{100 * TARGETS['unknown']:.0f} %)"
         + "".join(
             f"; at {lv:g}x {sum(r['correct'] for r in unk if r['level'] == lv)}/"
