@@ -35,7 +35,8 @@ field's coloured noise and exact angles, and about the same with 18-bit angles b
 estimation's error in the columns adds little).  Noise coloured on the motion's time scale leaves the
 statistic few effective degrees of freedom, so the gamma tail is rough (6 of 40 effect-free runs had a
 joint at adjusted p < 0.05, 2 expected), and the cost separated effect-free runs from unknown effects better
-than the p-value did.  So a joint counts as a lead only where the cost also reaches :data:`LEAD_COST`.  Such a joint makes the verdict "unexplained" where no effect is accepted
+than the p-value did.  So a joint counts as a lead only where the cost also reaches :data:`LEAD_COST`.
+Such a joint makes the verdict "unexplained" where no effect is accepted
 (:func:`dynid.diagnosis.core.diagnose`).
 """
 
@@ -65,9 +66,10 @@ LEAD_COST = 0.2
 """A joint whose cost (training loss added, over the training residual's variance) reaches this, and whose
 bootstrap p-value is below ``alpha``, is a lead: the two runs disagree on its parameters.  The bootstrap's
 tail is rough under noise coloured on the motion's time scale, and the cost itself separated effect-free
-runs from unknown effects better than the p-value did, so the decision rests on both.  Set on 200 simulated effect-free field runs (the tuning
-seeds 1000-1099, UR5 and Panda, three training periods, coloured noise, 18-bit angles): the largest cost
-per run reached 0.195 (UR5) and 0.153 (Panda) at the 99th percentile, and 0.2 once in 200 (0.209, UR5).
+runs from unknown effects better than the p-value did, so the decision rests on both.  Set on 200
+simulated effect-free field runs (the tuning seeds 1000-1099, UR5 and Panda, three training periods,
+coloured noise, 18-bit angles): the largest cost per run reached 0.195 (UR5) and 0.153 (Panda) at the
+99th percentile, and 0.2 once in 200 (0.209, UR5).
 Coupled wrist friction outside the catalogue at 1x, on 40 tuning runs, left 0.12-0.66 on its joint, at or
 above 0.2 in 32."""
 _CHUNK = 25  # draws per matrix product

@@ -405,7 +405,7 @@ def _training_noise(tr: bl.Side) -> NDArray[np.float64] | None:
     found = periodic_deviation(tr.prep)
     if found is None or len(tr.rows) < 2:
         return None
-    stride = int(tr.rows[1] - tr.rows[0])
+    stride = max(1, int(np.median(np.diff(tr.rows))))  # the sample's thinning
     return found[0][::stride]
 
 

@@ -163,9 +163,10 @@ def periodic_deviation(prep: Prepared) -> tuple[NDArray[np.float64], int] | None
 
     Found as :func:`measure_noise` finds the periods (the whole run, else the stretch that repeats, with
     the part of one more period it holds); at a phase held by ``K`` periods the deviation is scaled by
-    ``sqrt(K / (K - 1))``, so that it has the noise's variance.  Any effect of the state is periodic in a periodic run and drops out: what is left is noise
-    (and drift), over the whole band, the motion's frequencies included (bar narrow notches at its
-    harmonics).  :mod:`dynid.diagnosis.consistency` models the training noise on it.
+    ``sqrt(K / (K - 1))``, so that it has the noise's variance.  Any effect of the state is periodic in a
+    periodic run and drops out: what is left is noise (and drift), over the whole band, the motion's
+    frequencies included (bar narrow notches at its harmonics).  :mod:`dynid.diagnosis.consistency`
+    models the training noise on it.
 
     Parameters
     ----------
