@@ -272,6 +272,7 @@ def test_an_effect_the_cross_fitted_baseline_absorbs_shows_as_the_runs_disagreei
     c = d.consistency
     assert c["lead_joint"] == [False] * 6 + [True]
     assert c["cost"][6] > 3 * LEAD_COST and c["p_joint"][6] < 0.01
+    assert c["noise_source"] == "training periods"  # the training run repeats three periods
     assert out["verdict"] == ["unexplained"]
     assert any("disagree" in n and "panda_joint7" in n for n in d.notes)
 
