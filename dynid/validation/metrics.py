@@ -14,7 +14,7 @@ from scipy.signal import welch
 
 from dynid.exceptions import DataError, ShapeError
 
-__all__ = ["NoiseFloor", "noise_floor", "torque_metrics", "variance_rel_se"]
+__all__ = ["NoiseFloor", "noise_floor", "period_stack", "torque_metrics", "variance_rel_se"]
 
 
 def torque_metrics(tau: np.ndarray, tau_pred: np.ndarray) -> dict:
@@ -165,6 +165,34 @@ def variance_rel_se(deviations: np.ndarray, rows_per_lag_window: int) -> np.ndar
         return np.where(g[0] > 0, np.sqrt(var_mean) / g[0], np.nan)
 
 
+def period_stack(x: np.ndarray, per: int, lead: int = 0) -> tuple[np.ndarray, int]:
+    """A signal's whole periods at its end, one row each, and ``lead`` samples before them at the last
+    phases of one more (NaN where a period holds no sample).
+
+    Parameters
+    ----------
+    x : ndarray, shape (m, n)
+        The signal, uniformly sampled.
+    per : int
+        Samples per period; at least two whole periods must fit.
+    lead : int
+        Samples before the whole periods to add (clipped to what the signal holds).
+
+    Returns
+    -------
+    (stack, lead)
+        The stack, shape (K + (lead > 0), per, n) for ``K`` whole periods, and the ``lead`` used.
+    """
+    count = x.shape[0] // per
+    start = x.shape[0] - count * per  # whole periods at the end (the start may hold an approach)
+    lead = int(min(max(lead, 0), start))
+    stack = np.full((count + (lead > 0), per, x.shape[1]), np.nan)
+    stack[int(lead > 0) :] = x[start:].reshape(count, per, -1)
+    if lead:
+        stack[0, per - lead :] = x[start - lead : start]
+    return stack, lead
+
+
 def noise_floor(
     t: np.ndarray,
     tau: np.ndarray,
@@ -208,14 +236,7 @@ def noise_floor(
         per = round(period / dt)
         count = t.size // per
         if count >= 2 and abs(per * dt - period) < 0.01 * dt * per:
-            start = t.size - count * per  # whole periods at the end (the start may hold an approach)
-            lead = int(min(max(lead, 0), start))
-            # The whole periods, and the ``lead`` samples before them at the last phases of one more:
-            # NaN where a period holds no sample.
-            stack = np.full((count + (lead > 0), per, tau.shape[1]), np.nan)
-            stack[int(lead > 0) :] = tau[start:].reshape(count, per, -1)
-            if lead:
-                stack[0, per - lead :] = tau[start - lead : start]
+            stack, lead = period_stack(tau, per, lead)
             dev = stack - np.nanmean(stack, axis=0)
             dof = np.sum(np.isfinite(stack[:, :, 0]), axis=0) - 1
             # Unbiased spread across periods at each phase, pooled over the phase.

@@ -24,7 +24,7 @@ from scipy.ndimage import binary_opening, uniform_filter1d
 from dynid.exceptions import DataError
 from dynid.identify.periodic import overlap_autocorrelation, period_of
 from dynid.identify.preparation import Prepared
-from dynid.validation.metrics import NoiseFloor, noise_floor
+from dynid.validation.metrics import NoiseFloor, noise_floor, period_stack
 
 __all__ = [
     "MIN_SPECTRAL_SAMPLES",
@@ -196,12 +196,8 @@ def periodic_deviation(prep: Prepared) -> tuple[NDArray[np.float64], int] | None
     count = (b - a) // per if per > 0 else 0
     if count < 2:
         return None
-    start = b - count * per  # whole periods at the end (the start may hold an approach)
-    lead = start - a  # part of one more period before them, at its last phases
-    stack = np.full((count + (lead > 0), per, tau_f.shape[1]), np.nan)
-    stack[int(lead > 0) :] = tau_f[start:b].reshape(count, per, -1)
-    if lead:
-        stack[0, per - lead :] = tau_f[a:start]
+    # The whole periods and the part of one more before them, at its last phases.
+    stack, _lead = period_stack(tau_f[a:b], per, (b - a) % per)
     have = np.sum(np.isfinite(stack[:, :, 0]), axis=0)  # periods holding each phase: 2 or more
     dev = (stack - np.nanmean(stack, axis=0)) * np.sqrt(have / (have - 1))[None, :, None]
     dev = dev.reshape(-1, tau_f.shape[1])
