@@ -263,9 +263,11 @@ def _shifted(
 ) -> NDArray[np.float64]:
     """Change of the first-fit torque (M, n, 1) when the link angle of joint j lags the encoder by delta;
     with ``links`` of the links' share only (the motor's friction and inertia stay at the encoder's states)."""
-    at, base = src.torque_at, src.tau_pred
     if links and src.link_torque_at is not None and src.tau_link is not None:
-        at, base = src.link_torque_at, src.tau_link
+        Jq, Jv, Ja = _link_sensitivity(src, j)
+        d1, d2 = src.derivative(delta, 1), src.derivative(delta, 2)
+        return -(Jq * delta[:, None] + Jv * d1[:, None] + Ja * d2[:, None])[:, :, None]
+    at, base = src.torque_at, src.tau_pred
     if at is None:
         raise ValueError("the exact transmission columns need FeatureSource.torque_at")
     q, dq, ddq = src.q.copy(), src.dq.copy(), src.ddq.copy()
@@ -273,6 +275,32 @@ def _shifted(
     dq[:, j] -= src.derivative(delta, 1)
     ddq[:, j] -= src.derivative(delta, 2)
     return (at(q, dq, ddq) - base)[:, :, None]
+
+
+def _link_sensitivity(src: FeatureSource, j: int):
+    """Derivatives (M, n) of the links' torque with respect to joint j's angle, speed and acceleration.
+
+    The links' torque is smooth in the angles, quadratic in the speeds and linear in the accelerations, and
+    a transmission's deflection is a fraction of a milliradian: to first order, which is all a column with
+    a free coefficient stands for, the torque change is linear in the deflection and its derivatives.
+    Central differences (exact for the speeds'), memoised per joint: five evaluations of the links' torque
+    instead of one per column built (the backlash refit builds about a hundred).
+    """
+    key = f"link_sensitivity_{j}"
+    if key not in src.cache:
+        at, q, dq, ddq = src.link_torque_at, src.q, src.dq, src.ddq
+
+        def moved(x, h):
+            x = x.copy()
+            x[:, j] += h
+            return x
+
+        hq, hv = 1e-5, 1e-2
+        Jq = (at(moved(q, hq), dq, ddq) - at(moved(q, -hq), dq, ddq)) / (2 * hq)
+        Jv = (at(q, moved(dq, hv), ddq) - at(q, moved(dq, -hv), ddq)) / (2 * hv)
+        Ja = at(q, dq, moved(ddq, 1.0)) - src.tau_link
+        src.cache[key] = (Jq, Jv, Ja)
+    return src.cache[key]
 
 
 def _spring_deflection(src: FeatureSource, j: int, tau, w: float, z: float) -> NDArray[np.float64]:
@@ -326,11 +354,16 @@ def _backlash(src, c):
     if "exact" in c.hyper:
         # Refit: the teeth change sides once the transmitted torque has reversed beyond h (the impacts
         # and the link's own swing make it hover about zero), d seconds later (the time the motor takes
-        # to cross the gap); the link lags the encoder by a on the side last pushed.
+        # to cross the gap); the link lags the encoder by a on the side last pushed.  With ``w``, the
+        # teeth's stiffness too (the screen's c tau, with its dynamics): a spring of natural frequency w,
+        # damping ratio z, loaded by the transmitted torque, in a column of its own.
         b = relay(tau, c.hyper["h"] * max(float(np.std(tau)), 1e-12))
         if c.hyper.get("d", 0.0):
             b = np.interp(src.t - c.hyper["d"], src.t, b)
         out = _shifted(src, j, c.hyper["a"] * b, links=True)
+        if "w" in c.hyper:
+            spring = _spring_deflection(src, j, tau, c.hyper["w"], c.hyper["z"])
+            out = np.concatenate([out, _shifted(src, j, spring, links=True)], axis=2)
         return np.concatenate([out, _on_joint(src, j, motor)], axis=2) if motor else out
     b = np.tanh(tau / c.hyper["eps"])
     # The link lags by a tanh(tau / eps) + c tau (dead zone and the teeth's stiffness): to first order the
