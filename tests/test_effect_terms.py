@@ -192,3 +192,44 @@ def test_diagnose_out_writes_the_refitted_model(ur5, coupled, tmp_path, capsys) 
     before, after = _heldout_rms(plain, held), _heldout_rms(m2, held)
     np.testing.assert_allclose(after, refit["rms_after"], rtol=1e-6)
     assert after[5] < 0.6 * before[5] and np.mean(after) < np.mean(before), (before, after)
+
+
+def test_the_links_shifted_torque_is_the_exact_shift_to_first_order(ur5) -> None:
+    """The transmission columns take the links' torque at deflected states to first order (memoised
+    derivatives); for a deflection of a fraction of a milliradian that is the exact shift to within the
+    deflection's own relative size, on every joint the arm couples it to, gravity included."""
+    from dynid.identify.columns import compiled_base_regressor
+    from dynid.identify.effect_terms import FeatureSource, _shifted
+
+    t = np.arange(0.0, 4.0, 1e-3)
+    n = ur5.n
+    w = 2 * np.pi * np.array([0.5, 0.7, 0.3, 0.9, 1.1, 0.6])
+    q = 0.8 * np.sin(w * t[:, None] + np.arange(n))
+    dq = 0.8 * w * np.cos(w * t[:, None] + np.arange(n))
+    ddq = -0.8 * w**2 * np.sin(w * t[:, None] + np.arange(n))
+    x = np.random.default_rng(0).normal(size=compiled_base_regressor(ur5, q[:2], dq[:2], ddq[:2]).shape[2])
+
+    def at(q_, dq_, ddq_):
+        return np.einsum("mnk,k->mn", compiled_base_regressor(ur5, q_, dq_, ddq_), x)
+
+    tau = at(q, dq, ddq)
+    src = FeatureSource(
+        t=t,
+        q=q,
+        dq=dq,
+        ddq=ddq,
+        tau_pred=tau,
+        robot=ur5,
+        fs=1000.0,
+        runs=[slice(0, t.size)],
+        torque_at=at,
+        tau_link=tau,
+        link_torque_at=at,
+    )
+    j = 1  # the shoulder: gravity, speed and acceleration terms all matter
+    delta = 3e-4 * np.sin(2 * np.pi * 3.0 * t)
+    first = _shifted(src, j, delta, links=True)[:, :, 0]
+    exact = _shifted(src, j, delta)[:, :, 0]  # the whole torque (here the same) shifted exactly
+    err = np.linalg.norm(first - exact, axis=0) / np.linalg.norm(exact, axis=0)
+    assert np.all(err < 2e-3), err
+    assert f"link_sensitivity_{j}" in src.cache
