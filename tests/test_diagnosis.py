@@ -368,6 +368,7 @@ def test_a_wide_rattling_dead_zone_is_diagnosed_as_backlash(ur5):
     assert d.accepted[0].candidate.joint == 3
     assert d.accepted[0].closure >= MIN_CLOSURE["backlash"]
     assert d.decomposition["closure"][3] >= MIN_CLOSURE["backlash"]
+    assert "half gap" in d.summary() and "teeth of stiffness" in d.summary(), d.summary()
 
 
 @pytest.mark.slow
