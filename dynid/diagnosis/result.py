@@ -228,7 +228,7 @@ def _describe_refit(r: RankedCandidate) -> str:
         )
     if "h" in eff:
         teeth = (
-            f", in teeth of stiffness {r.refit['stiffness']:.3g} N m/rad (resonance {r.refit['frequency_hz']:.3g} Hz)"
+            f", in teeth of stiffness {r.refit['stiffness']:.3g} N m/rad, resonating at {r.refit['frequency_hz']:.3g} Hz"
             if "stiffness" in r.refit
             else ""
         )
