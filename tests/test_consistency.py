@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dynid.diagnosis.consistency import LEAD_COST, parameter_consistency
+from dynid.diagnosis.consistency import LEAD_COST, Consistency, parameter_consistency
 from dynid.diagnosis.crossfold import CrossFold
+from dynid.diagnosis.stats import holm
 
 RATE = 100.0  # Hz
 
@@ -129,3 +130,24 @@ def test_the_result_is_reproducible(quadratic):
     b = parameter_consistency(_case(3, quadratic), order=10)
     np.testing.assert_array_equal(a.p_joint, b.p_joint)
     np.testing.assert_array_equal(a.cost, b.cost)
+
+
+def test_the_per_joint_p_value_is_what_holm_adjusts():
+    c = parameter_consistency(_case(1, quadratic=0.1), order=10)
+    assert np.all(c.p_raw <= c.p_joint)
+    np.testing.assert_allclose(holm(c.p_raw), c.p_joint, rtol=0, atol=0)
+    assert c.to_dict(0.05)["p_raw"] == c.p_raw.tolist()
+
+
+def test_a_lead_needs_the_cost_and_the_joints_own_p_value():
+    # LEAD_COST is set on the largest cost over a run's joints, so it allows for their number itself: the
+    # p-value beside it is the joint's own.  A joint whose adjusted p misses alpha while its own does not
+    # is a lead; a cost below the threshold, or a wide null on the joint, is not.
+    c = Consistency(
+        cost=np.array([LEAD_COST + 0.01, LEAD_COST + 0.01, LEAD_COST - 0.01]),
+        null_mean=np.array([0.05, 0.15, 0.05]),
+        p_joint=np.array([0.06, 0.3, 1e-4]),
+        p_raw=np.array([0.02, 0.1, 3e-5]),
+    )
+    assert c.leads(0.05).tolist() == [True, False, False]
+    assert c.to_dict(0.05)["lead_joint"] == [True, False, False]

@@ -344,8 +344,8 @@ def _consistency_notes(c: Consistency, alpha: float, joint_names: list[str], exc
         return []
     joints = ", ".join(
         f"{joint_names[j]} ({100 * c.cost[j]:.0f} % of its training residual, {c.cost[j] / c.null_mean[j]:.1f} "
-        f"times what torque noise gives (noise modelled on the {c.noise_source}), adjusted p = "
-        f"{c.p_joint[j]:.2g})"
+        f"times what torque noise gives (noise modelled on the {c.noise_source}), p = {c.p_raw[j]:.2g}, "
+        f"{c.p_joint[j]:.2g} adjusted across the joints)"
         for j in lead
     )
     return [
