@@ -153,9 +153,10 @@ class Diagnosis:
         is ``"unexplained"`` or the floor is not measured; None otherwise.
     consistency : dict or None
         Whether the training and held-out runs agree on the baseline's parameters
-        (:mod:`dynid.diagnosis.consistency`: ``cost``, ``null_mean``, ``p_joint``, ``lead_joint``,
-        ``lead_cost``): a joint in ``lead_joint`` makes the verdict "unexplained" when no effect is
-        accepted; evidence that does not rest on the noise floor.
+        (:mod:`dynid.diagnosis.consistency`: ``cost``, ``null_mean``, ``p_joint`` (Holm-adjusted across
+        the joints), ``p_raw`` (per joint), ``lead_joint``, ``lead_cost``, ``noise_source``): a joint in
+        ``lead_joint`` makes the verdict "unexplained" when no effect is accepted; evidence that does not
+        rest on the noise floor.
     """
 
     verdict: list[str]
