@@ -37,6 +37,7 @@ def diagnosis_figures(result) -> list[tuple[str, str, bytes]]:
         What :func:`dynid.diagnosis.core.diagnose` returned.
     """
     from matplotlib.figure import Figure
+    from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
 
     from dynid.validation.plots import figure_png, joint_grid, thin, tidy_grid
 
@@ -64,6 +65,11 @@ def diagnosis_figures(result) -> list[tuple[str, str, bytes]]:
         ax.barh(y, est_a, xerr=err, color=colors, alpha=0.8, error_kw={"linewidth": 0.8})
         ax.axvline(1.0, color="k", linewidth=1.0, linestyle="--")
         ax.set_xscale("log")
+        # Ticks at 1, 2 and 5 per decade, plainly numbered: matplotlib's default labels the minor ticks of a
+        # range under a decade in scientific notation, and they run into each other.
+        ax.xaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0), numticks=8))
+        ax.xaxis.set_major_formatter(FormatStrFormatter("%g"))
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_yticks(y, labels, fontsize=5.5)
         ax.invert_yaxis()
         ax.set_xlabel("excess: mean(r^2) / noise variance (-)")
