@@ -46,14 +46,11 @@ import itertools
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.fft
-import scipy.linalg
 from numpy.typing import NDArray
 from scipy import stats
 
 from dynid.diagnosis import stats as st
 from dynid.diagnosis.crossfold import CrossFold
-from dynid.identify.estimators import autocovariance
 
 __all__ = ["DRAWS", "LEAD_COST", "MEMORY_SECONDS", "Consistency", "parameter_consistency"]
 
@@ -61,7 +58,6 @@ DRAWS = 200
 """Bootstrap draws of the null distribution."""
 MEMORY_SECONDS = 0.1
 """The autoregressive noise model reaches this far back (rows; the field noise has a 0.1 s time constant)."""
-_BURN = 500  # rows of each drawn noise series that the circular wrap of its filtering may reach
 LEAD_COST = 0.2
 """A joint whose cost (training loss added, over the training residual's variance) reaches this, and whose
 own bootstrap p-value is below ``alpha``, is a lead: the two runs disagree on its parameters.  The
@@ -131,19 +127,6 @@ def _solve(Rp: NDArray[np.float64], g: NDArray[np.float64]) -> NDArray[np.float6
     return Rp @ (Rp.T @ g)
 
 
-def _ar_model(x: NDArray[np.float64], order: int) -> tuple[NDArray[np.float64], float]:
-    """Yule-Walker AR(``order``) of a series: the filter denominator ``[1, -phi_1, ...]`` and the
-    innovations' std."""
-    m = x.size
-    order = max(1, min(int(order), m // 10))
-    acov = autocovariance((x - x.mean())[:, None], order)[:, 0] / m
-    if acov[0] <= 0:
-        return np.array([1.0]), 0.0
-    phi = scipy.linalg.solve_toeplitz(acov[:order], acov[1 : order + 1])
-    var = float(acov[0] - phi @ acov[1 : order + 1])
-    return np.concatenate([[1.0], -phi]), float(np.sqrt(max(var, 1e-12 * acov[0])))
-
-
 def parameter_consistency(
     cf: CrossFold,
     order: int,
@@ -206,25 +189,17 @@ def parameter_consistency(
         x_T[used] = _solve(Rp_tr, A.T @ cf.b_tr) / scale[used]
         noise = cf.y_tr - np.einsum("mnk,k->mn", cf.X_tr, x_T)
         moving = w_tr > 0
-        ar = [_ar_model(noise[moving[:, j], j], order) for j in range(n)]
+        ar = [st.ar_model(noise[moving[:, j], j], order) for j in range(n)]
         source = "training residual"
     else:
-        ar = [_ar_model(noise[:, j], order) for j in range(n)]
+        ar = [st.ar_model(noise[:, j], order) for j in range(n)]
         source = "training periods"
     rng = np.random.default_rng(seed)
     gain_cache: dict[int, NDArray[np.complex128]] = {}
 
     def series(length: int, d: int) -> NDArray[np.float64]:
-        """``d`` draws of the noise of every joint, (d, length, n): white noise through each joint's AR
-        filter, in the frequency domain (the first ``_BURN`` rows, where the circular wrap reaches, are
-        discarded)."""
-        size = scipy.fft.next_fast_len(length + _BURN, real=True)
-        if size not in gain_cache:  # two lengths: the training run's and the held-out run's
-            gain_cache[size] = np.stack([scale_j / scipy.fft.rfft(a, size) for a, scale_j in ar])  # (n, f)
-        gains = gain_cache[size]
-        white = scipy.fft.rfft(rng.standard_normal((d, n, size)), axis=2)
-        drawn = scipy.fft.irfft(white * gains[None], size, axis=2)[:, :, size - length :]
-        return drawn.transpose(0, 2, 1)
+        """``d`` draws of the noise of every joint, (d, length, n)."""
+        return st.ar_noise(ar, length, d, rng, gain_cache)
 
     null = []
     for start in range(0, draws, _CHUNK):

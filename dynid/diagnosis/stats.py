@@ -20,16 +20,19 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.fft
 import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 from scipy import stats
 
 from dynid.exceptions import DataError
-from dynid.identify.estimators import long_run_variance
+from dynid.identify.estimators import autocovariance, long_run_variance
 
 __all__ = [
     "DMResult",
     "HypothesisFit",
+    "ar_model",
+    "ar_noise",
     "block_bootstrap_ci",
     "default_lag",
     "diebold_mariano",
@@ -40,6 +43,45 @@ __all__ = [
     "principal_angles",
     "structured_change_test",
 ]
+
+
+AR_BURN = 500
+"""Rows of each drawn noise series (:func:`ar_noise`) that the circular wrap of its filtering may reach,
+discarded."""
+
+
+def ar_model(x: NDArray[np.float64], order: int) -> tuple[NDArray[np.float64], float]:
+    """Yule-Walker AR(``order``) of a series: the filter denominator ``[1, -phi_1, ...]`` and the
+    innovations' std (the order is capped at a tenth of the series' length)."""
+    m = x.size
+    order = max(1, min(int(order), m // 10))
+    acov = autocovariance((x - x.mean())[:, None], order)[:, 0] / m
+    if acov[0] <= 0:
+        return np.array([1.0]), 0.0
+    phi = scipy.linalg.solve_toeplitz(acov[:order], acov[1 : order + 1])
+    var = float(acov[0] - phi @ acov[1 : order + 1])
+    return np.concatenate([[1.0], -phi]), float(np.sqrt(max(var, 1e-12 * acov[0])))
+
+
+def ar_noise(
+    models: list[tuple[NDArray[np.float64], float]],
+    length: int,
+    draws: int,
+    rng: np.random.Generator,
+    cache: dict[int, NDArray[np.complex128]] | None = None,
+) -> NDArray[np.float64]:
+    """``draws`` series of every joint's noise, shape (draws, length, n): white noise through each joint's
+    autoregressive filter (:func:`ar_model`), in the frequency domain, the first :data:`AR_BURN` rows
+    (where the circular wrap reaches) discarded.  A sieve bootstrap's draws (Buhlmann 1997).  ``cache``
+    keeps the filters' frequency responses per length between calls."""
+    size = scipy.fft.next_fast_len(length + AR_BURN, real=True)
+    cache = {} if cache is None else cache
+    if size not in cache:
+        cache[size] = np.stack([scale / scipy.fft.rfft(a, size) for a, scale in models])  # (n, f)
+    gains = cache[size]
+    white = scipy.fft.rfft(rng.standard_normal((draws, len(models), size)), axis=2)
+    drawn = scipy.fft.irfft(white * gains[None], size, axis=2)[:, :, size - length :]
+    return drawn.transpose(0, 2, 1)
 
 
 def default_lag(m: int) -> int:

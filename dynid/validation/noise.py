@@ -34,6 +34,7 @@ __all__ = [
     "filter_noise_gain",
     "measure_noise",
     "periodic_deviation",
+    "repeated_periods",
     "repeating_stretch",
 ]
 
@@ -179,12 +180,44 @@ def periodic_deviation(prep: Prepared) -> tuple[NDArray[np.float64], int] | None
         The deviation, shape (M, n) at the full rate over the ``M`` samples that repeat, and the index in
         ``prep`` of its first sample; None when the data do not repeat at least two whole periods.
     """
+    found = _repeating_span(prep)
+    if found is None:
+        return None
+    a0, b0, per = found
+    tau_f = prep.filter(prep.tau)[a0:b0]
+    # The whole periods and the part of one more before them, at its last phases.
+    stack, _lead = period_stack(tau_f, per, (b0 - a0) % per)
+    have = np.sum(np.isfinite(stack[:, :, 0]), axis=0)  # periods holding each phase: 2 or more
+    dev = (stack - np.nanmean(stack, axis=0)) * np.sqrt(have / (have - 1))[None, :, None]
+    dev = dev.reshape(-1, tau_f.shape[1])
+    return dev[np.isfinite(dev[:, 0])], a0  # time order: the lead, then the whole periods
+
+
+def repeated_periods(prep: Prepared) -> tuple[int, int, int] | None:
+    """Where a run repeats its period: the stretch :func:`periodic_deviation` stacks.
+
+    Parameters
+    ----------
+    prep : Prepared
+        The prepared data.
+
+    Returns
+    -------
+    (start, stop, per) or None
+        Indices in ``prep`` of the stretch that repeats (its whole periods at its end, the part of one
+        more before them) and the samples per period; None when the data do not repeat two whole periods.
+    """
+    return _repeating_span(prep)
+
+
+def _repeating_span(prep: Prepared) -> tuple[int, int, int] | None:
+    """``(a, b, per)``: the stretch of ``prep`` (indices) that repeats a period of ``per`` samples at least
+    twice (the longest run, as a whole when it repeats, else its stretch that does), or None."""
     run = max(prep.runs, key=lambda r: r.stop - r.start)
     rows = prep.rows[(prep.rows >= run.start) & (prep.rows < run.stop)]
     if rows.size < 8:
         return None
     a0, b0 = int(rows[0]), int(rows[-1]) + 1
-    tau_f = prep.filter(prep.tau)[a0:b0]
     per_s = detect_period(prep.t[a0:b0], prep.q[a0:b0])
     a, b = 0, b0 - a0
     if per_s is None:
@@ -193,15 +226,9 @@ def periodic_deviation(prep: Prepared) -> tuple[NDArray[np.float64], int] | None
             return None
         a, b, per_s = found
     per = round(per_s * prep.fs)
-    count = (b - a) // per if per > 0 else 0
-    if count < 2:
+    if per <= 0 or (b - a) // per < 2:
         return None
-    # The whole periods and the part of one more before them, at its last phases.
-    stack, _lead = period_stack(tau_f[a:b], per, (b - a) % per)
-    have = np.sum(np.isfinite(stack[:, :, 0]), axis=0)  # periods holding each phase: 2 or more
-    dev = (stack - np.nanmean(stack, axis=0)) * np.sqrt(have / (have - 1))[None, :, None]
-    dev = dev.reshape(-1, tau_f.shape[1])
-    return dev[np.isfinite(dev[:, 0])], a0 + a  # time order: the lead, then the whole periods
+    return a0 + a, a0 + b, per
 
 
 STRETCH_TOL = 1e-4
