@@ -34,8 +34,9 @@ over the true filtered noise); the share right where the refit's excess on the e
 included, is >= 1x (the lab benchmark's measure: on an aperiodic held-out run it counts the refit's own
 parameter error, so effects that add nothing visible are counted as visible); false alarms (the
 effect-free cases and the twins) with the one-sided 95 % upper bound, unknown effects called "unexplained",
-how many "unexplained" verdicts rest on the two runs' disagreement on a joint's parameters alone
-(:mod:`dynid.diagnosis.consistency`), the share of provisional verdicts, the noise-floor
+how many "unexplained" verdicts rest on evidence that no floor enters alone: the two runs' disagreement
+on a joint's parameters (:mod:`dynid.diagnosis.consistency`) or the training refit's misfit across the
+training periods (:mod:`dynid.diagnosis.lack_of_fit`), the share of provisional verdicts, the noise-floor
 method per case (periods / training periods / spectrum), how often the floor covers the true noise
 (the simulator's injected torque noise put through the diagnosis' filter and trim), and how often the
 floor's 95 % interval (:meth:`dynid.validation.metrics.NoiseFloor.std_interval`) covers the std of the
@@ -191,6 +192,7 @@ def run_one(case: dict) -> dict:
         "top": [r.candidate.key for r in d.ranking[:3]],
         "undecided": [r.candidate.key for r in d.undecided],
         "consistency_lead": [j + 1 for j, hit in enumerate(d.consistency["lead_joint"]) if hit],
+        "misfit_lead": [j + 1 for j, hit in enumerate((d.lack_of_fit or {}).get("lead_joint", [])) if hit],
         "excess_significant": bool(d.excess["significant"]),
         "remainder_confirms": (
             bool(np.any(d.remainder["predictable_joint"])) if d.remainder is not None else None
@@ -350,6 +352,7 @@ def _figures(results: list[dict]) -> tuple[list[str], dict]:
                     if r.get("consistency_lead")
                     else ""
                 )
+                + (f", training misfit lead on joint {r['misfit_lead']}" if r.get("misfit_lead") else "")
             )
     lines.append(_lead_line(results))
     unexplained = [r for r in results if not r.get("error") and r.get("verdict") == ["unexplained"]]
@@ -414,23 +417,29 @@ def _figures(results: list[dict]) -> tuple[list[str], dict]:
 
 
 def _lead_line(results: list[dict]) -> str:
-    """How many "unexplained" verdicts rest on the runs' disagreement alone (:mod:`dynid.diagnosis.consistency`:
-    the excess over the floor not significant), and how often the disagreement is found at all."""
+    """How many "unexplained" verdicts rest on evidence that no floor enters alone (the excess over the floor
+    not significant): the runs' disagreement (:mod:`dynid.diagnosis.consistency`), the training run's
+    misfit across its periods (:mod:`dynid.diagnosis.lack_of_fit`), and how often each is found at all."""
     parts = []
     for kind, label in (("none", "effect-free"), ("twin", "twins"), ("unknown", "unknown effect")):
         rs = [r for r in results if r["kind"] == kind and not r.get("error")]
         if rs:
-            alone = sum(
-                r.get("verdict") == ["unexplained"]
-                and bool(r.get("consistency_lead"))
-                and not r.get("excess_significant")
+            alone = [
+                r
                 for r in rs
-            )
+                if r.get("verdict") == ["unexplained"]
+                and not r.get("excess_significant")
+                and (r.get("consistency_lead") or r.get("misfit_lead"))
+            ]
             parts.append(
-                f"{label} {alone}/{len(rs)} (disagreement found in {sum(bool(r.get('consistency_lead')) for r in rs)})"
+                f"{label} {len(alone)}/{len(rs)} (disagreement found in "
+                f"{sum(bool(r.get('consistency_lead')) for r in rs)}, training misfit in "
+                f"{sum(bool(r.get('misfit_lead')) for r in rs)}, both in "
+                f"{sum(bool(r.get('consistency_lead')) and bool(r.get('misfit_lead')) for r in rs)})"
             )
-    return "Unexplained on the runs' disagreement alone (no significant excess): " + (
-        ", ".join(parts) or "no case"
+    return (
+        "Unexplained on evidence without the floor alone (no significant excess; the runs' disagreement or "
+        "the training misfit across its periods): " + (", ".join(parts) or "no case")
     )
 
 

@@ -43,7 +43,9 @@ Method, in the order it runs:
    noise floor is significant, or the training and held-out runs disagree on a joint's parameters
    (:mod:`.consistency`: the cross-fitted coefficients fit the training run worse than noise and state
    estimation explain, as when the cross-fitted baseline absorbs an effect the model lacks; no floor
-   enters), ``["none"]`` when neither.  The excess is tested on what the baseline cannot
+   enters), or the training refit's residual repeats across the training run's periods beyond what
+   noise repeats (:mod:`.lack_of_fit`: a lack-of-fit test against the pure error of the replicates; no
+   floor and no held-out data enter), ``["none"]`` when none of these.  The excess is tested on what the baseline cannot
    predict even when refitted with the rest of the held-out run (contiguous folds, cross-fitted: an
    aperiodic held-out motion that leaves the training states shows the refit's parameter error at many
    times the floor, which its covariance does not foresee), above ``1 + measured_excess_tol`` noise
@@ -91,6 +93,7 @@ from dynid.diagnosis import baseline as bl
 from dynid.diagnosis.candidates import EFFECT_NAMES, enumerate_candidates
 from dynid.diagnosis.consistency import MEMORY_SECONDS, Consistency, parameter_consistency
 from dynid.diagnosis.gapmap import gap_map
+from dynid.diagnosis.lack_of_fit import LackOfFit, training_lack_of_fit
 from dynid.diagnosis.parameter_change import parameter_change_test
 from dynid.diagnosis.refinement import fitted_delay
 from dynid.diagnosis.remainder import Remainder, predictable_remainder
@@ -214,6 +217,17 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
     tr = bl.side(tr_sample, structure, base.x)
     ho = bl.side(ho_sample, structure, base.x)
     state_var, _ = bl.state_estimation_variance(structure, heldout, ho_sample, base.x, sigma)
+    train_noise = _training_noise(tr)
+    # Does the training refit's residual repeat across the training periods?  Evidence on the training
+    # run alone (a lack-of-fit test against the pure error of its replicates); no floor enters.
+    lack = None
+    if train_noise is not None:
+        train_state, _ = bl.state_estimation_variance(
+            structure, train, tr_sample, base.x, np.sqrt(np.maximum(np.mean(train_noise**2, axis=0), 1e-300))
+        )
+        lack = training_lack_of_fit(
+            tr.prep, tr.rows, base.fit, _rows_in(tr, MEMORY_SECONDS), state_variance=train_state
+        )
     del tr_sample, ho_sample  # their full-rate columns are no longer needed
     held = bl.heldout_baseline(model, heldout, ho, base.x, sigma)
     ctx = Context(
@@ -226,7 +240,7 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
     consistency = parameter_consistency(
         cross0.fold,
         max(1, round(MEMORY_SECONDS / settings.block_seconds * block)),
-        noise=_training_noise(tr),
+        noise=train_noise,
     )
     excess = bl.excess_over_floor(
         base.fit,
@@ -272,7 +286,7 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
         gear_ratio=_gear_ratio(sel.accepted),
         filter_gain=_filter_gain_function(ho.prep),
     )
-    verdict, notes = _verdict(sel, excess, consistency, noise, base, settings, robot.joint_names)
+    verdict, notes = _verdict(sel, excess, consistency, lack, noise, base, settings, robot.joint_names)
     measured = noise.method in MEASURED_FLOORS
     remainder = None
     if verdict == ["unexplained"] or not measured:
@@ -290,9 +304,10 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
             block,
             settings.alpha,
         )
-    status = _provisional(
-        verdict, measured, remainder, sel, excess, settings, held.mse, consistency.leads(settings.alpha)
-    )
+    floor_free = consistency.leads(settings.alpha)
+    if lack is not None:
+        floor_free = floor_free | lack.leads(settings.alpha)
+    status = _provisional(verdict, measured, remainder, sel, excess, settings, held.mse, floor_free)
     provisional = status[0]
     notes = _remainder_notes(verdict, measured, status, remainder, robot.joint_names) + notes
     undecided = [] if sel.accepted else _undecided(ctx, base, sel.ranking, settings)
@@ -333,6 +348,7 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
         undecided=undecided,
         remainder=None if remainder is None else remainder.to_dict(),
         consistency=consistency.to_dict(settings.alpha),
+        lack_of_fit=None if lack is None else lack.to_dict(settings.alpha),
     )
 
 
@@ -363,6 +379,35 @@ def _consistency_notes(c: Consistency, alpha: float, joint_names: list[str], exc
             )
         )
     ]
+
+
+def _lack_of_fit_notes(lack: LackOfFit | None, alpha: float, joint_names: list[str]) -> list[str]:
+    """Under an "unexplained" verdict: the joints whose training residual repeats across the training
+    periods beyond noise (:mod:`.lack_of_fit`), and what that says."""
+    if lack is None:
+        return []
+    lead = np.flatnonzero(lack.leads(alpha))
+    if not lead.size:
+        return []
+    joints = ", ".join(
+        f"{joint_names[j]} ({lack.misfit[j]:.2g} noise variances, p = {lack.p_raw[j]:.2g}, "
+        f"{lack.p_joint[j]:.2g} adjusted across the joints)"
+        for j in lead
+    )
+    return [
+        f"The training run repeats its period {lack.periods:.3g} times, and the baseline refitted on it leaves a "
+        f"residual that repeats with it on {joints}: what repeats is what the robot's state determines, and "
+        "noise does not repeat (a lack-of-fit test against the spread across the periods).  Something the "
+        "model lacks is in the training run; no catalogue effect was accepted for it.  This evidence rests on "
+        "neither the held-out run nor the noise floor."
+    ]
+
+
+def _rows_in(side: bl.Side, seconds: float) -> int:
+    """Rows of ``side`` in ``seconds`` (at least one)."""
+    t = side.t
+    dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0 / side.prep.fs
+    return max(1, round(seconds / dt))
 
 
 UNDECIDED_SHOWN = 3
@@ -468,6 +513,7 @@ def _verdict(
     sel: Selection,
     excess: dict[str, Any],
     consistency: Consistency,
+    lack: LackOfFit | None,
     noise: NoiseFloor,
     base: bl.Baseline,
     settings: DiagnosisSettings,
@@ -482,11 +528,13 @@ def _verdict(
         )
     notes.extend(sel.notes)
     disagree = consistency.leads(settings.alpha)
+    misfit = np.zeros_like(disagree) if lack is None else lack.leads(settings.alpha)
     if sel.accepted:
         verdict = [a.candidate.effect for a in sel.accepted]
-    elif excess["significant"] or disagree.any():
+    elif excess["significant"] or disagree.any() or misfit.any():
         verdict = ["unexplained"]
         notes.extend(_consistency_notes(consistency, settings.alpha, joint_names, excess["significant"]))
+        notes.extend(_lack_of_fit_notes(lack, settings.alpha, joint_names))
         partial = [r for r in sel.ranking if r.significant]
         if partial:
             notes.append(
@@ -528,7 +576,7 @@ def _provisional(
     excess: dict[str, Any],
     settings: DiagnosisSettings,
     mse_refit: NDArray[np.float64],
-    disagree: NDArray[np.bool_],
+    floor_free: NDArray[np.bool_],
 ) -> tuple[bool, str]:
     """Does the verdict rest on a floor that is only a lower bound?  The answer, and why, in a clause.
 
@@ -542,8 +590,9 @@ def _provisional(
       ``min_gain``).  The figures computed on the floor (the share of the gap, the gain) would otherwise
       rest on it, joint by joint.
     * "Unexplained" stands when the check that does not rest on the floor (:mod:`.remainder`) finds the
-      residual predictable on a joint whose excess is significant, or the two runs disagree on a joint's
-      parameters (``disagree``, :mod:`.consistency`: no floor enters either), and no significant candidate
+      residual predictable on a joint whose excess is significant, or evidence that no floor enters finds
+      a joint (``floor_free``: the two runs disagree on its parameters, :mod:`.consistency`, or the training
+      residual repeats across the training periods, :mod:`.lack_of_fit`), and no significant candidate
       was turned down for closing too little (the share it closes is understated on a lower floor: it might
       close enough).
     """
@@ -566,7 +615,7 @@ def _provisional(
             f"{partial[0].candidate.label} is significant but closes too little of a gap that the floor may "
             "overstate"
         )
-    confirmed = bool(np.any(disagree)) or (
+    confirmed = bool(np.any(floor_free)) or (
         remainder is not None
         and bool(np.any(remainder.predictable & np.asarray(excess["significant_joint"], dtype=bool)))
     )

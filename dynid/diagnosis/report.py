@@ -129,7 +129,40 @@ def diagnosis_figures(result) -> list[tuple[str, str, bytes]]:
             figure_png(fig),
         )
     )
-    # 4. Delay and cogging flags as curves.
+    # 4. The training residual over the period (the lack-of-fit check).
+    lof = result.lack_of_fit
+    if lof and lof.get("curve", {}).get("phase_s"):
+        curve = lof["curve"]
+        phase = np.asarray(curve["phase_s"], dtype=float)
+        fig, axes = joint_grid(n, height=2.0)
+        for j, ax in enumerate(axes):
+            mean = np.asarray(curve["mean"][j], dtype=float)
+            band = np.asarray(curve["band"][j], dtype=float)
+            ax.fill_between(phase, -band, band, color="k", alpha=0.1, linewidth=0, label="+-2 noise std of the mean")
+            lead = lof["lead_joint"][j]
+            ax.plot(phase, mean, color="#d62728" if lead else "#1f77b4", linewidth=0.8, label="mean over the periods")
+            ax.set_xlabel("time into the period (s)")
+            ax.set_ylabel(f"r_{j + 1} (N m)")
+            ax.set_title(
+                f"joint {j + 1} ({names[j]}): misfit {lof['misfit'][j]:.2g}, p = {lof['p_raw'][j]:.2g}"
+                + (" (lead)" if lead else ""),
+                fontsize=9,
+            )
+        axes[0].legend(fontsize=7, loc="upper right")
+        tidy_grid(axes)
+        out.append(
+            (
+                "Training residual over the period",
+                f"The training refit's residual averaged over the training run's {lof['periods']:.3g} periods, phase "
+                "by phase (the joint's moving samples).  Noise averages out across the periods; what the state "
+                "determines repeats and stays.  The grey band is two noise stds of such a mean (the noise "
+                "measured by the spread across the periods); a curve that leaves it on long stretches is "
+                "something the model lacks.  Misfit: its mean square less the noise's share, in noise variances "
+                f"(a lead at {lof['lead_misfit']:g} or more with p < alpha, red).",
+                figure_png(fig),
+            )
+        )
+    # 5. Delay and cogging flags as curves.
     fig, axes = joint_grid(n, height=2.0, sharex=False)
     for j, ax in enumerate(axes):
         d = gmap["flags"]["delay"][j]
@@ -214,6 +247,43 @@ def _refit_html(refit: dict[str, Any], joint_names) -> str:
         f"{len(rows)} joints, mean {format_number(float(np.mean(b)), 3)} to {format_number(float(np.mean(a)), 3)} N m.</p>"
         + _table(["joint", "before (N m)", "after (N m)", "after / before"], rows)
     )
+
+
+def _floor_free_html(doc: dict[str, Any], joint_names) -> list[str]:
+    """The two checks that do not rest on the floor, per joint: the runs' agreement on the parameters and the
+    training run's misfit across its periods."""
+    con, lof = doc.get("consistency"), doc.get("lack_of_fit")
+    if not con and not lof:
+        return []
+    headers, columns = ["joint"], []
+    if con:
+        headers += ["disagreement: cost (-)", "p", "lead"]
+        columns.append(
+            lambda j: [con["cost"][j], con["p_raw"][j], "yes" if con["lead_joint"][j] else "no"]
+        )
+    if lof:
+        headers += ["training misfit (noise variances)", "of it from quantised angles", "p", "lead"]
+        columns.append(
+            lambda j: [lof["misfit"][j], lof["state_estimation"][j], lof["p_raw"][j], "yes" if lof["lead_joint"][j] else "no"]
+        )
+    rows = [[f"{j + 1} ({joint_names[j]})", *[v for col in columns for v in col(j)]] for j in range(len(joint_names))]
+    text = []
+    if con:
+        text.append(
+            f"Disagreement: the training loss the coefficients refitted with the held-out run add, over the training "
+            f"residual's variance; a lead where it reaches {con['lead_cost']:g} with p < alpha."
+        )
+    if lof:
+        text.append(
+            f"Training misfit: how much of the training refit's residual repeats across the training run's "
+            f"{lof['periods']:.3g} periods beyond noise, less what the quantised angles repeat; a lead where it "
+            f"reaches {lof['lead_misfit']:g} with p < alpha."
+        )
+    return [
+        "<h3>Checks that do not rest on the floor</h3>",
+        _table(headers, rows, text_columns=1),
+        "<p>" + html.escape(" ".join(text)) + "</p>",
+    ]
 
 
 def render_diagnosis_html(
@@ -318,6 +388,7 @@ def render_diagnosis_html(
             f"<p>{html.escape(rem['model'])}; each held-out fold is predicted by trees that never saw it. A share "
             "at or below zero: the trees learnt nothing that holds on data they did not see.</p>"
         )
+    parts.extend(_floor_free_html(doc, result.joint_names))
     for title_f, caption, png in diagnosis_figures(result):
         parts.append(figure_html(png, title=title_f, caption=caption, show_title=True))
     parts.append("<h2>Which effect: candidate ranking</h2>")

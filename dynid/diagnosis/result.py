@@ -157,6 +157,12 @@ class Diagnosis:
         the joints), ``p_raw`` (per joint), ``lead_joint``, ``lead_cost``, ``noise_source``): a joint in
         ``lead_joint`` makes the verdict "unexplained" when no effect is accepted; evidence that does not
         rest on the noise floor.
+    lack_of_fit : dict or None
+        Whether the training refit's residual repeats across the training run's periods beyond noise
+        (:mod:`dynid.diagnosis.lack_of_fit`: ``ratio``, ``null_mean``, ``misfit`` (noise variances),
+        ``p_raw``, ``p_joint``, ``lead_joint``, ``lead_misfit``, ``periods``): a joint in ``lead_joint``
+        makes the verdict "unexplained" when no effect is accepted; evidence on the training run alone.
+        None when the training run does not repeat two whole periods.
     """
 
     verdict: list[str]
@@ -175,6 +181,7 @@ class Diagnosis:
     undecided: list[RankedCandidate] = field(default_factory=list)
     remainder: dict[str, Any] | None = None
     consistency: dict[str, Any] | None = None
+    lack_of_fit: dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON-ready figures (``gap_map``, ``ranking``, ``verdict``, ``parametric``, and more)."""
@@ -187,6 +194,7 @@ class Diagnosis:
                 "undecided": [r.to_dict() for r in self.undecided],
                 "remainder": self.remainder,
                 "consistency": self.consistency,
+                "lack_of_fit": self.lack_of_fit,
                 "gap_map": self.gap_map,
                 "parametric": self.parametric,
                 "decomposition": self.decomposition,
@@ -397,14 +405,17 @@ def verdict_text(d: Diagnosis) -> str:
         if d.excess["significant"]:
             evidence = f"the held-out error is {ratio:.2f} times the noise floor (significant)"
         else:
-            lead = [
-                n
-                for n, hit in zip(d.joint_names, (d.consistency or {}).get("lead_joint", []), strict=False)
-                if hit
-            ]
+            parts = []
+            for doc, what in (
+                (d.consistency, "the training and held-out runs disagree on the parameters of {}"),
+                (d.lack_of_fit, "the training refit's residual repeats across the training periods on {}"),
+            ):
+                lead = [n for n, hit in zip(d.joint_names, (doc or {}).get("lead_joint", []), strict=False) if hit]
+                if lead:
+                    parts.append(what.format(", ".join(lead)))
             evidence = (
-                f"the training and held-out runs disagree on the parameters of {', '.join(lead)} (the held-out "
-                f"error, {ratio:.2f} times the noise floor, is not significant over it)"
+                " and ".join(parts) + " (evidence that does not rest on the noise floor; the held-out excess "
+                "test, which lets the parameters move, is not significant)"
             )
         lines.append(
             f"Unexplained gap: {evidence}, and no candidate effect of the catalogue both closes enough of it and "
