@@ -193,6 +193,10 @@ def run_one(case: dict) -> dict:
         "undecided": [r.candidate.key for r in d.undecided],
         "consistency_lead": [j + 1 for j, hit in enumerate(d.consistency["lead_joint"]) if hit],
         "misfit_lead": [j + 1 for j, hit in enumerate((d.lack_of_fit or {}).get("lead_joint", [])) if hit],
+        "lack_of_fit": None
+        if d.lack_of_fit is None
+        else {k: d.lack_of_fit[k] for k in ("misfit", "state_estimation", "p_raw", "periods")},
+        "consistency": {k: d.consistency[k] for k in ("cost", "p_raw")},
         "excess_significant": bool(d.excess["significant"]),
         "remainder_confirms": (
             bool(np.any(d.remainder["predictable_joint"])) if d.remainder is not None else None

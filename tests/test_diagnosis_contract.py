@@ -97,6 +97,8 @@ def test_default_path_on_an_effect_free_robot_says_none_with_nothing_undecided(d
     case = _record(designs, None, capsys)
     fig = case["figures"]
     assert fig["verdict"] == ["none"], fig["verdict"]
+    # The training run's three periods were checked for a misfit that repeats, and none was found.
+    assert fig["lack_of_fit"]["periods"] > 2.5 and not any(fig["lack_of_fit"]["lead_joint"]), fig["lack_of_fit"]
     assert fig["undecided"] == [] and "settle" not in fig and "Undecided" not in case["out"]
     # The slow recording the Stribeck case asks for is no trap either: on this robot it says none too.
     monkeypatch.chdir(designs)

@@ -24,8 +24,8 @@ repeats.  No held-out data and no noise floor enter.
 The check needs at least two whole periods in the training run (``dynid simulate`` records three by
 default, ``dynid excite --csv`` writes three between the approach and the retreat).  What repeats is what
 the state determines, which includes the state estimation's error when the angles are quantised (the same
-angles give the same error each period): its share is taken off the misfit, and a joint where it is loud
-(:data:`STATE_LIMIT`) is not a lead.
+angles give the same error each period): a multiple of its white model's share is taken off the misfit
+(:data:`QUANTISATION_FACTOR`).
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ from dynid.diagnosis import stats as st
 from dynid.diagnosis.fitting import WeightedFit
 from dynid.validation.noise import periodic_deviation, repeated_periods
 
-__all__ = ["DRAWS", "LEAD_MISFIT", "STATE_LIMIT", "LackOfFit", "training_lack_of_fit"]
+__all__ = ["DRAWS", "LEAD_MISFIT", "QUANTISATION_FACTOR", "LackOfFit", "training_lack_of_fit"]
 
 DRAWS = 200
 """Bootstrap draws of the null distribution."""
@@ -51,13 +51,16 @@ Set on the largest misfit over a run's joints in 200 simulated effect-free field
 1000-1099, UR5 and Panda, three training periods, coloured noise, 18-bit angles): LEAD_CALIBRATION.  The
 bootstrap's p-value alone is rough here as in :mod:`.consistency` (8 % of the effect-free UR5 joints had
 p < 0.05), so the decision rests on both."""
-STATE_LIMIT = 0.25
-"""Joints where differentiating the quantised angles adds this many noise variances or more
-(:func:`dynid.diagnosis.baseline.state_estimation_variance` on the training run) are not leads: the same
-angles give the same error in every period, so it repeats, and the model of that error (white, uniform
-within one encoder step) understates what repeats.  On simulated effect-free runs with 14-bit angles it
-added 0.4-6.5 noise variances per joint and the misfit exceeded it by up to 2.7; with 18-bit angles it adds
-about 0.02-0.04.  (0.25 is where the diagnosis' account says the angles' resolution limits it.)"""
+QUANTISATION_FACTOR = 4.0
+"""How many times the white model of the angles' quantisation error
+(:func:`dynid.diagnosis.baseline.state_estimation_variance`) the lead rule takes off the misfit.  The
+same angles give the same error in every period, so it repeats, and the white model (uniform within one
+encoder step, independent from sample to sample) understates what repeats: on the simulated default path
+of ``dynid simulate`` (a UR5, 1 kHz, 18-bit angles, no effect), the misfit fell by 0.12-0.49 noise
+variances per joint when the angles were logged exactly, 0.9-3.6 times the white model's 0.11-0.14; on
+simulated field runs with 14-bit angles the misfit reached 1.5 times it.  (The controller's feedback on the
+quantised angles repeats too, in the torque, with motion below the encoder's step that the logged angles
+cannot show.)"""
 CURVE_POINTS = 400
 """Points per joint of the periodic mean kept for the report."""
 _CHUNK = 25  # draws per matrix product
@@ -82,8 +85,8 @@ class LackOfFit:
     p_joint : ndarray, shape (n,)
         The same, Holm-adjusted across the joints.
     state : ndarray, shape (n,)
-        What differentiating the quantised angles adds (noise variances): it repeats too.  The lead rule
-        takes it off the misfit, and joints where it reaches :data:`STATE_LIMIT` are not leads.
+        What differentiating the quantised angles adds (noise variances, the white model): it repeats too.
+        The lead rule takes :data:`QUANTISATION_FACTOR` times it off the misfit.
     periods : float
         Periods the training run's repeating stretch holds (its whole periods and the part of one more).
     curve : dict
@@ -102,9 +105,9 @@ class LackOfFit:
     curve: dict = field(default_factory=dict, repr=False)
 
     def leads(self, alpha: float) -> NDArray[np.bool_]:
-        """Joints whose misfit, less what the quantised angles repeat, reaches :data:`LEAD_MISFIT` with
-        their own p-value below ``alpha``, where the angles' share stays below :data:`STATE_LIMIT`."""
-        return (self.misfit - self.state >= LEAD_MISFIT) & (self.p_raw < alpha) & (self.state < STATE_LIMIT)
+        """Joints whose misfit, less what the quantised angles may repeat, reaches :data:`LEAD_MISFIT` with
+        their own p-value below ``alpha``."""
+        return (self.misfit - QUANTISATION_FACTOR * self.state >= LEAD_MISFIT) & (self.p_raw < alpha)
 
     def to_dict(self, alpha: float) -> dict:
         """JSON-ready figures, with the leads at ``alpha``."""
@@ -116,6 +119,7 @@ class LackOfFit:
             "p_joint": self.p_joint.tolist(),
             "lead_joint": self.leads(alpha).tolist(),
             "state_estimation": self.state.tolist(),
+            "quantisation_factor": QUANTISATION_FACTOR,
             "lead_misfit": LEAD_MISFIT,
             "periods": self.periods,
             "curve": self.curve,
