@@ -262,7 +262,7 @@ def _floor_free_html(doc: dict[str, Any], joint_names) -> list[str]:
             lambda j: [con["cost"][j], con["p_raw"][j], "yes" if con["lead_joint"][j] else "no"]
         )
     if lof:
-        headers += ["training misfit (noise variances)", "of it from quantised angles", "p", "lead"]
+        headers += ["training misfit (noise variances)", "quantised angles (white model)", "p", "lead"]
         columns.append(
             lambda j: [lof["misfit"][j], lof["state_estimation"][j], lof["p_raw"][j], "yes" if lof["lead_joint"][j] else "no"]
         )
@@ -276,7 +276,8 @@ def _floor_free_html(doc: dict[str, Any], joint_names) -> list[str]:
     if lof:
         text.append(
             f"Training misfit: how much of the training refit's residual repeats across the training run's "
-            f"{lof['periods']:.3g} periods beyond noise, less what the quantised angles repeat; a lead where it "
+            f"{lof['periods']:.3g} periods beyond noise; a lead where, less {lof['quantisation_factor']:g} times what the "
+            f"white model of the quantised angles gives, it "
             f"reaches {lof['lead_misfit']:g} with p < alpha."
         )
     return [
