@@ -317,7 +317,7 @@ def test_the_benchmark_counts_what_an_effect_adds_over_its_effect_free_twin() ->
 
 
 @pytest.mark.slow
-def test_a_lead_is_the_joints_own_p_value_beside_the_cost(ur5) -> None:
+def test_a_lead_is_the_joints_own_p_value_beside_the_cost(ur5, tmp_path) -> None:
     """Coupled wrist friction at 1x on the UR5, left out of the catalogue (tuning seed 1002).  On joint 6
     the training run pays 21 % of its residual for the parameters refitted with the held-out run, above
     the cost threshold, with a bootstrap p-value of 0.01 on that joint; corrected across the six joints
@@ -326,6 +326,8 @@ def test_a_lead_is_the_joints_own_p_value_beside_the_cost(ur5) -> None:
     motions and noise) keeps every cost below the threshold and stays "none"."""
     from dynid.diagnosis.consistency import LEAD_COST
     from dynid.diagnosis.field_cases import run_field_case
+    from dynid.diagnosis.lack_of_fit import LEAD_MISFIT
+    from dynid.diagnosis.report import write_diagnosis_report
     from dynid.sim.effects import EFFECT_NAMES
 
     catalogue = [e for e in EFFECT_NAMES if e != "coupled_friction"]
@@ -337,7 +339,16 @@ def test_a_lead_is_the_joints_own_p_value_beside_the_cost(ur5) -> None:
     assert c["cost"][5] >= LEAD_COST and c["p_raw"][5] < 0.05 <= c["p_joint"][5]
     assert out["verdict"] == ["unexplained"]
     assert any("disagree" in n and "adjusted across the joints" in n for n in d.notes)
+    # The training run's three periods say the same on their own: its residual repeats on joint 6.
+    lof = d.lack_of_fit
+    assert lof["lead_joint"] == [False] * 5 + [True] and lof["misfit"][5] > 2 * LEAD_MISFIT, lof
+    assert any("repeats with it on wrist_3_joint" in n for n in d.notes)
+    # The report draws it: the residual over the period, with the check's table.
+    write_diagnosis_report(d, tmp_path / "d.html")
+    page = (tmp_path / "d.html").read_text()
+    assert "Training residual over the period" in page and "Checks that do not rest on the floor" in page
 
     twin = run_field_case(ur5, [], level=0.0, seed=1002, catalogue=catalogue)["diagnosis"]
     assert twin.verdict == ["none"]
     assert max(twin.consistency["cost"]) < LEAD_COST
+    assert not any(twin.lack_of_fit["lead_joint"]) and max(twin.lack_of_fit["misfit"]) < LEAD_MISFIT

@@ -222,6 +222,8 @@ def test_diagnose_writes_everything(recordings, models, name, tmp_path, capsys) 
     # confirm it: the verdict is provisional (a "none" would stand, and need no recording).
     assert figures["provisional"] is (figures["verdict"] == ["unexplained"])
     assert not any(figures["remainder"]["predictable_joint"]), figures["remainder"]
+    # No training period repeats either: no lack-of-fit test to lean on.
+    assert figures["lack_of_fit"] is None
     if not figures["provisional"]:
         return
     settle = figures["settle"]
