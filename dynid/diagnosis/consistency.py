@@ -47,7 +47,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from dynid.diagnosis import stats as st
 from dynid.diagnosis.crossfold import CrossFold
@@ -213,12 +212,7 @@ def parameter_consistency(
         null.append(costs(e_tr, e_fold))
     null = np.concatenate(null, axis=1)  # (n, draws)
     mean = null.mean(axis=1)
-    var = null.var(axis=1, ddof=1)
-    p = np.ones(n)
-    for j in range(n):
-        if mean[j] > 0 and var[j] > 0 and np.isfinite(observed[j]):
-            shape = mean[j] ** 2 / var[j]
-            p[j] = float(stats.gamma.sf(observed[j], a=shape, scale=var[j] / mean[j]))
+    p = st.gamma_tail(observed, null)
     return Consistency(
         cost=observed,
         null_mean=mean,

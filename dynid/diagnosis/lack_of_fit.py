@@ -34,7 +34,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from dynid.diagnosis import stats as st
 from dynid.diagnosis.fitting import WeightedFit
@@ -259,11 +258,7 @@ def training_lack_of_fit(
         null.append(_ratio(rw.reshape(m, n, d) / w[:, :, None], moving, period, phase, K, B)[0])
     null_ = np.concatenate(null, axis=1)
     mean = null_.mean(axis=1)
-    var = null_.var(axis=1, ddof=1)
-    p = np.ones(n)
-    for j in range(n):
-        if mean[j] > 0 and var[j] > 0 and np.isfinite(observed[j]):
-            p[j] = float(stats.gamma.sf(observed[j], a=mean[j] ** 2 / var[j], scale=var[j] / mean[j]))
+    p = st.gamma_tail(observed, null_)
     return LackOfFit(
         ratio=observed,
         null_mean=mean,

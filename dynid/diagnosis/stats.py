@@ -37,6 +37,7 @@ __all__ = [
     "default_lag",
     "diebold_mariano",
     "excess_test",
+    "gamma_tail",
     "holm",
     "ljung_box",
     "newey_west_variance",
@@ -82,6 +83,18 @@ def ar_noise(
     white = scipy.fft.rfft(rng.standard_normal((draws, len(models), size)), axis=2)
     drawn = scipy.fft.irfft(white * gains[None], size, axis=2)[:, :, size - length :]
     return drawn.transpose(0, 2, 1)
+
+
+def gamma_tail(observed: NDArray[np.float64], null: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Upper-tail p-values (n,) of statistics ``observed`` (n,) against bootstrap draws ``null`` (n, draws):
+    a gamma matched to the draws' mean and variance, row by row (1 where the draws do not define one)."""
+    mean = null.mean(axis=1)
+    var = null.var(axis=1, ddof=1)
+    p = np.ones(observed.shape[0])
+    for j in range(observed.shape[0]):
+        if mean[j] > 0 and var[j] > 0 and np.isfinite(observed[j]):
+            p[j] = float(stats.gamma.sf(observed[j], a=mean[j] ** 2 / var[j], scale=var[j] / mean[j]))
+    return p
 
 
 def default_lag(m: int) -> int:
