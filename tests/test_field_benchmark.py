@@ -342,7 +342,7 @@ def test_a_lead_is_the_joints_own_p_value_beside_the_cost(ur5, tmp_path) -> None
     # The training run's three periods say the same on their own: its residual repeats on joint 6.
     lof = d.lack_of_fit
     assert lof["lead_joint"] == [False] * 5 + [True] and lof["misfit"][5] > 2 * LEAD_MISFIT, lof
-    assert any("repeats with it on wrist_3_joint" in n for n in d.notes)
+    assert any("repeats with them on wrist_3_joint" in n for n in d.notes)
     # The report draws it: the residual over the period, with the check's table.
     write_diagnosis_report(d, tmp_path / "d.html")
     page = (tmp_path / "d.html").read_text()

@@ -395,8 +395,8 @@ def _lack_of_fit_notes(lack: LackOfFit | None, alpha: float, joint_names: list[s
         for j in lead
     )
     return [
-        f"The training run repeats its period {lack.periods:.3g} times, and the baseline refitted on it leaves a "
-        f"residual that repeats with it on {joints}: what repeats is what the robot's state determines, and "
+        f"The training run holds {lack.periods:.2g} periods of its excitation, and the baseline refitted on it "
+        f"leaves a residual that repeats with them on {joints}: what repeats is what the robot's state determines, and "
         "noise does not repeat (a lack-of-fit test against the spread across the periods).  Something the "
         "model lacks is in the training run; no catalogue effect was accepted for it.  This evidence rests on "
         "neither the held-out run nor the noise floor."
