@@ -160,7 +160,9 @@ class Diagnosis:
     lack_of_fit : dict or None
         Whether the training refit's residual repeats across the training run's periods beyond noise
         (:mod:`dynid.diagnosis.lack_of_fit`: ``ratio``, ``null_mean``, ``misfit`` (noise variances),
-        ``p_raw``, ``p_joint``, ``lead_joint``, ``lead_misfit``, ``periods``): a joint in ``lead_joint``
+        ``p_raw``, ``p_joint``, ``state_estimation``, ``quantisation_factor``, ``lead_joint``,
+        ``lead_misfit``, ``periods``, ``curve`` (the residual over the period, for the report)): a joint in
+        ``lead_joint``
         makes the verdict "unexplained" when no effect is accepted; evidence on the training run alone.
         None when the training run does not repeat two whole periods.
     """
