@@ -226,7 +226,7 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
             structure, train, tr_sample, base.x, np.sqrt(np.maximum(np.mean(train_noise**2, axis=0), 1e-300))
         )
         lack = training_lack_of_fit(
-            tr.prep, tr.rows, base.fit, _rows_in(tr, MEMORY_SECONDS), state_variance=train_state
+            tr.prep, tr.rows, base.fit, _rows_in(tr, MEMORY_SECONDS), noise=train_noise, state_variance=train_state
         )
     del tr_sample, ho_sample  # their full-rate columns are no longer needed
     held = bl.heldout_baseline(model, heldout, ho, base.x, sigma)

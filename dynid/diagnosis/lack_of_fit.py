@@ -172,15 +172,16 @@ def _stack(
 def _ratio(
     r: NDArray[np.float64], moving: NDArray[np.bool_], period: NDArray[np.intp], phase: NDArray[np.intp], K: int, B: int
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """The statistic (n, d) of residuals ``r`` (m, n, d) on the phases :func:`_stack` uses, the mean count
-    of periods per phase (n,), the periodic mean (B, n, d) and the within-phase variance (n, d)."""
+    """The statistic (n, d) of residuals ``r`` (m, n, d) on the phases :func:`_stack` uses, the periods
+    holding each phase (B, n; zero where unused), the periodic mean (B, n, d) and the within-phase variance
+    (n, d)."""
     sums, counts, good, k = _stack(r, moving, period, phase, K, B)
     used = np.maximum(good.sum(axis=0), 1)  # (n,)
     mean = sums.sum(axis=0) / np.maximum(k, 1.0)[:, :, None]  # (B, n, d)
     between = np.einsum("bn,bnd->nd", k, mean**2) / used[:, None]
     dev = (sums - mean[None] * counts[:, :, :, None]) * good[None, :, :, None]
     within = np.einsum("kbnd->nd", dev**2) / np.maximum(np.sum(k - good, axis=0), 1.0)[:, None]
-    return between / np.maximum(within, 1e-300), np.sum(k, axis=0) / used, np.where(good[:, :, None], mean, np.nan), within
+    return between / np.maximum(within, 1e-300), k, np.where(good[:, :, None], mean, np.nan), within
 
 
 def _curve(
@@ -205,6 +206,7 @@ def training_lack_of_fit(
     fit: WeightedFit,
     order: int,
     *,
+    noise: NDArray[np.float64] | None = None,
     state_variance: NDArray[np.float64] | None = None,
     draws: int = DRAWS,
     seed: int = 0,
@@ -221,6 +223,10 @@ def training_lack_of_fit(
         The baseline refitted on those rows (its weights are zero where a joint does not move).
     order : int
         Order of the autoregressive model of the noise (rows).
+    noise : ndarray, shape (L, n), optional
+        The training run's deviation from its mean over its periods at the rows' rate
+        (:func:`dynid.validation.noise.periodic_deviation`, thinned like ``rows``), when the caller has it;
+        found here otherwise.
     state_variance : ndarray, shape (n,), optional
         What differentiating the quantised angles adds to the training residual, in noise variances
         (:func:`dynid.diagnosis.baseline.state_estimation_variance`); zeros when not given.
@@ -235,19 +241,24 @@ def training_lack_of_fit(
         None when the training run does not repeat two whole periods.
     """
     layout = _layout(prep, rows)
-    found = periodic_deviation(prep)
-    if layout is None or found is None:
+    if layout is None:
         return None
+    stride = max(1, int(np.median(np.diff(rows))))
+    if noise is None:
+        found = periodic_deviation(prep)
+        if found is None:
+            return None
+        noise = found[0][::stride]
     period, phase, K, B, held = layout
     m, n = fit.shape
     moving = np.asarray(fit.w) > 0
     w = np.where(moving, fit.w, 1.0)
     r = (fit.r0.reshape(m, n) / w)[:, :, None]
-    observed, mean_k, periodic, within = _ratio(r, moving, period, phase, K, B)
+    observed, k, periodic, within = _ratio(r, moving, period, phase, K, B)
     observed = observed[:, 0]
-    stride = max(1, int(np.median(np.diff(rows))))
-    curve = _curve(periodic[:, :, 0], within[:, 0], _stack(r, moving, period, phase, K, B)[3], stride / prep.fs)
-    ar = [st.ar_model(found[0][::stride, j], order) for j in range(n)]
+    mean_k = np.sum(k, axis=0) / np.maximum((k > 0).sum(axis=0), 1)  # periods per phase used, on average
+    curve = _curve(periodic[:, :, 0], within[:, 0], k, stride / prep.fs)
+    ar = [st.ar_model(noise[:, j], order) for j in range(n)]
     rng = np.random.default_rng(seed)
     null = []
     for start in range(0, draws, _CHUNK):
