@@ -1,4 +1,9 @@
-"""Shared fixtures and markers."""
+"""Shared fixtures and markers.
+
+Two tiers: ``pytest`` runs the fast one (the default ``-m "not slow"`` of pyproject.toml: unit tests,
+contracts, small recoveries, the command line, bad inputs); ``pytest -m slow`` runs the benchmark-sized
+cases, the real recordings and the fleets.  CI runs both.
+"""
 
 from __future__ import annotations
 
@@ -17,6 +22,13 @@ import pytest  # noqa: E402
 REPO = Path(__file__).resolve().parents[1]
 DATA = Path(__file__).resolve().parent / "data"
 SHARED_DATA = Path(os.environ.get("DYNID_SHARED_DATA", REPO.parent / "shared" / "data"))
+
+
+def pytest_collection_modifyitems(config, items):
+    """The real recordings are benchmark-sized: every ``realdata`` test runs in the slow tier."""
+    for item in items:
+        if item.get_closest_marker("realdata") and not item.get_closest_marker("slow"):
+            item.add_marker(pytest.mark.slow)
 
 
 @pytest.fixture

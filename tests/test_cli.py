@@ -81,6 +81,7 @@ def test_the_installed_command_runs():
     assert "Traceback" not in run.stderr
 
 
+@pytest.mark.slow
 def test_demo_runs_what_exists(tmp_path, capsys):
     figures = tmp_path / "demo.json"
     assert main(["demo", "--out", str(tmp_path / "demo"), "--quick", "--json", str(figures)]) == 0

@@ -332,6 +332,7 @@ def _param(effect):
     return pytest.param(effect, marks=[pytest.mark.slow] if effect in SLOW else [])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("effect", [_param(e) for e in EFFECT_CASES])
 def test_a_withheld_effect_is_diagnosed_on_its_joint_and_closes_the_gap(ur5, effect):
     spec, options = EFFECT_CASES[effect]
@@ -403,6 +404,7 @@ def test_a_small_gain_error_on_one_joint_is_found_with_its_joint_and_size(ur5):
     assert case["correct"]
 
 
+@pytest.mark.slow
 def test_nothing_injected_gives_none(ur5):
     case = fast_case(ur5, [], seed=8)
     assert case["verdict"] == ["none"]
@@ -426,6 +428,7 @@ def test_an_excess_left_by_uncertain_parameters_is_not_called_a_gap(ur5):
     assert "parameters uncertain" in d.summary()
 
 
+@pytest.mark.slow
 def test_an_effect_outside_the_catalogue_is_unexplained(ur5):
     catalogue = [e for e in EFFECT_NAMES if e != "coupled_friction"]
     case = fast_case(ur5, ["coupled_friction:1"], catalogue=catalogue)
@@ -471,6 +474,7 @@ def test_heldout_data_without_a_noise_estimate_is_refused(small):
         diagnose(model, train, one)
 
 
+@pytest.mark.slow
 def test_a_floor_from_the_spectrum_makes_the_verdict_provisional(ur5, small):
     model, train, held = small
     # Less than one period of a slow excitation: no repeated period in either run, the floor comes from

@@ -141,6 +141,7 @@ def test_a_term_that_needs_time_is_predicted_from_a_dataset(ur5, coupled) -> Non
         model.predict(held.q, held.q, held.q)
 
 
+@pytest.mark.slow
 def test_diagnose_out_writes_the_refitted_model(ur5, coupled, tmp_path, capsys) -> None:
     _, train, held, plain = coupled
     save_dataset(train, tmp_path / "D.csv")

@@ -26,6 +26,9 @@ from dynid.diagnosis.field_cases import (
 )
 from dynid.validation.noise import detect_period
 
+# benchmark-sized cases (simulated field runs of a minute each): the slow tier
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(scope="module")
 def case(ur5):

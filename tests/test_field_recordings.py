@@ -119,6 +119,7 @@ def models(recordings, tmp_path_factory) -> dict[str, tuple[Path, str]]:
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", VARIANTS)
 def test_identify_fits_every_variant_alike(models, name) -> None:
     """Irregular stamps, samples logged twice and a gap do not spoil the fit: the RMS of the physical
@@ -200,6 +201,7 @@ def test_stamps_repeating_with_other_values_are_refused(recordings, models, tmp_
     assert not js.exists()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", VARIANTS)
 def test_diagnose_writes_everything(recordings, models, name, tmp_path, capsys) -> None:
     js, report = tmp_path / "d.json", tmp_path / "d.html"

@@ -45,6 +45,7 @@ def _strip(rows):
     return [{k: v for k, v in r.items() if k not in ("elapsed_s", "cpu_s")} for r in rows]
 
 
+@pytest.mark.slow
 def test_a_local_cluster_of_two_workers_gives_the_serial_table(fleet, tmp_path, monkeypatch):
     """Four recordings (two robots) keep it short; the drift tests are a function of the table.
 

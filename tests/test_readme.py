@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 import re
 
 from conftest import REPO
@@ -36,6 +38,7 @@ def test_readme_links_the_architecture():
     assert (REPO / "docs" / "architecture.md").is_file()
 
 
+@pytest.mark.slow
 def test_the_python_section_runs(tmp_path, monkeypatch, capsys):
     """Every ```python block of "## Python", in order, in one namespace, in an empty folder."""
     blocks = _python_blocks(_section(README.read_text(encoding="utf-8"), "Python"))

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 import runpy
 from pathlib import Path
 from types import SimpleNamespace
@@ -15,6 +17,7 @@ def load_script() -> SimpleNamespace:
     )
 
 
+@pytest.mark.slow
 def test_quick_reproduction_prints_every_figure_of_the_table() -> None:
     script = load_script()
     lines: list[str] = []
