@@ -100,6 +100,9 @@ def build_parser() -> argparse.ArgumentParser:
         mod = importlib.import_module(f"dynid.commands.{module}")
         p = sub.add_parser(name, help=mod.HELP, description=mod.HELP)
         mod.add_arguments(p)
+        p.add_argument(
+            "--quiet", action="store_true", help="print no progress lines on stderr (results and errors still)"
+        )
         p.set_defaults(_module=mod, _parser=p)
     return parser
 
@@ -129,6 +132,7 @@ def _one_line_warnings(command: str, fallback):
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``dynid`` command; returns the exit code."""
+    from dynid import _progress
     from dynid.exceptions import DynidError
 
     parser = build_parser()
@@ -148,7 +152,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         with warnings.catch_warnings():
             if argv is None:  # the console command (tests calling main(argv) keep pytest's warning capture)
                 warnings.showwarning = _one_line_warnings(args.command, warnings.showwarning)
-            return int(args._module.run(args) or 0)
+            with _progress.session(args.command, quiet=bool(getattr(args, "quiet", False))):
+                return int(args._module.run(args) or 0)
     except DynidError as exc:
         print(f"dynid {args.command}: error: {exc}", file=sys.stderr)
         return 2

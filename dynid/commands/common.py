@@ -104,7 +104,10 @@ def read_dataset(path: str | os.PathLike[str], n_joints: int | None = None, *, r
         kwargs["topic"] = topic
     if joint_names is not None:
         kwargs["joint_names"] = tuple(joint_names)
-    return load_dataset(path, n_joints, **kwargs)
+    from dynid._progress import stage
+
+    with stage(f"reading {path}"):
+        return load_dataset(path, n_joints, **kwargs)
 
 
 def check_data_fits_model(model: Any, data: Any, *, model_path: Any, data_option: str) -> None:

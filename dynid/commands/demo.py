@@ -46,7 +46,10 @@ def _check_out(path: str) -> Path:
 
 
 def _show(line: str) -> None:
+    from dynid import _progress
+
     print(line, flush=True)
+    _progress.touch()
 
 
 def run(args: argparse.Namespace) -> int:

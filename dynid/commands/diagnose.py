@@ -72,6 +72,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from dynid._progress import say
     from dynid.diagnosis.candidates import EFFECT_NAMES
     from dynid.diagnosis.core import diagnose
     from dynid.diagnosis.report import write_diagnosis_report
@@ -157,6 +158,7 @@ def run(args: argparse.Namespace) -> int:
         if args.out and figures["correction"].get("out"):
             context["corrected description"] = f"{args.out} (held-out RMS per joint in the JSON figures)"
     elif args.out:
+        say(f"refitting the model with the accepted effects for {args.out}")
         refit = _write_refit(model, train, heldout, result, args.out)
         figures["refit"] = refit
         if refit.get("written"):
@@ -165,6 +167,7 @@ def run(args: argparse.Namespace) -> int:
             )
     write_figures(args.json, figures)
     if report is not None:
+        say("drawing the report")
         write_diagnosis_report(
             result,
             report,

@@ -115,6 +115,14 @@ def output_paths(out: Path, count: int) -> list[Path]:
     return [out] + [out.with_name(f"{out.stem}-{k}{out.suffix}") for k in range(2, count + 1)]
 
 
+def _show(line: str) -> None:
+    """A line of the design's progress (stdout, as before), which also resets the heartbeat."""
+    from dynid import _progress
+
+    print("  " + line, flush=True)
+    _progress.touch()
+
+
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -180,8 +188,14 @@ def run(args: argparse.Namespace) -> int:
         "baseline": args.baseline,
         "screen_iter": args.screen_iter or None,
         "polish": args.polish,
-        "progress": lambda line: print("  " + line, flush=True),
+        "progress": _show,
     }
+    from dynid._progress import say
+
+    say(
+        f"designing {args.trajectories} trajectory(ies) for {problem.robot.name} "
+        f"({args.harmonics} harmonics, criterion {args.criterion})"
+    )
     if args.scheduler:
         import joblib
 

@@ -70,6 +70,7 @@ def run(args: argparse.Namespace) -> int:
         from dynid.simmodel.mjcf import import_mujoco
 
         import_mujoco()
+    from dynid._progress import say
     from dynid.identify.model import load_model
     from dynid.simmodel.export import export_model
 
@@ -80,6 +81,7 @@ def run(args: argparse.Namespace) -> int:
             args.heldout, degrees=args.degrees, topic=args.topic, joint_names=model.robot.joint_names
         )
         check_data_fits_model(model, heldout, model_path=args.model, data_option="heldout")
+    say(f"writing the {args.format.upper()} description and reloading it to check")
     result = export_model(
         model,
         args.format,

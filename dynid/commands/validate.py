@@ -77,6 +77,7 @@ def _row(values, fmt: str = "{:>10.4g}") -> str:
 
 def run(args: argparse.Namespace) -> int:
     from dynid._io import to_jsonable
+    from dynid._progress import say
     from dynid.identify.model import load_model
     from dynid.identify.preparation import Preprocessing
     from dynid.simmodel.nominal import description_model, is_description
@@ -120,10 +121,12 @@ def run(args: argparse.Namespace) -> int:
         check_data_fits_model(model, data, model_path=path, data_option="data")
     stems = [Path(f).stem for f in files]
     labels = [s if stems.count(s) == 1 else str(f) for s, f in zip(stems, files, strict=True)]
-    results = [
-        validate(model, data, period=args.period, label=label, info={"model_file": Path(path).name})
-        for model, label, path in zip(models, labels, files, strict=True)
-    ]
+    results = []
+    for model, label, path in zip(models, labels, files, strict=True):
+        say(f"predicting with {Path(path).name} and measuring the noise floor")
+        results.append(
+            validate(model, data, period=args.period, label=label, info={"model_file": Path(path).name})
+        )
     rows = compare(results)
     first = results[0]
     figures = {
@@ -137,6 +140,7 @@ def run(args: argparse.Namespace) -> int:
     figures = to_jsonable(figures)
     report = None
     if report_path is not None:
+        say(f"drawing the report {report_path}")
         report = render_report(results, figures=figures, pdf=report_path.suffix.lower() == ".pdf")
 
     n = first.n

@@ -88,6 +88,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from dynid._progress import say
 from dynid._threads import single_blas_thread
 from dynid.diagnosis import baseline as bl
 from dynid.diagnosis.candidates import EFFECT_NAMES, enumerate_candidates
@@ -204,6 +205,7 @@ def run_diagnosis(
 
 
 def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, robot) -> Diagnosis:
+    say("[1/6] preparing the training and held-out runs")
     structure = bl.model_structure(model, robot, train, heldout)
     robot = structure.robot
     bl.check_training_length(structure, train)
@@ -213,6 +215,7 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
     sigma = np.maximum(noise.std, 1e-12)
     block = _block_rows(ho_sample, settings.block_seconds)
 
+    say("[2/6] refitting the model's structure on the training run (the baseline)")
     base = bl.refit_baseline(tr_sample)
     tr = bl.side(tr_sample, structure, base.x)
     ho = bl.side(ho_sample, structure, base.x)
@@ -235,6 +238,7 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
     )
     # The baseline cross-fitted on the held-out folds: the excess test's residual
     # (:func:`~dynid.diagnosis.baseline.crossfit_residual`) and the first round's cross-fitted footing.
+    say("[3/6] cross-fitting the baseline on the held-out folds; the runs' agreement and the excess")
     cross0 = cross_fitted(ctx, base.fit, tr.X0, ho.X0, bl.FOLDS)
     # Do the two runs agree on the baseline's parameters?  Evidence that does not rest on the floor.
     consistency = parameter_consistency(
@@ -254,12 +258,14 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
         floor_rel_se=noise.rel_se,
     )
 
+    say("[4/6] screening the candidate effects")
     skip = _in_model(structure)
     groups = enumerate_candidates(tr.src, settings.effects, skip=skip, motor_inertia="armature" not in skip)
     sel = select(ctx, base, held, groups, settings, excess["significant_joint"], cross0=cross0)
 
     # A torque gain on one joint scales that joint's measured torque: what the refit absorbs of it.
     # Its columns were built for the screen (round 0 tunes every candidate).
+    say("[5/6] the parameter change and the gap map")
     gain_dirs = {c.joint: base.fit.regress(C) for c, C in sel.tuned.values() if c.effect == "drive_gain"}
     par = parameter_change_test(
         tr.src.ddq[tr.rows],
@@ -286,6 +292,7 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
         gear_ratio=_gear_ratio(sel.accepted),
         filter_gain=_filter_gain_function(ho.prep),
     )
+    say("[6/6] the verdict")
     verdict, notes = _verdict(sel, excess, consistency, lack, noise, base, settings, robot.joint_names)
     measured = noise.method in MEASURED_FLOORS
     remainder = None

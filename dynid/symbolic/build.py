@@ -79,7 +79,13 @@ def stderr_progress(message: str) -> None:
     message : str
         One line of progress.
     """
-    print(message, file=sys.stderr, flush=True)
+    from dynid import _progress
+
+    session = _progress.active()
+    if session is not None:
+        session.say(message)
+    else:
+        print(message, file=sys.stderr, flush=True)
 
 
 def cache_dir() -> Path:
