@@ -50,7 +50,7 @@ def rng() -> np.random.Generator:
 
 # ---------------------------------------------------------------------- without the data
 def test_unknown_recording_lists_the_known_ones(tmp_path: Path) -> None:
-    with pytest.raises(DataError, match="unknown recording 'ur5'; known recordings: panda_gaz2019, tx40"):
+    with pytest.raises(DataError, match="unknown recording 'ur5'; known recordings: kuka_lwr4_flobaroid, panda_gaz2019, tx40"):
         load_recording("ur5", tmp_path)
 
 

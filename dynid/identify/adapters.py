@@ -10,6 +10,8 @@ goes with it.  The recordings are test fixtures, never part of the package; a fr
                            robot, link-side torque sensors (Gaz et al., RA-L 2019).
 ``tx40``                   Staubli TX40, 6 joints, 5 kHz, motor-side angles and torques converted to
                            the joint side through the gear ratios and the coupled wrist.
+``kuka_lwr4_flobaroid``    KUKA LWR4+, 7 joints, ~200 Hz jittered stamps, joint torque sensors, three
+                           runs (FloBaRoID); positions and torques pre-filtered by the recording software.
 ========================  ==========================================================================
 
 Examples
@@ -39,6 +41,7 @@ __all__ = [
     "TX40_SAMPLE_TIME",
     "Recording",
     "find_shared_data",
+    "load_kuka_lwr4",
     "load_panda_gaz2019",
     "load_recording",
     "load_tx40",
@@ -313,6 +316,73 @@ def load_tx40(root: str | os.PathLike[str] | None = None) -> Dataset:
     )
 
 
+# ---------------------------------------------------------------------- KUKA LWR4+
+_KUKA_MODEL = Path("model", "kuka_lwr4.urdf")
+_KUKA_RUNS = (1, 2, 3)
+_KUKA_JOINTS = 7
+
+
+def load_kuka_lwr4(root: str | os.PathLike[str] | None = None, *, run: int = 1) -> Dataset:
+    """KUKA LWR4+ recording (FloBaRoID), one of its three runs, in joint space.
+
+    Each run (``data/measurements_<run>.npz``) holds Unix time stamps at ~200 Hz with jitter (steps
+    3.2-6.8 ms), positions and velocities (rad, rad/s; the velocities derived by the recording software)
+    and the joint torque sensors' torque (N m), in the URDF's joint order.  The recording software stored
+    the positions low-pass filtered (3 Hz, zero-phase) and the torques median- and low-pass filtered:
+    they are not raw, and a model is scored against them as they are.  Runs 1 and 2 execute the same
+    excitation; run 3 is another motion (identify on 1, hold out 3).  Time starts at 0; the irregular
+    stamps are kept (preprocessing resamples them).
+
+    Parameters
+    ----------
+    root : str or path-like, optional
+        Folder holding the recordings, or ``kuka_lwr4_flobaroid/`` itself; default :func:`find_shared_data`.
+    run : {1, 2, 3}
+        Which run.
+
+    Returns
+    -------
+    Dataset
+        m = 5027 samples, n = 7, with ``dq``.
+    """
+    if run not in _KUKA_RUNS:
+        raise DataError(f"run is {run!r}; the KUKA LWR4+ recording has runs 1, 2 and 3")
+    folder = recording_folder("kuka_lwr4_flobaroid", root)
+    path = _require(folder / "data" / f"measurements_{run}.npz", f"the KUKA LWR4+ run {run}")
+    try:
+        with np.load(path, allow_pickle=False) as arrays:
+            t = np.asarray(arrays["times"], dtype=np.float64)
+            q = np.asarray(arrays["positions"], dtype=np.float64)
+            dq = np.asarray(arrays["velocities"], dtype=np.float64)
+            tau = np.asarray(arrays["torques"], dtype=np.float64)
+    except (KeyError, ValueError, OSError) as err:
+        raise DataError(
+            f"{path.name} could not be read as the KUKA LWR4+ run (times, positions, velocities, torques: "
+            f"{err}); restore the file"
+        ) from None
+    if not (q.shape == dq.shape == tau.shape == (len(t), _KUKA_JOINTS)):
+        raise DataError(
+            f"{path.name} holds positions {q.shape}, velocities {dq.shape}, torques {tau.shape} for "
+            f"{len(t)} time stamps; ({len(t)}, 7) each was expected; restore the file"
+        )
+    return Dataset(
+        t - t[0],
+        q,
+        tau,
+        dq=dq,
+        meta={
+            "recording": "kuka_lwr4_flobaroid",
+            "run": run,
+            "robot": "kuka_lwr4",
+            "model": str(folder / _KUKA_MODEL),
+            "torque": "link-side joint torque sensors, median and low-pass filtered by the recording software",
+            "reference": "as recorded (pre-filtered)",
+        },
+        n_joints=_KUKA_JOINTS,
+        robot_name="kuka_lwr4",
+    )
+
+
 # ---------------------------------------------------------------------- registry
 @dataclass(frozen=True)
 class Recording:
@@ -386,6 +456,13 @@ ADAPTERS: dict[str, Recording] = {
         n_joints=6,
         description="Staubli TX40, 6 DOF, 5 kHz, motor-side data converted through a coupled wrist",
         transmission=tx40_transmission,
+    ),
+    "kuka_lwr4_flobaroid": Recording(
+        name="kuka_lwr4_flobaroid",
+        loader=load_kuka_lwr4,
+        model=_KUKA_MODEL,
+        n_joints=_KUKA_JOINTS,
+        description="KUKA LWR4+, 7 DOF, ~200 Hz, joint torque sensors, run 1 of 3 (FloBaRoID; pre-filtered)",
     ),
 }
 
