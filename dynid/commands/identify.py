@@ -101,10 +101,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--reference-weight",
-        default=0.0,
-        type=float,
+        default="auto",
+        type=_weight,
         metavar="W",
-        help="consistent method: pull toward the URDF bodies (default 0)",
+        help="pull of the consistent links toward the robot description's bodies, in squared standard "
+        "deviations per unit of divergence; 'auto' (default): chosen by blocked cross-validation on the "
+        "recording; 0: only directions the data cannot see keep the description",
     )
     parser.add_argument(
         "--unconstrained",
@@ -150,6 +152,19 @@ def _links_line(figures: dict) -> str:
         f"{', '.join(str(k) for k in held)} ({c['mahalanobis']:.3g} std from the unconstrained estimate"
         f"{rise_text}; --unconstrained lifts it)"
     )
+
+
+def _weight(text: str) -> float | str:
+    """``--reference-weight``: 'auto' or a number >= 0."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not (value >= 0 and value < float("inf")):
+        raise argparse.ArgumentTypeError(f"expected 'auto' or a number >= 0, got {text!r}")
+    return value
 
 
 def run(args: argparse.Namespace) -> int:

@@ -63,6 +63,10 @@ _MU_FACTOR = 0.1  # barrier weight decrease per centring
 # multiplier (squared std per relative loosening) above which a link is held at the bound: measured 6-2000 on
 # UR5 links the data push against the bound, at most 5e-4 where only the pull of the unseen directions does
 _BOUND_FORCE = 0.05
+# pull of the armature and friction toward their description, relative to the links' divergence: a base
+# parameter that holds a link's inertia and an armature together (joint 1's axis) leaves the link at its
+# description and the armature takes the rest
+_EXTRA_PULL = 1e-3
 EPS = 1e-6
 """Default smallest eigenvalue (SI, kg m^2) of a consistent pseudo-inertia (see :class:`ConsistentLS`)."""
 __all__ = [
@@ -70,6 +74,7 @@ __all__ = [
     "ConsistentLS",
     "consistent_projection",
     "consistent_solution",
+    "described_bodies",
     "is_consistent",
     "link_inertials",
     "log_cholesky",
@@ -93,21 +98,27 @@ def pseudo_inertia(params: ArrayLike) -> NDArray[np.float64]:
     p = np.asarray(params, dtype=np.float64)
     single = p.ndim == 1
     p = p.reshape(-1, 10)
-    m, h = p[:, 0], p[:, 1:4]
-    Ixx, Ixy, Iyy, Ixz, Iyz, Izz = p[:, 4], p[:, 5], p[:, 6], p[:, 7], p[:, 8], p[:, 9]
-    inertia = np.stack(
-        [np.stack([Ixx, Ixy, Ixz], -1), np.stack([Ixy, Iyy, Iyz], -1), np.stack([Ixz, Iyz, Izz], -1)], -2
-    )
-    tr = Ixx + Iyy + Izz
-    J = np.zeros((len(p), 4, 4))
-    J[:, :3, :3] = 0.5 * tr[:, None, None] * np.eye(3) - inertia
-    J[:, :3, 3] = h
-    J[:, 3, :3] = h
-    J[:, 3, 3] = m
+    J = (p @ _E_FLAT).reshape(-1, 4, 4)  # J is linear in the parameters: sum_i params_i E_i
     return J[0] if single else J
 
 
-_E = pseudo_inertia(np.eye(10))  # (10, 4, 4): J = sum_i params_i _E[i]
+def _basis() -> NDArray[np.float64]:
+    """(10, 4, 4): the pseudo-inertia of each unit standard parameter."""
+    E = np.zeros((10, 4, 4))
+    for i, (a, b) in enumerate([(3, 3), (0, 3), (1, 3), (2, 3)]):
+        E[i, a, b] = E[i, b, a] = 1.0
+    # inertia entries [Ixx, Ixy, Iyy, Ixz, Iyz, Izz]: Sigma = tr(I)/2 * 1 - I
+    for i, (a, b) in zip(range(4, 10), [(0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2)], strict=True):
+        if a == b:
+            E[i, :3, :3] = 0.5 * np.eye(3)
+            E[i, a, a] -= 1.0
+        else:
+            E[i, a, b] = E[i, b, a] = -1.0
+    return E
+
+
+_E = _basis()  # (10, 4, 4): J = sum_i params_i _E[i]
+_E_FLAT = _E.reshape(10, 16)
 
 
 def standard_from_pseudo_inertia(J):
@@ -349,6 +360,7 @@ def consistent_solution(
     eps: float = EPS,
     tol: float = 1e-8,
     max_iter: int = 1000,
+    describe: bool = True,
 ) -> tuple[NDArray[np.float64], dict[str, Any]]:
     """The physical vector closest to an unconstrained estimate among eps-consistent ones.
 
@@ -383,6 +395,10 @@ def consistent_solution(
         Duality-gap tolerance of the barrier method, relative to the objective (at least 1).
     max_iter : int
         Most Newton steps in all.
+    describe : bool
+        Among the bodies with the found identified parameters, return those nearest the description
+        (:func:`described_bodies`; default).  False skips that step (the identified parameters are
+        the same; a cross-validation that needs only them saves its time).
 
     Returns
     -------
@@ -425,13 +441,18 @@ def consistent_solution(
         np.linalg.eigvalsh(pseudo_inertia(phi0[10 * k : 10 * k + 10])).min() > eps_l[k] for k in range(n)
     ) and np.all(phi0[10 * n + e_idx] >= lb_e)
     if start_ok and reference_weight == 0:
-        # x_hat has an eps-consistent standard vector: it is the (weighted least-squares) answer itself.
+        # x_hat has an eps-consistent standard vector: it is the (weighted least-squares) answer itself;
+        # the description decides the bodies in the directions it leaves open.
+        prior = {}
+        if describe:
+            phi0, prior = described_bodies(robot, cols, phi0, mask=mask, eps=eps_l)
         return phi0, {
             "status": "unconstrained estimate is consistent",
             "iterations": 0,
-            "time_s": 0.0,
+            "time_s": time.perf_counter() - started,
             "eps": eps_l.tolist(),
             "at_bound": [],
+            "prior": prior,
         }
 
     # Variables v = (y, w), the physical vector affine in them: y = R (x - x_hat) / sigma (whitened
@@ -463,49 +484,65 @@ def consistent_solution(
     phi_f[10 * n + e_idx] = np.maximum(phi_f[10 * n + e_idx], np.where(lower, lb_e + 1e-2 * e_scale, -np.inf))
     v = np.concatenate([R @ (P[:, act] @ phi_f[act] - xm) / sigma, V2.T @ (phi_f[act] / D_a)])
 
+    eye4 = np.eye(4)
+    shift = eps_l[:, None, None] * eye4  # (n, 4, 4)
+    Jr_inv = np.linalg.inv(np.asarray(J_ref_pd))  # (n, 4, 4)
+    logdet_ref = np.linalg.slogdet(np.asarray(J_ref_pd))[1]
+    B_all = np.stack(B)  # (n, nv, 4, 4)
+    prior_grad = (
+        reference_weight * np.einsum("lab,lkba->k", Jr_inv, B_all) if reference_weight > 0 else np.zeros(nv)
+    )
+    diag16 = [0, 5, 10, 15]
+
     def bodies(v):
         pa = c0 + G @ v
-        return [pseudo_inertia(pa[10 * k : 10 * k + 10]) for k in range(n)], pa[10 * n :][lower] - lbe
+        return pseudo_inertia(pa[: 10 * n].reshape(n, 10)), pa[10 * n :][lower] - lbe
 
     def value(v, mu):
         Js, slack = bodies(v)
         if np.any(slack <= 0):
             return np.inf
         out = float(np.sum(weight * (v - centre) ** 2)) - mu * float(np.sum(np.log(slack / se)))
-        for link, J in enumerate(Js):
-            try:
-                L = np.linalg.cholesky(J - eps_l[link] * np.eye(4))
-            except np.linalg.LinAlgError:
+        try:
+            L = np.linalg.cholesky(Js - shift)
+        except np.linalg.LinAlgError:
+            return np.inf
+        out -= 2 * mu * float(np.log(np.diagonal(L, axis1=1, axis2=2)).sum())
+        if reference_weight > 0:
+            sign, logdet = np.linalg.slogdet(Js)
+            if np.any(sign <= 0):
                 return np.inf
-            out -= 2 * mu * float(np.log(np.diag(L)).sum())
-            if reference_weight > 0:
-                Jr_inv = np.linalg.inv(J_ref_pd[link])
-                out += reference_weight * (
-                    float(np.trace(Jr_inv @ J))
-                    - np.linalg.slogdet(J)[1]
-                    + np.linalg.slogdet(J_ref_pd[link])[1]
-                    - 4
-                )
+            out += reference_weight * float(
+                np.sum(np.einsum("lab,lba->l", Jr_inv, Js) - logdet + logdet_ref - 4)
+            )
         return out
+
+    def _logdet_terms(M, coef, grad, hess):
+        """-coef log det M_l summed over links: gradient -tr(M^-1 B_k), Hessian tr(M^-1 B_k M^-1 B_j)."""
+        Li = np.linalg.inv(np.linalg.cholesky(M))  # (n, 4, 4), lower triangular
+        T = (Li[:, None] @ B_all @ np.swapaxes(Li, 1, 2)[:, None]).reshape(n, nv, 16)
+        grad -= coef * T[:, :, diag16].sum(axis=(0, 2))
+        Tm = np.ascontiguousarray(T.transpose(1, 0, 2)).reshape(nv, 16 * n)
+        hess += coef * (Tm @ Tm.T)
 
     def newton_step(v, mu):
         Js, slack = bodies(v)
-        grad = 2 * weight * (v - centre)
+        grad = 2 * weight * (v - centre) + prior_grad
         hess = np.diag(2 * weight)
-        for link, J in enumerate(Js):
-            terms = [(mu, J - eps_l[link] * np.eye(4))]
-            if reference_weight > 0:
-                terms.append((reference_weight, J))
-                grad += reference_weight * np.einsum("ab,kba->k", np.linalg.inv(J_ref_pd[link]), B[link])
-            for coef, M in terms:  # -coef log det M: gradient -tr(M^-1 B_k), Hessian tr(M^-1 B_k M^-1 B_j)
-                Li = scipy.linalg.solve_triangular(np.linalg.cholesky(M), np.eye(4), lower=True)
-                T = np.einsum("ab,kbc,dc->kad", Li, B[link], Li).reshape(nv, 16)
-                grad -= coef * T[:, [0, 5, 10, 15]].sum(axis=1)
-                hess += coef * (T @ T.T)
+        _logdet_terms(Js - shift, mu, grad, hess)
+        if reference_weight > 0:
+            _logdet_terms(Js, reference_weight, grad, hess)
         grad -= mu * (Ge.T @ (1.0 / slack))
         hess += mu * (Ge.T / slack**2) @ Ge
         d = 1.0 / np.sqrt(np.maximum(np.diag(hess), 1e-300))  # Jacobi scaling: entries span many decades
-        step = -d * np.linalg.lstsq(hess * np.outer(d, d), d * grad, rcond=1e-14)[0]
+        scaled = hess * np.outer(d, d)
+        try:
+            c = scipy.linalg.cho_factor(scaled, check_finite=False)
+            step = -d * scipy.linalg.cho_solve(c, d * grad, check_finite=False)
+            if not np.all(np.isfinite(step)):
+                raise np.linalg.LinAlgError
+        except (np.linalg.LinAlgError, ValueError):
+            step = -d * np.linalg.lstsq(scaled, d * grad, rcond=1e-14)[0]
         return step, float(-grad @ step)
 
     nu = 4 * n + int(lower.sum())  # barrier parameter: 4 per pseudo-inertia, 1 per bound
@@ -549,16 +586,193 @@ def consistent_solution(
     Js, _ = bodies(v)
     for link, J in enumerate(Js):
         size = max(float(np.linalg.eigvalsh(J_ref_pd[link]).max()), 1e-6)
-        lam = mu * float(np.linalg.eigvalsh(np.linalg.inv(J - eps_l[link] * np.eye(4))).max())
+        force = mu * np.linalg.inv(J - eps_l[link] * np.eye(4))
+        if reference_weight > 0:  # the divergence's log-det is a barrier at J = 0 too; its pull toward J_ref aside
+            force = force + reference_weight * (np.linalg.inv(J) - Jr_inv[link])
+        lam = float(np.linalg.eigvalsh(0.5 * (force + force.T)).max())
         if lam * size > _BOUND_FORCE:
             at_bound.append(link + 1)
+    prior = {}
+    if describe:
+        phi_opt, prior = described_bodies(robot, cols, phi_opt, mask=mask, eps=eps_l)
     return phi_opt, {
         "status": status,
         "iterations": steps,
         "time_s": time.perf_counter() - started,
         "eps": eps_l.tolist(),
         "at_bound": at_bound,
+        "prior": prior,
     }
+
+
+def _link_margins(ref_params: NDArray[np.float64], eps: float | ArrayLike) -> NDArray[np.float64]:
+    """Per-link consistency margin: ``eps``, lowered to half the smallest eigenvalue of a thinner URDF body."""
+    J_ref = pseudo_inertia(ref_params.reshape(-1, 10))
+    eps_in = np.broadcast_to(np.asarray(eps, dtype=np.float64), (len(J_ref),))
+    out = np.empty(len(J_ref))
+    for link, J in enumerate(J_ref):
+        w = np.linalg.eigvalsh(J).min()
+        out[link] = min(float(eps_in[link]), 0.5 * float(w)) if w > 0 else float(eps_in[link])
+    return out
+
+
+def described_bodies(
+    robot,
+    cols: ColumnSet,
+    phi: ArrayLike,
+    *,
+    mask: NDArray[np.bool_] | None = None,
+    eps: float | ArrayLike = EPS,
+    max_iter: int = 200,
+) -> tuple[NDArray[np.float64], dict[str, Any]]:
+    """The bodies nearest the robot's description among those with the same identified parameters.
+
+    Joint torques determine only combinations of the links' standard parameters (the base parameters):
+    in every other direction any body is as good as another for the data, and a vanishing pull toward
+    an arbitrary start used to decide, which could put 60 kg on a 0.65 kg link.  Here the description
+    decides there: among the physical vectors ``phi`` with the same identified parameters (``P phi``
+    fixed, so the prediction of every torque is unchanged to rounding) and ``J_l >= eps_l I``, the one
+    that minimises the entropic divergence of every body from its description,
+
+        sum_l  tr(J_l,ref^-1 J_l) - log det(J_l - eps_l I)     (Lee and Wensing's log-det divergence,
+                                                                with the margin in the log-det)
+
+    plus, for armature and friction in play, ``((e - e_ref) / e_scale)^2`` with a vanishing barrier at
+    their lower bounds.  The divergence is unit-free and treats mass, first and second moments alike:
+    a change of a base parameter that could go into a link's mass or its inertia goes where it is
+    the smaller change relative to that body, and a direction the data do not see stays at the
+    description.  A convex problem in the null-space coordinates, solved by damped Newton steps from
+    the feasible ``phi``.
+
+    Parameters
+    ----------
+    robot : RobotModel
+        The robot; its URDF/DH bodies are the description.
+    cols : ColumnSet
+        The identified parameters.
+    phi : array_like, shape (14 n,)
+        A physical vector with ``J_l - eps_l I`` positive semidefinite.
+    mask : ndarray of bool, shape (p,), optional
+        Identified parameters held fixed (default all).
+    eps : float or array_like
+        Consistency margin per link (kg m^2).
+    max_iter : int
+        Most Newton steps.
+
+    Returns
+    -------
+    phi : ndarray, shape (14 n,)
+        The physical vector with the same identified parameters, nearest the description.
+    info : dict
+        ``iterations``, ``directions`` (how many directions the data leave to the description) and
+        ``divergence`` (the summed divergence before and after).
+    """
+    phi = np.asarray(phi, dtype=np.float64).copy()
+    n = cols.n
+    mask = np.ones(cols.p, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+    P = cols.P[mask]
+    enabled = cols.enabled_extras & np.any(P[:, 10 * n :] != 0, axis=0)
+    e_idx = np.flatnonzero(enabled)
+    act = np.concatenate([np.arange(10 * n), 10 * n + e_idx])
+    ref = np.concatenate([robot.params, robot.armature * enabled[:n], np.zeros(3 * n)])
+    D = _phi_scale(ref, n)[act]
+    Pa = P[:, act] * D
+    if Pa.size:
+        _, sk, Vkt = np.linalg.svd(Pa, full_matrices=True)
+        rank = int(np.sum(sk > 1e-10 * sk[0])) if sk.size and sk[0] > 0 else 0
+    else:
+        Vkt, rank = np.eye(len(act)), 0
+    N = D[:, None] * Vkt[rank:].T  # phi_a = phi_a,0 + N w keeps P phi
+    info: dict[str, Any] = {"iterations": 0, "directions": int(N.shape[1])}
+    if N.shape[1] == 0:
+        return phi, info
+    eps_l = _link_margins(robot.params, eps)
+    J_ref = pseudo_inertia(robot.params.reshape(n, 10))
+    A = []
+    for link in range(n):
+        w_ref = np.linalg.eigvalsh(J_ref[link])
+        floor = max(1e-6 * max(float(w_ref.max()), 1e-6), 2 * eps_l[link])
+        A.append(np.linalg.inv(_project_pd(J_ref[link], floor)))
+    kinds = [EXTRA_KINDS[e // n] for e in e_idx]
+    lb = np.array([-np.inf if k == "offset" else 0.0 for k in kinds])
+    e_ref = ref[10 * n + e_idx]
+    e_scale = np.maximum(np.abs(phi[10 * n + e_idx]), 1e-6)
+    e_scale = np.maximum(e_scale, 1e-2 * float(e_scale.max(initial=1e-6)))
+    bounded = np.isfinite(lb)
+    # the start must be strictly inside: nudge extras sitting on their bound
+    e0 = phi[10 * n + e_idx]
+    phi[10 * n + e_idx] = np.where(bounded & (e0 <= lb + 1e-9 * e_scale), lb + 1e-9 * e_scale, e0)
+    base = phi[act].copy()
+    B = [np.einsum("ik,iab->kab", N[10 * link : 10 * link + 10], _E) for link in range(n)]
+    Ne = N[10 * n :]
+    kappa = 1e-9  # barrier weight of the extras' bounds (relative to the unit pull)
+
+    def parts(w):
+        pa = base + N @ w
+        return pseudo_inertia(pa[: 10 * n].reshape(n, 10)), pa[10 * n :]
+
+    def value(w):
+        Js, e = parts(w)
+        slack = (e - lb)[bounded]
+        if np.any(slack <= 0):
+            return np.inf
+        out = _EXTRA_PULL * float(np.sum(((e - e_ref) / e_scale) ** 2)) - kappa * float(
+            np.sum(np.log(slack / e_scale[bounded]))
+        )
+        for link, J in enumerate(Js):
+            M = J - eps_l[link] * np.eye(4)
+            sign, logdet = np.linalg.slogdet(M)
+            if sign <= 0 or not np.all(np.linalg.eigvalsh(M) > 0):
+                return np.inf
+            out += float(np.trace(A[link] @ J)) - logdet
+        return out
+
+    w = np.zeros(N.shape[1])
+    f = value(w)
+    if not np.isfinite(f):  # the start sits on the margin: nothing safe to move
+        return phi, info
+    f_start = f
+    for step_count in range(1, max_iter + 1):
+        Js, e = parts(w)
+        grad = 2 * _EXTRA_PULL * Ne.T @ ((e - e_ref) / e_scale**2)
+        hess = 2 * _EXTRA_PULL * (Ne.T / e_scale**2) @ Ne
+        slack = (e - lb)[bounded]
+        Nb = Ne[bounded]
+        grad -= kappa * Nb.T @ (1.0 / slack)
+        hess += kappa * (Nb.T / slack**2) @ Nb
+        for link, J in enumerate(Js):
+            grad += np.einsum("ab,kba->k", A[link], B[link])
+            Li = scipy.linalg.solve_triangular(
+                np.linalg.cholesky(J - eps_l[link] * np.eye(4)), np.eye(4), lower=True
+            )
+            T = np.einsum("ab,kbc,dc->kad", Li, B[link], Li).reshape(-1, 16)
+            grad -= T[:, [0, 5, 10, 15]].sum(axis=1)
+            hess += T @ T.T
+        d = 1.0 / np.sqrt(np.maximum(np.diag(hess), 1e-300))
+        step = -d * np.linalg.lstsq(hess * np.outer(d, d), d * grad, rcond=1e-14)[0]
+        decrement = float(-grad @ step)
+        info["iterations"] = step_count
+        if decrement <= 1e-10 * max(1.0, abs(f)):
+            break
+        t = 1.0
+        while True:
+            f_new = value(w + t * step)
+            if f_new <= f - 0.25 * t * decrement:
+                break
+            t *= 0.5
+            if t < 1e-12:
+                break
+        if t < 1e-12:
+            break
+        w, f = w + t * step, f_new
+    target = P[:, act] @ base
+    moved = base + N @ w
+    # back onto the affine set exactly (the null space is numerical: rounding of its basis)
+    moved += np.linalg.lstsq(P[:, act], target - P[:, act] @ moved, rcond=None)[0]
+    phi[act] = moved
+    phi[10 * n + e_idx] = np.maximum(phi[10 * n + e_idx], lb)
+    info["divergence"] = {"start": f_start, "end": f}
+    return phi, info
 
 
 def consistent_projection(
@@ -594,7 +808,7 @@ def consistent_projection(
     mask : ndarray of bool, shape (p,), optional
         Parameters the estimate and ``R`` cover (default all).
     **options
-        Keywords of :func:`consistent_solution` (``reference_weight``, ``eps``, ``tol``, ``max_iter``).
+        Keywords of :func:`consistent_solution` (``reference_weight``, ``eps``, ``tol``, ``max_iter``, ``describe``).
 
     Returns
     -------

@@ -54,6 +54,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynid._io import atomic_path, dumps_json, to_jsonable
+from dynid._progress import say
 from dynid._threads import single_blas_thread
 from dynid.exceptions import DynidError, ModelFileError, UsageError
 from dynid.identify.columns import ColumnSet, column_set, linear_torque
@@ -84,6 +85,7 @@ from dynid.identify.friction import FRICTION_MODELS, FrictionLayer
 from dynid.identify.gmr import GMRCorrection
 from dynid.identify.linear_system import build_system
 from dynid.identify.preparation import Prepared, Preprocessing, prepare
+from dynid.identify.prior import choose_prior
 from dynid.identify.refine import refine
 
 __all__ = [
@@ -496,8 +498,13 @@ class ThreeLayerModel:
         Filtering, differentiation, trimming, decimation (default :class:`Preprocessing`).
     armature : bool
         Identify the armature with the link parameters.
-    reference_weight : float
-        Pull toward the URDF bodies in the consistent fit.
+    reference_weight : float or "auto"
+        Pull of the physically consistent links toward the description's (URDF / DH) bodies, in
+        squared standard deviations of the data per unit of entropic divergence
+        (:mod:`dynid.identify.prior`).  ``"auto"`` (default): the strongest pull whose blocked
+        cross-validated error on the training recording stays within 3 % of the best on every joint,
+        so the description stands wherever the data do not measurably predict better without it.
+        0: only the directions the data cannot see at all keep the description.
     gmm_mode : {"position", "own", "per_joint", "vector"}
         Inputs of the mixture regression (see :class:`GMRCorrection`); default ``position``, each
         joint's own angle.
@@ -532,7 +539,7 @@ class ThreeLayerModel:
         gmm: str | int = "auto",
         preprocessing: Preprocessing | None = None,
         armature: bool = True,
-        reference_weight: float = 0.0,
+        reference_weight: float | str = "auto",
         gmm_mode: str = "position",
         random_state: int = 0,
         rounds: int = 2,
@@ -574,6 +581,12 @@ class ThreeLayerModel:
             raise UsageError(
                 f"rounds is {r!r}; give 0 (the layers in sequence) or a positive number of rounds"
             )
+        w = self.reference_weight
+        numeric = isinstance(w, int | float | np.integer | np.floating) and not isinstance(w, bool)
+        if not (w == "auto" if isinstance(w, str) else numeric and np.isfinite(w) and w >= 0):
+            raise UsageError(
+                f"reference_weight is {w!r}; give 'auto' (chosen by cross-validation) or a number >= 0"
+            )
 
     def fit(self, data: Dataset) -> ThreeLayerModel:
         """Identify the three layers.
@@ -594,6 +607,7 @@ class ThreeLayerModel:
         effect_columns, effect_reference = None, None
         if terms:
             effect_columns, effect_reference = self._effect_columns(data, terms, layer1_friction)
+        say(f"preparing {data.m} samples and evaluating the regressor")
         system = build_system(
             robot,
             data,
@@ -605,15 +619,20 @@ class ThreeLayerModel:
         # the layers are refitted together unless layer 1 already is the whole model (linear friction
         # or none, no correction) or the paper's sequence is asked for
         joint = self.rounds > 0 and not (self.friction in ("none", "linear") and self.gmm == "off")
+        self._prior = None
+        if self.reference_weight == "auto" and (self.physical or self.method == "consistent"):
+            say("the description's prior: its strength by blocked cross-validation")
+            self._prior = choose_prior(robot, system)
         est: LinkEstimator
         options = {"robot": robot, "friction": layer1_friction, "armature": self.armature}
         if self.method == "consistent" and not joint:
             est = ConsistentLS(
-                **options, preprocessing=self.preprocessing, reference_weight=self.reference_weight
+                **options, preprocessing=self.preprocessing, reference_weight=self._weight(effective=False)
             )
         else:
             name = "irls" if self.method == "consistent" else self.method
             est = ESTIMATORS[name](**options, preprocessing=self.preprocessing)
+        say(f"layer 1: link parameters ({est.method})")
         est.fit(system)
         cols = system.columns
         prep = system.prepared
@@ -623,14 +642,17 @@ class ThreeLayerModel:
             "notes": list(est.notes_),
             "reference": prep.reference,
         }
+        if self._prior is not None:
+            info["prior"] = self._prior.to_dict()
         if hasattr(est, "n_iter_"):
             info["irls"] = {"iterations": int(est.n_iter_), "converged": bool(est.converged_)}
         lower = physical_lower_bounds(cols) if self.physical else None
-        consistent = self._consistency()
+        consistent = self._consistency(effective=joint)
         x0 = est.params_
         if lower is not None and hasattr(est, "R_"):
             x0 = bounded_triangular(est.R_, est.rhs_, lower)
         if joint:
+            say(f"friction ({self.friction}) and correction (gmm {self.gmm}) refitted with the links")
             x, cov, friction, source, gmr, rms_layers = self._joint(system, est, info, x0, lower, consistent)
         else:
             if consistent is not None and not isinstance(est, ConsistentLS):
@@ -675,18 +697,26 @@ class ThreeLayerModel:
         )
         return self
 
-    def _consistency(self) -> dict[str, Any] | None:
+    def _weight(self, *, effective: bool) -> float:
+        """The pull toward the description for a consistency step whose data term is in effective
+        samples (the joint refit's, with the long-run variance factor) or in plain squared standard
+        deviations (layer 1's own metric)."""
+        if self.reference_weight != "auto":
+            return float(self.reference_weight)
+        if self._prior is None:
+            return 0.0
+        return self._prior.weight if effective else self._prior.weight * self._prior.kappa
+
+    def _consistency(self, *, effective: bool) -> dict[str, Any] | None:
         """Options of the consistent projection of the link parameters (None: the unconstrained fit).
 
-        Every physical fit keeps its links consistent (``J >= eps I`` for every pseudo-inertia): when the
-        base parameters admit such a standard set they are kept as they are; otherwise they are projected to
-        the closest one in the estimate's own metric and the later layers refitted on what they leave.
-        The method ``consistent`` adds its pull toward the URDF bodies.
+        Every physical fit keeps its links consistent (``J >= eps I`` for every pseudo-inertia) and
+        pulled toward the description's bodies (:mod:`dynid.identify.prior`): in the directions the
+        data do not determine the description stands, in the others the data move the bodies as far as
+        the pull's strength allows; the later layers are refitted on what the links leave.
         """
-        if self.method == "consistent":
-            return {"reference_weight": self.reference_weight}
-        if self.physical:
-            return {"reference_weight": 0.0}
+        if self.method == "consistent" or self.physical:
+            return {"reference_weight": self._weight(effective=effective)}
         return None
 
     def _project_layer1(
@@ -1021,7 +1051,7 @@ def identify(
     gmm: str | int = "auto",
     preprocessing: Preprocessing | None = None,
     armature: bool = True,
-    reference_weight: float = 0.0,
+    reference_weight: float | str = "auto",
     gmm_mode: str = "position",
     random_state: int = 0,
     rounds: int = 2,
@@ -1046,8 +1076,8 @@ def identify(
         Filtering and differentiation.
     armature : bool
         Identify the armature.
-    reference_weight : float
-        Pull toward the URDF bodies in the consistent fit.
+    reference_weight : float or "auto"
+        Pull of the consistent links toward the description's bodies (see :class:`ThreeLayerModel`).
     gmm_mode : {"position", "own", "per_joint", "vector"}
         Inputs of the mixture regression.
     random_state : int
