@@ -586,10 +586,8 @@ def consistent_solution(
     Js, _ = bodies(v)
     for link, J in enumerate(Js):
         size = max(float(np.linalg.eigvalsh(J_ref_pd[link]).max()), 1e-6)
-        force = mu * np.linalg.inv(J - eps_l[link] * np.eye(4))
-        if reference_weight > 0:  # the divergence's log-det is a barrier at J = 0 too; its pull toward J_ref aside
-            force = force + reference_weight * (np.linalg.inv(J) - Jr_inv[link])
-        lam = float(np.linalg.eigvalsh(0.5 * (force + force.T)).max())
+        # (with a pull toward the description, whose log-det keeps every body off the bound, none is)
+        lam = mu * float(np.linalg.eigvalsh(np.linalg.inv(J - eps_l[link] * np.eye(4))).max())
         if lam * size > _BOUND_FORCE:
             at_bound.append(link + 1)
     prior = {}

@@ -394,6 +394,72 @@ def example_robot_data_dir() -> Path:
     )
 
 
+SNAP_RAD = 1e-4
+"""A joint placement or axis within this angle (rad) of a right-angle orientation is snapped to it."""
+SNAP_M = 1e-6
+"""A joint offset component below this length (m) is snapped to 0."""
+_QUIET_SNAP_RAD = 1e-6  # snaps smaller than this (pi/2 written as 1.5707963) need no warning
+
+
+def _snap_rotation(R: np.ndarray) -> tuple[np.ndarray, float]:
+    """The nearest right-angle orientation (a signed permutation, det +1) and the angle to it (rad).
+
+    Returns ``(R, 0.0)`` unchanged when no such orientation lies within :data:`SNAP_RAD`.
+    """
+    S = np.round(R)
+    if not (np.all(np.abs(S).sum(axis=0) == 1) and np.all(np.abs(S).sum(axis=1) == 1)) or np.linalg.det(S) < 0.5:
+        return R, 0.0
+    A = S.T @ R  # the rotation from the right-angle orientation to R; its angle, accurate when tiny:
+    skew = np.array([A[2, 1] - A[1, 2], A[0, 2] - A[2, 0], A[1, 0] - A[0, 1]])
+    angle = float(np.arctan2(np.linalg.norm(skew) / 2.0, (np.trace(A) - 1.0) / 2.0))
+    if np.array_equal(S, R) or angle > SNAP_RAD:
+        return R, 0.0
+    return S, angle
+
+
+def _snap_axis(axis: np.ndarray) -> tuple[np.ndarray, float]:
+    """The nearest principal direction of a unit axis and the angle to it, within :data:`SNAP_RAD`."""
+    a = np.asarray(axis, dtype=float)
+    k = int(np.argmax(np.abs(a)))
+    e = np.zeros(3)
+    e[k] = np.sign(a[k])
+    off = np.delete(a, k)
+    angle = float(np.arctan2(np.linalg.norm(off), abs(a[k])))
+    if np.array_equal(e, a) or angle > SNAP_RAD:
+        return a, 0.0
+    return e, angle
+
+
+def _snapped(joints: list[Joint], source: str) -> list[Joint]:
+    """Joints as CAD meant them: rounded right angles and sub-micrometre offsets snapped, with a warning.
+
+    A CAD export writes pi/2 as 1.5708: the joint axes are then 3.7e-6 rad off parallel or
+    perpendicular, the regressor's columns that are dependent on the exact arm are only nearly so, and
+    the base parameters become huge, ill-determined combinations (1,110 kg m^2 on a 10 N m arm).
+    Snapping keeps the exact arm's base parameters; the change is far below any arm's real tolerance.
+    """
+    out, moved = [], []
+    for j in joints:
+        R, a_rot = _snap_rotation(j.rotation)
+        axis, a_axis = _snap_axis(j.axis) if j.kind in ("RU", "PU") else (j.axis, 0.0)
+        t = np.where(np.abs(j.translation) < SNAP_M, 0.0, j.translation)
+        if R is not j.rotation or axis is not j.axis or not np.array_equal(t, j.translation):
+            moved.append((j.name, max(a_rot, a_axis)))  # an offset alone: 0 rad
+            j = replace(j, rotation=R, axis=axis, translation=t)
+        out.append(j)
+    worst = max((a for _, a in moved), default=0.0)
+    if worst > _QUIET_SNAP_RAD:  # values written to 7 decimals or better are the exact ones, silently
+        warnings.warn(
+            f"the robot description '{source}' places joint(s) {', '.join(name for name, _ in moved)} within "
+            f"{SNAP_RAD:g} rad of a right angle or {SNAP_M:g} m of zero (rounded values, as CAD exports write "
+            f"them; largest change {worst:.2g} rad); dynid snapped them, so that the base parameters are "
+            "those of the exact arm. Write the exact values in the file to silence this.",
+            RobotModelWarning,
+            stacklevel=4,
+        )
+    return out
+
+
 def _from_pin_model(model, *, name: str, source: str, tool: str | None, ddq_max) -> RobotModel:
     """Canonical tree of a numeric Pinocchio model (URDF import)."""
     import pinocchio as pin
@@ -427,6 +493,7 @@ def _from_pin_model(model, *, name: str, source: str, tool: str | None, ddq_max)
             )
         )
         params.append(np.array(model.inertias[i].toDynamicParameters()))
+    joints = _snapped(joints, source)
     n = len(joints)
     # Tool frame: the named frame, else the last frame in the model.
     frame_id = None
