@@ -60,15 +60,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_topic_argument(parser)
     parser.add_argument(
         "--method",
-        default="irls",
-        choices=("ols", "wls", "gls", "irls", "consistent"),
-        help="layer-1 method (default irls)",
+        default="auto",
+        choices=("auto", "ols", "wls", "gls", "irls", "consistent"),
+        help="layer-1 method; auto (default): ols with linear friction and no correction, or the paper's "
+        "irls + seed friction + gmm, whichever predicts one half of the recording from the other better "
+        "(the richer one only if no joint is worse)",
     )
     parser.add_argument(
         "--friction",
-        default="seed",
-        choices=("none", "linear", "seed", "stribeck", "sigmoid"),
-        help="friction model (default seed: the paper's)",
+        default="auto",
+        choices=("auto", "none", "linear", "seed", "stribeck", "sigmoid"),
+        help="friction model; auto (default): chosen with --method auto, else seed (the paper's)",
     )
     parser.add_argument(
         "--gmm", default="auto", type=_gmm, metavar="{off,auto,K}", help="layer-3 correction (default auto)"

@@ -46,7 +46,7 @@ import json
 import os
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -488,10 +488,15 @@ class ThreeLayerModel:
     ----------
     robot : RobotModel
         The robot that recorded the data.
-    method : {"ols", "wls", "gls", "irls", "consistent"}
-        Layer-1 method (``consistent``: IRLS weighting with physically consistent links).
-    friction : {"none", "linear", "seed", "stribeck", "sigmoid"}
+    method : {"auto", "ols", "wls", "gls", "irls", "consistent"}
+        Layer-1 method (``consistent``: IRLS weighting with physically consistent links).  ``"auto"``
+        (default): the pipeline chosen from the recording (:mod:`dynid.identify.pipeline`): OLS with
+        linear friction and no correction, or the paper's IRLS + nonlinear friction + mixture, whichever
+        predicts each half of the training recording from the other better (the richer one only if no
+        joint is worse); ``model_.info["pipeline"]`` records the choice and its reason.
+    friction : {"auto", "none", "linear", "seed", "stribeck", "sigmoid"}
         Friction model (layer 2; ``linear`` keeps the coefficients identified with the links).
+        ``"auto"`` (default): chosen with ``method="auto"``, else ``seed`` (the paper's).
     gmm : "off" or "auto" or int
         Layer 3: off, mixture size by validation, or a fixed number of components.
     preprocessing : Preprocessing, optional
@@ -534,8 +539,8 @@ class ThreeLayerModel:
         self,
         *,
         robot,
-        method: str = "irls",
-        friction: str = "seed",
+        method: str = "auto",
+        friction: str = "auto",
         gmm: str | int = "auto",
         preprocessing: Preprocessing | None = None,
         armature: bool = True,
@@ -566,11 +571,11 @@ class ThreeLayerModel:
         )
 
     def _check(self) -> None:
-        if self.method not in METHODS:
-            raise UsageError(f"unknown method {self.method!r}; choose one of {', '.join(METHODS)}")
-        if self.friction not in FRICTION_MODELS:
+        if self.method not in ("auto", *METHODS):
+            raise UsageError(f"unknown method {self.method!r}; choose one of auto, {', '.join(METHODS)}")
+        if self.friction != "auto" and self.friction not in FRICTION_MODELS:
             raise UsageError(
-                f"unknown friction model {self.friction!r}; choose one of {', '.join(FRICTION_MODELS)}"
+                f"unknown friction model {self.friction!r}; choose one of auto, {', '.join(FRICTION_MODELS)}"
             )
         g = self.gmm
         ok = g in ("off", "auto") or (isinstance(g, int | np.integer) and not isinstance(g, bool) and g >= 1)
@@ -601,6 +606,10 @@ class ThreeLayerModel:
         self
         """
         self._check()
+        if self.method == "auto":
+            return self._fit_chosen(data)
+        if self.friction == "auto":  # an explicit method: the paper's friction model
+            return self._with(friction="seed").fit(data)._adopt_into(self)
         robot = self.robot
         layer1_friction = self.friction != "none"
         terms = self._effect_terms(layer1_friction)
@@ -696,6 +705,36 @@ class ThreeLayerModel:
             effect_reference=effect_reference,
         )
         return self
+
+    def _with(self, **changes: Any) -> ThreeLayerModel:
+        """An unfitted copy with some settings changed."""
+        keys = (
+            "robot", "method", "friction", "gmm", "preprocessing", "armature", "reference_weight", "gmm_mode",
+            "random_state", "rounds", "physical", "effects",
+        )  # fmt: skip
+        return ThreeLayerModel(**{k: changes.get(k, getattr(self, k)) for k in keys})
+
+    def _adopt_into(self, target: ThreeLayerModel) -> ThreeLayerModel:
+        """Copy this fit's results into ``target`` (whose settings asked for it) and return ``target``."""
+        target.model_ = self.model_
+        target.link_ = self.link_
+        target._prior = self._prior
+        return target
+
+    def _fit_chosen(self, data: Dataset) -> ThreeLayerModel:
+        """``method="auto"``: the pipeline blocked cross-validation prefers, then fitted on all the data."""
+        from dynid.identify.pipeline import candidates, choose_pipeline
+
+        choice = choose_pipeline(
+            lambda m, f, g: self._with(method=m, friction=f, gmm=g), data, candidates(self.friction, self.gmm)
+        )
+        say(f"pipeline: {choice.reason}")
+        chosen = self._with(method=choice.method, friction=choice.friction, gmm=choice.gmm).fit(data)
+        info = dict(chosen.model_.info)
+        info["pipeline"] = choice.to_dict()
+        info["notes"] = [f"pipeline chosen from the recording: {choice.reason}", *info.get("notes", [])]
+        chosen.model_ = replace(chosen.model_, info=info)
+        return chosen._adopt_into(self)
 
     def _weight(self, *, effective: bool) -> float:
         """The pull toward the description for a consistency step whose data term is in effective
@@ -1046,8 +1085,8 @@ def identify(
     robot,
     data: Dataset,
     *,
-    method: str = "irls",
-    friction: str = "seed",
+    method: str = "auto",
+    friction: str = "auto",
     gmm: str | int = "auto",
     preprocessing: Preprocessing | None = None,
     armature: bool = True,
@@ -1066,10 +1105,10 @@ def identify(
         The robot that recorded the data.
     data : Dataset
         Measured data.
-    method : {"ols", "wls", "gls", "irls", "consistent"}
-        Layer-1 method.
-    friction : {"none", "linear", "seed", "stribeck", "sigmoid"}
-        Friction model.
+    method : {"auto", "ols", "wls", "gls", "irls", "consistent"}
+        Layer-1 method (``"auto"``: the pipeline chosen from the recording; see :class:`ThreeLayerModel`).
+    friction : {"auto", "none", "linear", "seed", "stribeck", "sigmoid"}
+        Friction model (``"auto"``: chosen with the pipeline, else ``seed``).
     gmm : "off" or "auto" or int
         Layer-3 correction.
     preprocessing : Preprocessing, optional
