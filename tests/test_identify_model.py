@@ -345,3 +345,26 @@ def test_default_fit_keeps_an_estimate_that_is_consistent_as_it_is(ur5) -> None:
     prior = pulled.info["prior"]
     assert prior["weight"] in prior["grid"] and "cross-validation" in prior["rule"]
     assert np.all(pulled.rms <= 1.05 * free.rms)
+
+
+def test_a_prediction_far_outside_the_training_torque_says_so_in_one_sentence(ur5, tmp_path) -> None:
+    rng = np.random.default_rng(5)
+    cols = column_set(ur5)
+    x = true_parameters(cols, rng)
+    train = synthetic_dataset(cols, x, random_fourier(ur5, rng), rate=50, rng=rng, noise=0.01)
+    held = synthetic_dataset(cols, x, random_fourier(ur5, rng), rate=50, rng=rng, noise=0.01)
+    model = identify(ur5, train, method="ols", friction="linear", gmm="off")
+    lo, hi = np.asarray(model.info["torque_range"]).T
+    assert np.all(lo < hi)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", IdentificationWarning)
+        model.predict(held)  # a motion like the training one: silent
+    q, dq, ddq = (np.asarray(held.q), np.asarray(held.dq), np.asarray(held.ddq))
+    with pytest.warns(IdentificationWarning, match=r"leaves the training torque's range by far on joint\(s\) .*2"):
+        model.predict(q, 30 * dq, 300 * ddq)
+    # the range travels with the model file
+    json_path, _ = save_model(model, tmp_path / "M.json")
+    again = load_model(json_path, robot=ur5)
+    assert again.info["torque_range"] == model.info["torque_range"] and "prior" in again.info
+    with pytest.warns(IdentificationWarning, match="leaves the training torque's range by far"):
+        again.predict(q, 30 * dq, 300 * ddq)

@@ -156,6 +156,30 @@ def _links_line(figures: dict) -> str:
     )
 
 
+def _bodies_lines(figures: dict) -> list[str]:
+    """How far each identified body moved from the description, and whether the data or it decided."""
+    links = figures.get("links")
+    if not links:
+        return []
+    prior = figures.get("prior")
+    head = (
+        f"bodies: pulled toward the description with weight {prior['weight']:g} ({prior['rule']})"
+        if prior
+        else "bodies: the description keeps only what the data cannot see at all"
+    )
+    lines = [head]
+    for body in links:
+        ratio = body.get("mass_ratio")
+        decided = body.get("decided_by")
+        lines.append(
+            f"  {body['joint']:<24} {body['mass_description']:8.3g} -> {body['mass']:8.3g} kg"
+            + ("" if ratio is None else f" (x{ratio:.2f})")
+            + f", centre of mass moved {1000 * body['com_shift']:.0f} mm"
+            + ("" if decided is None else f"; decided by {decided} (data share {100 * body['data_share']:.0f} %)")
+        )
+    return lines
+
+
 def _weight(text: str) -> float | str:
     """``--reference-weight``: 'auto' or a number >= 0."""
     if text.strip().lower() == "auto":
@@ -268,6 +292,8 @@ def run(args: argparse.Namespace) -> int:
             )
         )
     print(_links_line(figures))
+    for line in _bodies_lines(figures):
+        print(line)
     print(f"wrote {json_path} and {arrays_path}")
     write_figures(args.json, {**figures, "elapsed_s": elapsed, "model": str(json_path)})
     return 0

@@ -85,7 +85,7 @@ from dynid.identify.friction import FRICTION_MODELS, FrictionLayer
 from dynid.identify.gmr import GMRCorrection
 from dynid.identify.linear_system import build_system
 from dynid.identify.preparation import Prepared, Preprocessing, prepare
-from dynid.identify.prior import choose_prior
+from dynid.identify.prior import choose_prior, link_report
 from dynid.identify.refine import refine
 
 __all__ = [
@@ -350,7 +350,36 @@ class IdentifiedModel:
         else:
             fric = self._friction_torque(prep.dq[rows])
             corr = self._correction(prep.q[rows], prep.dq[rows])
-        return {"link": prep.filter(link)[rows], "friction": fric, "gmm": corr}
+        parts = {"link": prep.filter(link)[rows], "friction": fric, "gmm": corr}
+        self._check_torque(parts["link"] + fric + corr)
+        return parts
+
+    def _check_torque(self, tau: NDArray[np.float64]) -> None:
+        """Warn, in one sentence, when a prediction leaves the training torque's range by far.
+
+        Far: beyond the range widened by twice its span on both sides.  A model whose base parameters
+        are ill-determined (a CAD description's near-dependent columns, a motion that never excited
+        them) can predict thousands of N m for an arm whose torque stays under ten: that is the sign.
+        """
+        seen = self.info.get("torque_range")
+        if seen is None or tau.size == 0:
+            return
+        lo, hi = np.asarray(seen, dtype=np.float64).T
+        span = np.maximum(hi - lo, 1e-9)
+        far = (tau.min(axis=0) < lo - 2 * span) | (tau.max(axis=0) > hi + 2 * span)
+        if not far.any():
+            return
+        joints = np.flatnonzero(far)
+        worst = joints[np.argmax(np.abs(tau[:, joints]).max(axis=0) / span[joints])]
+        warnings.warn(
+            f"the prediction leaves the training torque's range by far on joint(s) "
+            f"{', '.join(str(j + 1) for j in joints)} (joint {worst + 1}: up to "
+            f"{np.abs(tau[:, worst]).max():.4g} N m, trained on {lo[worst]:.3g}..{hi[worst]:.3g} N m): the model "
+            "extrapolates, from parameters the training motion did not determine or a motion unlike it; check "
+            "the parameters' standard deviations, or identify on a motion that covers this one",
+            IdentificationWarning,
+            stacklevel=3,
+        )
 
     def predict(self, q, dq=None, ddq=None) -> NDArray[np.float64]:
         """Joint torques (N m).
@@ -376,7 +405,9 @@ class IdentifiedModel:
         link = linear_torque(
             self.columns, self.params, q, dq, ddq, mask=self.filtered_mask, effect_values=values
         )
-        return link + self._direct(np.atleast_2d(np.asarray(q, float)), np.atleast_2d(np.asarray(dq, float)))
+        out = link + self._direct(np.atleast_2d(np.asarray(q, float)), np.atleast_2d(np.asarray(dq, float)))
+        self._check_torque(out)
+        return out
 
     # ------------------------------------------------------------------ figures
     def _effect_figures(self) -> list[dict[str, Any]]:
@@ -469,13 +500,19 @@ class IdentifiedModel:
 
     def links(self) -> list[dict[str, Any]] | None:
         """Each link's body as a URDF inertial takes it (:func:`dynid.identify.consistent.link_inertials`),
-        with ``name`` (its joint) and ``at_bound``; None without consistent standard parameters."""
+        with ``name`` (its joint), ``at_bound``, and how far it moved from the description and what
+        decided it (:func:`dynid.identify.prior.link_report`: ``mass_description``, ``mass_ratio``,
+        ``com_shift``, ``divergence``, ``data_share``, ``decided_by``); None without consistent standard
+        parameters."""
         phi = self.standard_params
         if phi is None:
             return None
         held = set(self.info["consistency"].get("at_bound", []))
+        share = (self.info.get("prior") or {}).get("data_share")
+        moved = link_report(self.robot, phi, None if share is None else np.asarray(share, dtype=np.float64))
+        keys = ("mass_description", "mass_ratio", "com_shift", "divergence", "data_share", "decided_by")
         return [
-            {"joint": name, **body, "at_bound": j + 1 in held}
+            {"joint": name, **body, "at_bound": j + 1 in held, **{k: moved[j][k] for k in keys}}
             for j, (name, body) in enumerate(zip(self.robot.joint_names, link_inertials(phi), strict=True))
         ]
 
@@ -653,6 +690,8 @@ class ThreeLayerModel:
         }
         if self._prior is not None:
             info["prior"] = self._prior.to_dict()
+        tau_seen = prep.tau_reference
+        info["torque_range"] = np.stack([tau_seen.min(axis=0), tau_seen.max(axis=0)], axis=1).tolist()
         if hasattr(est, "n_iter_"):
             info["irls"] = {"iterations": int(est.n_iter_), "converged": bool(est.converged_)}
         lower = physical_lower_bounds(cols) if self.physical else None
@@ -1328,6 +1367,9 @@ def load_model(path: str | os.PathLike[str], robot=None) -> IdentifiedModel:
                 "refinement",
                 "bounds",
                 "physical_check",
+                "prior",
+                "pipeline",
+                "torque_range",
             )
         }
         if doc.get("gmm") is not None:
