@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import pytest
-
 import runpy
 from pathlib import Path
 from types import SimpleNamespace
+
+import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 
