@@ -68,6 +68,9 @@ FIGAROH_TX40 = np.array([5.34, 6.94, 4.02, 1.67, 2.49, 1.70])
 SETUPS = {
     # recording, train rows, held-out rows (by time for the Panda), scoring cut-off (Hz), score step, trim (s)
     "panda": {"recording": "panda_gaz2019", "split_s": 15.0, "cutoff": 10.0, "step": 1, "trim": 0.25},
+    # the LWR4+: identify on run 1, hold out run 3 (another motion); torques as recorded (pre-filtered)
+    "kuka": {"recording": "kuka_lwr4_flobaroid", "train_run": 1, "heldout_run": 3, "cutoff": 5.0, "step": 1,
+             "trim": 0.25},
     "tx40": {
         "recording": "tx40",
         "train": (0, 24750),
@@ -98,6 +101,41 @@ def gaz_reference(urdf: str, full) -> tuple[np.ndarray, np.ndarray]:
     for k in range(len(prep.q)):
         tau[k] = pin.rnea(model, data, prep.q[k], prep.dq[k], prep.ddq[k])
     return prep.t, tau + gaz_friction(prep.dq)
+
+
+def plain_least_squares(urdf: str, train, full) -> tuple[np.ndarray, np.ndarray]:
+    """A plain least-squares fit, as a user would write it without dynid: (t, tau) on ``full``.
+
+    Numeric Pinocchio's joint-torque regressor (``pin.computeJointTorqueRegressor``) of the URDF, plus
+    Coulomb ``sign(dq_j)``, viscous ``dq_j`` and an offset per joint, fitted by ordinary least squares
+    (minimum norm, ``numpy.linalg.lstsq``) on filtered states and the torque filtered apart (dynid's
+    preprocessing with ``parallel=False``, the paper's way), no constraint, no base-parameter reduction.
+    """
+    import pinocchio as pin
+
+    from dynid.identify.preparation import Preprocessing, prepare
+
+    model = pin.buildModelFromUrdf(urdf)
+    data = model.createData()
+    settings = Preprocessing(parallel=False)
+
+    def design(ds):
+        prep = prepare(ds, settings)
+        rows = prep.rows
+        q, dq, ddq = prep.q[rows], prep.dq[rows], prep.ddq[rows]
+        n = q.shape[1]
+        blocks = []
+        for k in range(len(q)):
+            Y = pin.computeJointTorqueRegressor(model, data, q[k], dq[k], ddq[k])
+            blocks.append(np.hstack([Y, np.diag(np.sign(dq[k])), np.diag(dq[k]), np.eye(n)]))
+        A = np.stack(blocks)  # (m, n, 10 n + 3 n)
+        return prep, rows, A
+
+    prep, rows, A = design(train)
+    tau = prep.tau[rows]
+    x = np.linalg.lstsq(A.reshape(-1, A.shape[2]), tau.reshape(-1), rcond=None)[0]
+    prep_full, rows_full, A_full = design(full)
+    return prep_full.t[rows_full], A_full @ x
 
 
 def model_parts(model, full) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -213,13 +251,20 @@ def main() -> None:
     from dynid.symbolic import load_robot
 
     warnings.simplefilter("ignore")
-    full = load_recording(setup["recording"])
     urdf = str(recording_model_path(setup["recording"]))
     robot = load_robot(urdf)
-    if "split_s" in setup:
+    if "heldout_run" in setup:  # two runs: the held-out one is scored whole
+        from dynid.identify.adapters import load_kuka_lwr4
+
+        train = load_kuka_lwr4(run=setup["train_run"])
+        full = load_kuka_lwr4(run=setup["heldout_run"])
+        split_t = full.t[0]
+    elif "split_s" in setup:
+        full = load_recording(setup["recording"])
         split_t = full.t[0] + setup["split_s"]
         train = full.select_rows(np.flatnonzero(full.t < split_t))
     else:
+        full = load_recording(setup["recording"])
         a, b = setup["train"]
         train = full.select_rows(np.arange(a, b))
         split_t = full.t[setup["heldout"][0]]
@@ -253,13 +298,21 @@ def main() -> None:
     default = identify(robot, train)
     t_default = time.perf_counter() - start
     start = time.perf_counter()
-    ols = identify(robot, train, method="ols", friction="linear", gmm="off", physical=False)
+    ols = identify(robot, train, method="ols", friction="linear", gmm="off")
     t_ols = time.perf_counter() - start
     t, phys, total = model_parts(default, full)
     rows["defaults"] = score(t, total)
     rows["phys"] = score(t, phys)
     t, _, total = model_parts(ols, full)
     rows["ols+lin"] = score(t, total)
+    # the same flags without the description's prior (reference weight 0: the earlier default)
+    ols0 = identify(robot, train, method="ols", friction="linear", gmm="off", reference_weight=0.0)
+    t, _, total = model_parts(ols0, full)
+    rows["ols+lin/0"] = score(t, total)
+    start = time.perf_counter()
+    t, total = plain_least_squares(urdf, train, full)
+    t_plain = time.perf_counter() - start
+    rows["plain"] = score(t, total)
     extra: tuple[str, ...] = ()
     if args.robot == "tx40":
         from dynid.identify.adapters import recording_robot
@@ -273,12 +326,15 @@ def main() -> None:
         t, tau = gaz_reference(urdf, full)
         rows["ref"] = score(t, tau)
         ref_label = "Gaz et al. 2019 (URDF + Table I friction, pin.rnea)"
-    else:
+    elif args.robot == "tx40":
         rows["ref"] = FIGAROH_TX40
         ref_label = "FIGAROH 0.2.4 (quoted)"
+    else:
+        rows["ref"] = rows["plain"]
+        ref_label = "the plain least-squares fit above (no published model for this recording)"
 
     n = robot.n
-    print(f"identify: defaults {t_default:.1f} s, ols+lin {t_ols:.1f} s")
+    print(f"identify: defaults {t_default:.1f} s, ols+lin {t_ols:.1f} s, plain least squares {t_plain:.1f} s")
     print(f"preprocessing of the defaults: {default.preprocessing}")
     fig = default.figures()
     print(
@@ -305,17 +361,41 @@ def main() -> None:
     print(f"\nheld-out RMS (N m); reference: {ref_label}")
     head = f"{'model':<10}" + "".join(f"{'j' + str(j + 1):>8}" for j in range(n)) + f"{'mean':>8}"
     print(head)
-    for label in ("defaults", "phys", "ols+lin", *extra, "ref"):
+    for label in ("defaults", "phys", "ols+lin", "ols+lin/0", "plain", *extra, "ref"):
         v = rows[label]
         print(f"{label:<10}" + "".join(f"{x:>8.3f}" for x in v) + f"{np.mean(v):>8.3f}")
     print("ratios")
-    pairs = [("defaults", "ref"), ("phys", "ols+lin"), ("defaults", "phys"), *((e, "ref") for e in extra)]
+    pairs = [
+        ("defaults", "ref"),
+        ("defaults", "ols+lin"),
+        ("defaults", "plain"),
+        ("phys", "ols+lin"),
+        ("defaults", "phys"),
+        *((e, "ref") for e in extra),
+    ]
     for num, den in pairs:
         r = rows[num] / rows[den]
         label = f"{num}/{den}"
         print(
             f"{label:<10}" + "".join(f"{x:>8.2f}" for x in r[:n]) + f"   below 1 on {int(np.sum(r < 1))}/{n}"
         )
+    urdf_mass = robot.params.reshape(-1, 10)[:, 0]
+    print("\nlink masses (kg): the URDF's and the identified bodies' (what dynid export writes)")
+    print(f"{'URDF':<10}" + "".join(f"{x:>8.2f}" for x in urdf_mass) + f"{urdf_mass.sum():>8.2f}")
+    for label, model in (("defaults", default), ("ols+lin", ols), ("ols+lin/0", ols0)):
+        std = model.standard_params
+        if std is None:
+            continue
+        mass = std[:, 0]
+        heavy = urdf_mass >= 0.2
+        inside = np.sum((mass[heavy] >= 0.5 * urdf_mass[heavy]) & (mass[heavy] <= 2 * urdf_mass[heavy]))
+        print(
+            f"{label:<10}" + "".join(f"{x:>8.2f}" for x in mass) + f"{mass.sum():>8.2f}"
+            + f"   total x{mass.sum() / urdf_mass.sum():.2f}; {inside}/{int(heavy.sum())} links in [0.5, 2]x"
+        )
+    prior = default.info.get("prior")
+    if prior:
+        print(f"prior of the defaults: weight {prior['weight']:g} ({prior['rule']})")
     if args.spring:
         spring_check(robot, full, split_t, (split_t, t_end), setup["cutoff"], setup["step"])
 
