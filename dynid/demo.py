@@ -35,7 +35,7 @@ if TYPE_CHECKING:
     from dynid.diagnosis import Diagnosis
     from dynid.validation.validate import ValidationResult
 
-__all__ = ["DEFAULT_ROBOT", "DEMO_FILES", "PERTURB", "SETTINGS", "DemoResult", "StageRecord", "run_demo"]
+__all__ = ["DEFAULT_ROBOT", "DEMO_FILES", "DEMO_MARKER", "PERTURB", "SETTINGS", "DemoResult", "StageRecord", "run_demo"]
 
 DEFAULT_ROBOT = "ur5"
 
@@ -55,6 +55,9 @@ DEMO_FILES = (
     "diagnosis.html",
 )
 """The files :func:`run_demo` may write in its folder (``dynid demo --json`` may not take one of these names)."""
+
+DEMO_MARKER = ".dynid-demo"
+"""The file that marks a folder as the demo's: a later demo overwrites :data:`DEMO_FILES` only beside it."""
 
 #: Settings of the two modes.
 SETTINGS: dict[str, dict[str, Any]] = {
@@ -216,7 +219,8 @@ def run_demo(
     Raises
     ------
     UsageError
-        ``out_dir`` is a file, or its parent folder does not exist.
+        ``out_dir`` is a file, its parent folder does not exist, or it holds one of :data:`DEMO_FILES`
+        that no earlier demo wrote (no :data:`DEMO_MARKER` beside it).
     DynidError
         A stage other than the diagnosis failed (a failed diagnosis is recorded in the result).
     """
@@ -236,7 +240,15 @@ def run_demo(
     from dynid.symbolic.build import cache_dir, generator_is_built
     from dynid.symbolic.robot import load_robot
 
+    clash = [f for f in DEMO_FILES if (out / f).exists()]
+    if clash and not (out / DEMO_MARKER).is_file():
+        raise UsageError(
+            f"the folder '{out}' holds '{clash[0]}', which the demo would overwrite and no earlier demo wrote; "
+            "give a new or empty folder."
+        )
     out.mkdir(exist_ok=True)
+    # first of all: the folder is the demo's, so that a later demo may overwrite what this one writes
+    (out / DEMO_MARKER).write_text("written by dynid demo; its files may be replaced by the next demo\n")
     mode = "quick" if quick else "full"
     cfg = SETTINGS[mode]
     started = time.perf_counter()

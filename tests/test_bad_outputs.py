@@ -608,3 +608,64 @@ def test_a_replaced_folder_holding_other_files_is_refused_and_kept(folder, tmp_p
         r"is replaced as a whole, and it holds files this command did not write \(e.g. 'precious.txt'\)",
     )
     assert (results / "precious.txt").read_text() == "keep me"
+
+
+# ---------------------------------------------------------------------------- data lost (fix first)
+def test_export_never_overwrites_the_description_the_model_came_from(folder, tmp_path, capsys):
+    """identify on arm.urdf, then export --out arm.urdf: the description is an input of export."""
+    from dynid.symbolic.robot import example_robot_data_dir
+
+    arm = tmp_path / "arm.urdf"
+    shutil.copy(example_robot_data_dir() / "ur_description" / "urdf" / "ur5_robot.urdf", arm)
+    model = tmp_path / "M.json"
+    _ok(["identify", "--robot", str(arm), "--data", str(folder / "D.csv"), "--method", "ols", "--friction",
+         "linear", "--gmm", "off", "--rounds", "0", "--decimate", "4", "--quiet", "--out", str(model)])  # fmt: skip
+    run_refused(
+        ["export", "--model", str(model), "--format", "urdf", "--out", str(arm)],
+        tmp_path,
+        capsys,
+        r"is the robot description the model was identified on",
+    )
+
+
+def test_a_second_c_export_keeps_a_file_the_user_put_in_the_folder(tmp_path, capsys):
+    out = tmp_path / "c"
+    _ok(["export-c", "--robot", "ur5", "--functions", "base_regressor", "--quiet", "--out", str(out)])
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert "manifest.json" in manifest["files"] and "example.c" in manifest["files"]
+    # the export's own files: a second export replaces them
+    _ok(["export-c", "--robot", "ur5", "--functions", "base_regressor", "--quiet", "--out", str(out)])
+    (out / "my_controller.c").write_text("int main(void) { return 0; }\n")
+    run_refused(
+        ["export-c", "--robot", "ur5", "--functions", "base_regressor", "--out", str(out)],
+        tmp_path,
+        capsys,
+        r"holds files this command did not write \(e.g. 'my_controller.c'\)",
+    )
+    assert (out / "my_controller.c").is_file()
+
+
+def test_a_fleet_folder_with_a_note_of_the_users_is_refused(folder, tmp_path, capsys):
+    results = tmp_path / "results"
+    results.mkdir()
+    (results / "summary.json").write_text(json.dumps({"files": ["fleet.csv", "summary.json"]}))
+    (results / "fleet.csv").write_text("path\n")
+    (results / "my_notes.txt").write_text("keep me")
+    robot_dir = tmp_path / "recordings" / "arm_a"
+    robot_dir.mkdir(parents=True)
+    shutil.copy(folder / "D.csv", robot_dir / "1.csv")
+    run_refused(
+        ["fleet", "--robot", "ur5", "--data", str(tmp_path / "recordings" / "*" / "*.csv"), "--serial", "--out",
+         str(results)],
+        results,
+        capsys,
+        r"holds files this command did not write \(e.g. 'my_notes.txt'\)",
+    )
+
+
+def test_the_demo_never_overwrites_a_users_file_in_its_folder(tmp_path, capsys):
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "model.json").write_text('{"mine": true}')
+    run_refused(["demo", "--quick", "--out", str(out)], tmp_path, capsys, r"holds 'model.json'")
+    assert (out / "model.json").read_text() == '{"mine": true}'

@@ -25,6 +25,7 @@ __all__ = [
     "read_dataset",
     "robot_file",
     "robot_from_args",
+    "same_file",
     "write_figures",
 ]
 
@@ -302,6 +303,17 @@ def _same(a: Path, b: Path) -> bool:
         return False
 
 
+def same_file(a: str | os.PathLike[str], b: str | os.PathLike[str]) -> bool:
+    """Whether two paths name one file (a symbolic or hard link included), existing or not.
+
+    Parameters
+    ----------
+    a, b : str or path-like
+        The paths.
+    """
+    return _same(Path(a), Path(b))
+
+
 def _inside(path: Path, folder: Path) -> bool:
     inner, outer = _real(path), _real(folder)
     return inner == outer or inner.startswith(outer.rstrip(os.sep) + os.sep)
@@ -329,11 +341,29 @@ def _check_replaced_folder(out: Output) -> None:
             f"e.g. --{option} {path.name if path.name not in ('', '.', '..') else 'out'}/results."
         )
     entries = sorted(p.name for p in path.iterdir())
-    if entries and not (out.marker and (path / out.marker).is_file()):
+    if not entries:
+        return
+    listed = _listed_files(path / out.marker) if out.marker else None
+    foreign = [e for e in entries if listed is None or (e not in listed and e != out.marker)]
+    if foreign:
         raise UsageError(
             f"--{option} '{path}' is replaced as a whole, and it holds files this command did not write "
-            f"(e.g. '{entries[0]}'); give a new or empty folder."
+            f"(e.g. '{foreign[0]}'); give a new or empty folder."
         )
+
+
+def _listed_files(marker: Path) -> set[str] | None:
+    """The file names a command's marker (its manifest or summary JSON) says it wrote; None if it lists none."""
+    import json
+
+    try:
+        doc = json.loads(marker.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    files = doc.get("files") if isinstance(doc, dict) else None
+    if not isinstance(files, list) or not all(isinstance(f, str) for f in files):
+        return None
+    return set(files)
 
 
 def _check_one(out: Output) -> None:

@@ -13,6 +13,7 @@ from dynid.commands.common import (
     check_outputs,
     output,
     read_dataset,
+    same_file,
     write_figures,
 )
 
@@ -75,6 +76,19 @@ def run(args: argparse.Namespace) -> int:
     from dynid.simmodel.export import export_model
 
     model = load_model(args.model)
+    if args.template is None:
+        # the description the model was identified on is export's template: an input, never an output
+        from dynid.simmodel.export import default_template
+
+        try:
+            source = default_template(model.robot)
+        except UsageError:
+            source = None  # no URDF to copy: export_model says so
+        if source is not None and same_file(args.out, source):
+            raise UsageError(
+                f"--out '{args.out}' is the robot description the model was identified on, which export reads "
+                "as its template; give the output another name."
+            )
     heldout = None
     if args.heldout is not None:
         heldout = read_dataset(

@@ -390,7 +390,9 @@ class FleetResult:
             write_text(work / "fleet.csv", self.to_csv())
             write_text(work / "drift.csv", "" if self.drift is None else self.drift.to_csv())
             write_fleet_report(self, work / "report.html")
-            write_json(work / "summary.json", self.figures())
+            # the files of the folder, so that a later run replaces only what it wrote
+            files = sorted([*(p.name for p in work.iterdir()), "summary.json"])
+            write_json(work / "summary.json", {**self.figures(), "files": files})
         return Path(out_dir)
 
 

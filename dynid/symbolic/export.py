@@ -265,8 +265,11 @@ def export_c(
             example, makefile = _example(stem, c_identifier(robot.name), robot, base)
             (work / "example.c").write_text(example)
             (work / "Makefile").write_text(makefile)
-        (work / "manifest.json").write_text(dumps_json(_manifest(robot, base, stem, entries)))
         shutil.copyfile(_HERE / "loader.py", work / "dynid_loader.py")
+        manifest = _manifest(robot, base, stem, entries)
+        # every file of the folder, so that a later export replaces only what dynid wrote
+        manifest["files"] = sorted([*(p.name for p in work.iterdir()), "manifest.json"])
+        (work / "manifest.json").write_text(dumps_json(manifest))
     return ExportResult(
         folder=out,
         source=out / f"{stem}.c",
