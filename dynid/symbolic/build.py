@@ -202,7 +202,7 @@ def _compiler_failed(what: str, proc_out: str, code: int) -> GeneratorError:
 def _run_parallel(
     commands: list[tuple[str, list[str]]], what: str, expected: str, jobs: int, progress: Progress | None
 ) -> None:
-    """Run the named commands, ``jobs`` at a time; report each one done and the elapsed time every 15 s.
+    """Run the named commands, ``jobs`` at a time; report each one done and the elapsed time every 4 s.
 
     The first failure stops the others and raises :class:`GeneratorError` with the compiler's last lines.
     """
@@ -213,10 +213,11 @@ def _run_parallel(
     finished = [0]
 
     def tick() -> None:
-        while not done.wait(15.0):
+        while not done.wait(4.0):  # no silence longer than the commands' heartbeat
             if progress:
                 progress(
-                    f"dynid: {what}: {finished[0]}/{len(commands)} parts, {time.monotonic() - start:.0f} s"
+                    f"dynid: {what}: {finished[0]}/{len(commands)} parts compiled, {time.monotonic() - start:.0f} s "
+                    f"({expected.split(',')[0]})"
                 )
 
     ticker = threading.Thread(target=tick, daemon=True)
@@ -263,7 +264,7 @@ def generator_is_built() -> bool:
 
 
 def generator_path(progress: Progress | None = stderr_progress) -> Path:
-    """Path of the compiled generator, building it on first use (about a minute on 2 cores).
+    """Path of the compiled generator, building it on first use (about 45 s on 2 idle cores).
 
     Its translation units compile in parallel (:func:`build_jobs` at a time), then link.
     """
@@ -313,7 +314,7 @@ def generator_path(progress: Progress | None = stderr_progress) -> Path:
             _run_parallel(
                 compile_cmds,
                 "building the symbolic generator (Pinocchio on CasADi SX)",
-                f"about a minute on 2 cores with {jobs} parallel compiler{'s' if jobs > 1 else ''}, cached for "
+                f"about 45 s on 2 idle cores, {jobs} compiler{'s' if jobs > 1 else ''} in parallel, cached for "
                 "this environment",
                 jobs,
                 progress,
