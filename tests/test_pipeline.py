@@ -1,0 +1,76 @@
+"""The default pipeline chosen from the recording (dynid.identify.pipeline)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dynid.identify.columns import column_set
+from dynid.identify.model import ThreeLayerModel, identify
+from dynid.identify.pipeline import BASELINE, JOINT_TOLERANCE, candidates, choose_pipeline
+from dynid.sim.synthetic import random_fourier, synthetic_dataset, true_parameters
+
+
+@pytest.fixture(scope="module")
+def linear_run(ur5):
+    """Ten seconds of a UR5 whose friction is Coulomb + viscous (linear in its parameters)."""
+    rng = np.random.default_rng(11)
+    cols = column_set(ur5)
+    x = true_parameters(cols, rng)
+    return synthetic_dataset(cols, x, random_fourier(ur5, rng, periods=1), rate=100, rng=rng, noise=0.05)
+
+
+def test_candidates_keep_the_users_own_choices():
+    assert candidates()[0] == BASELINE
+    assert candidates() == [("ols", "linear", "off"), ("irls", "seed", "auto")]
+    assert candidates("stribeck", "off") == [("ols", "stribeck", "off"), ("irls", "stribeck", "off")]
+
+
+def test_a_pipeline_that_predicts_worse_is_not_chosen(ur5, linear_run):
+    """No friction at all, on data with friction: worse on every joint on the other half, so refused."""
+    base = ThreeLayerModel(robot=ur5)
+    choice = choose_pipeline(
+        lambda m, f, g: base._with(method=m, friction=f, gmm=g), linear_run, [BASELINE, ("ols", "none", "off")]
+    )
+    assert (choice.method, choice.friction, choice.gmm) == BASELINE
+    assert choice.cv_rms.shape == (2, 6) and np.all(choice.cv_rms[1] > (1 + JOINT_TOLERANCE) * choice.cv_rms[0])
+    assert "ols+none+off is worse on joint(s) 1, 2, 3, 4, 5, 6" in choice.reason
+
+
+def test_the_default_records_its_choice_in_the_model(ur5, linear_run, tmp_path):
+    from dynid.identify.model import load_model, save_model
+
+    model = identify(ur5, linear_run)
+    pipe = model.info["pipeline"]
+    assert (pipe["method"], pipe["friction"], pipe["gmm"]) in [tuple(c) for c in pipe["candidates"]]
+    assert model.method == pipe["method"] and pipe["reason"] in model.info["notes"][0]
+    again = load_model(save_model(model, tmp_path / "M.json")[0], robot=ur5)
+    assert again.info["pipeline"] == pipe
+
+
+def test_a_recording_too_short_for_two_halves_keeps_the_full_pipeline(ur5):
+    rng = np.random.default_rng(2)
+    cols = column_set(ur5)
+    x = true_parameters(cols, rng)
+    short = synthetic_dataset(cols, x, random_fourier(ur5, rng, base_freq=0.5), rate=100, rng=rng, noise=0.05)
+    assert short.duration < 4
+    model = identify(ur5, short, gmm="off")
+    assert model.info["pipeline"]["method"] == "irls" and "too short" in model.info["pipeline"]["reason"]
+
+
+@pytest.mark.slow
+def test_nonlinear_friction_makes_the_papers_pipeline_the_choice(ur5):
+    """The simulator's seed friction (Stribeck-like at low speed): the richer pipeline predicts the other half
+    better, and the default takes it."""
+    import dynid
+    from dynid.optim.excitation import ExcitationProblem
+
+    problem = ExcitationProblem(robot=ur5, harmonics=5, base_freq=0.1)
+    traj = problem.random_trajectory(np.random.default_rng(4), amplitude=0.9)
+    truth = dynid.build_truth(ur5, friction="seed", perturb=0.1, truth_seed=0)
+    run = dynid.simulate(ur5, traj, truth=truth, seed=1, duration=2 * traj.period).to_dataset()
+    model = identify(ur5, run)
+    pipe = model.info["pipeline"]
+    assert (pipe["method"], pipe["friction"]) == ("irls", "seed"), pipe["reason"]
+    cv = np.asarray(pipe["cv_rms"])
+    assert np.mean(cv[1] / cv[0]) < 0.9
