@@ -85,7 +85,7 @@ from dynid.identify.friction import FRICTION_MODELS, FrictionLayer
 from dynid.identify.gmr import GMRCorrection
 from dynid.identify.linear_system import build_system
 from dynid.identify.preparation import Prepared, Preprocessing, prepare
-from dynid.identify.prior import choose_prior, link_report
+from dynid.identify.prior import PriorChoice, choose_prior, link_report
 from dynid.identify.refine import refine
 
 __all__ = [
@@ -625,7 +625,9 @@ class ThreeLayerModel:
             )
         w = self.reference_weight
         numeric = isinstance(w, int | float | np.integer | np.floating) and not isinstance(w, bool)
-        if not (w == "auto" if isinstance(w, str) else numeric and np.isfinite(w) and w >= 0):
+        if isinstance(w, PriorChoice):
+            pass
+        elif not (w == "auto" if isinstance(w, str) else numeric and np.isfinite(w) and w >= 0):
             raise UsageError(
                 f"reference_weight is {w!r}; give 'auto' (chosen by cross-validation) or a number >= 0"
             )
@@ -666,7 +668,9 @@ class ThreeLayerModel:
         # or none, no correction) or the paper's sequence is asked for
         joint = self.rounds > 0 and not (self.friction in ("none", "linear") and self.gmm == "off")
         self._prior = None
-        if self.reference_weight == "auto" and (self.physical or self.method == "consistent"):
+        if isinstance(self.reference_weight, PriorChoice):  # chosen already (the pipeline's halves)
+            self._prior = self.reference_weight
+        elif self.reference_weight == "auto" and (self.physical or self.method == "consistent"):
             say("the description's prior: its strength by blocked cross-validation")
             self._prior = choose_prior(robot, system)
         est: LinkEstimator
@@ -764,11 +768,26 @@ class ThreeLayerModel:
         """``method="auto"``: the pipeline blocked cross-validation prefers, then fitted on all the data."""
         from dynid.identify.pipeline import candidates, choose_pipeline
 
+        weight = self.reference_weight
+        if weight == "auto" and self.physical and not self.effects and self.friction != "none":
+            # the prior's strength once, on the whole recording; each half takes half its weight (the
+            # weight is in effective samples, and a half has half of them)
+            say("the description's prior: its strength by blocked cross-validation")
+            system = build_system(
+                self.robot, data, preprocessing=self.preprocessing, friction=True, armature=self.armature
+            )
+            weight = choose_prior(self.robot, system)
+            system.release()
+        half = replace(weight, weight=0.5 * weight.weight) if isinstance(weight, PriorChoice) else weight
         choice = choose_pipeline(
-            lambda m, f, g: self._with(method=m, friction=f, gmm=g), data, candidates(self.friction, self.gmm)
+            lambda m, f, g: self._with(method=m, friction=f, gmm=g, reference_weight=half),
+            data,
+            candidates(self.friction, self.gmm),
         )
         say(f"pipeline: {choice.reason}")
-        chosen = self._with(method=choice.method, friction=choice.friction, gmm=choice.gmm).fit(data)
+        chosen = self._with(
+            method=choice.method, friction=choice.friction, gmm=choice.gmm, reference_weight=weight
+        ).fit(data)
         info = dict(chosen.model_.info)
         info["pipeline"] = choice.to_dict()
         info["notes"] = [f"pipeline chosen from the recording: {choice.reason}", *info.get("notes", [])]
@@ -779,11 +798,11 @@ class ThreeLayerModel:
         """The pull toward the description for a consistency step whose data term is in effective
         samples (the joint refit's, with the long-run variance factor) or in plain squared standard
         deviations (layer 1's own metric)."""
-        if self.reference_weight != "auto":
-            return float(self.reference_weight)
-        if self._prior is None:
+        if self._prior is not None:
+            return self._prior.weight if effective else self._prior.weight * self._prior.kappa
+        if self.reference_weight == "auto":
             return 0.0
-        return self._prior.weight if effective else self._prior.weight * self._prior.kappa
+        return float(self.reference_weight)
 
     def _consistency(self, *, effective: bool) -> dict[str, Any] | None:
         """Options of the consistent projection of the link parameters (None: the unconstrained fit).
