@@ -177,8 +177,17 @@ def test_panda_defaults_beat_the_published_model_with_physical_layers_that_stand
     # joints 3 and 4): along this motion q_4 and ddq_4 correlate at -0.79, so a negative armature stands
     # in for a torque linear in q_4.  Given that term (a spring per joint), consistent bodies cost
     # nothing (real_robots_benchmark.py --spring: joint 4 at 0.93x, every joint within 1.01x)
-    assert np.all(rms["phys"] <= 1.15 * rms["ols"]), rms
-    assert np.sum(rms["phys"] <= 1.1 * rms["ols"]) >= 6, rms
+    # The pull toward the description (the default) costs joint 4 a further 8 % (0.195 N m, 1.21x): the
+    # price of bodies a person believes, below.
+    assert np.all(rms["phys"] <= 1.25 * rms["ols"]), rms
+    assert np.sum(rms["phys"] <= 1.12 * rms["ols"]) >= 6, rms  # joint 6 at 1.116x with the pull
+    # ... the bodies are the arm's: 16.4 kg for the URDF's 16.1 (the unpulled fit: 482 kg), every link of
+    # at least 0.2 kg within [0.5, 2] times its URDF mass
+    urdf_mass = model.robot.params.reshape(-1, 10)[:, 0]
+    mass = model.standard_params[:, 0]
+    assert abs(mass.sum() / urdf_mass.sum() - 1) < 0.15, mass
+    heavy = urdf_mass >= 0.2
+    assert np.all((mass[heavy] >= 0.5 * urdf_mass[heavy]) & (mass[heavy] <= 2 * urdf_mass[heavy])), mass
     assert np.all(rms["full"] <= 1.02 * rms["phys"]), rms  # the correction never makes it worse
     kinds = np.asarray(model.columns.kinds)
     assert np.all(model.params[np.isin(kinds, ("armature", "coulomb", "viscous"))] >= 0)
@@ -209,8 +218,13 @@ def test_tx40_whole_recording_defaults_keep_the_torque_in_the_physical_layers(sh
         model = identify(robot, full)
     check = model.info["physical_check"]
     phys = np.asarray(model.rms_layers["friction"])
-    assert np.all(phys <= 1.1 * np.asarray(check["physical_alone_rms"])), check
-    assert check["kept"].startswith("physical layers first") and "joints 2" in check["kept"], check
+    # (1.1 before the pull toward the description; with it joint 2's fit is 1.103x the physical layers alone)
+    assert np.all(phys <= 1.12 * np.asarray(check["physical_alone_rms"])), check
+    # with the pull toward the description the joint fit's physical layers already hold joint 2 (the check
+    # keeps the joint fit); without it the check had to fit the physical layers first
+    assert check["kept"] == "joint fit" or (
+        check["kept"].startswith("physical layers first") and "joints 2" in check["kept"]
+    ), check
     assert np.all(np.asarray(model.rms_layers["gmm"]) <= 1.02 * phys)
 
 
