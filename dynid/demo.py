@@ -39,7 +39,11 @@ __all__ = ["DEFAULT_ROBOT", "DEMO_FILES", "DEMO_MARKER", "PERTURB", "SETTINGS", 
 
 DEFAULT_ROBOT = "ur5"
 
+DEMO_MARKER = "dynid-demo.txt"
+"""The file that marks a folder as the demo's: a later demo overwrites :data:`DEMO_FILES` only beside it."""
+
 DEMO_FILES = (
+    DEMO_MARKER,
     "excitation.json",
     "identification.csv",
     "identification.csv.truth.json",
@@ -55,9 +59,6 @@ DEMO_FILES = (
     "diagnosis.html",
 )
 """The files :func:`run_demo` may write in its folder (``dynid demo --json`` may not take one of these names)."""
-
-DEMO_MARKER = ".dynid-demo"
-"""The file that marks a folder as the demo's: a later demo overwrites :data:`DEMO_FILES` only beside it."""
 
 #: Settings of the two modes.
 SETTINGS: dict[str, dict[str, Any]] = {
