@@ -399,6 +399,10 @@ SNAP_RAD = 1e-4
 SNAP_M = 1e-6
 """A joint offset component below this length (m) is snapped to 0."""
 _QUIET_SNAP_RAD = 1e-6  # snaps smaller than this (pi/2 written as 1.5707963) need no warning
+# Below these the value is exact as written (float noise of a file's 9 decimals, 5e-10 rad at most): left as it
+# is, so that a robot's key, and the model files identified on it, do not change
+_EXACT_RAD = 1e-7
+_EXACT_M = 1e-9
 
 
 def _snap_rotation(R: np.ndarray) -> tuple[np.ndarray, float]:
@@ -412,7 +416,7 @@ def _snap_rotation(R: np.ndarray) -> tuple[np.ndarray, float]:
     A = S.T @ R  # the rotation from the right-angle orientation to R; its angle, accurate when tiny:
     skew = np.array([A[2, 1] - A[1, 2], A[0, 2] - A[2, 0], A[1, 0] - A[0, 1]])
     angle = float(np.arctan2(np.linalg.norm(skew) / 2.0, (np.trace(A) - 1.0) / 2.0))
-    if np.array_equal(S, R) or angle > SNAP_RAD:
+    if angle <= _EXACT_RAD or angle > SNAP_RAD:  # exact as written (float noise), or no right angle meant
         return R, 0.0
     return S, angle
 
@@ -425,7 +429,7 @@ def _snap_axis(axis: np.ndarray) -> tuple[np.ndarray, float]:
     e[k] = np.sign(a[k])
     off = np.delete(a, k)
     angle = float(np.arctan2(np.linalg.norm(off), abs(a[k])))
-    if np.array_equal(e, a) or angle > SNAP_RAD:
+    if angle <= _EXACT_RAD or angle > SNAP_RAD:
         return a, 0.0
     return e, angle
 
@@ -442,7 +446,7 @@ def _snapped(joints: list[Joint], source: str) -> list[Joint]:
     for j in joints:
         R, a_rot = _snap_rotation(j.rotation)
         axis, a_axis = _snap_axis(j.axis) if j.kind in ("RU", "PU") else (j.axis, 0.0)
-        t = np.where(np.abs(j.translation) < SNAP_M, 0.0, j.translation)
+        t = np.where((np.abs(j.translation) < SNAP_M) & (np.abs(j.translation) > _EXACT_M), 0.0, j.translation)
         if R is not j.rotation or axis is not j.axis or not np.array_equal(t, j.translation):
             moved.append((j.name, max(a_rot, a_axis)))  # an offset alone: 0 rad
             j = replace(j, rotation=R, axis=axis, translation=t)
