@@ -40,6 +40,7 @@ sentence (never a model with another model's arrays).
 
 from __future__ import annotations
 
+import glob
 import hashlib
 import io
 import json
@@ -1251,12 +1252,54 @@ def save_model(model: IdentifiedModel, path: str | os.PathLike[str]) -> tuple[Pa
         "arrays_sha256": hashlib.sha256(blob).hexdigest(),
     }
     text = dumps_json(doc)
+    # The old arrays are kept under a name their own sha256 gives until the new JSON is in place: a save
+    # killed between the two renames leaves the old JSON beside them (load_model finds them there), one
+    # interrupted in Python puts them back.
+    backup = _keep_old_arrays(arrays_path)
     # Both files are written before either is renamed; the blocks close inner first, so the arrays
     # replace theirs before the JSON that names them (and carries their sha256) does.
-    with atomic_path(path) as tmp_json, atomic_path(arrays_path) as tmp_arrays:
-        tmp_arrays.write_bytes(blob)
-        tmp_json.write_text(text, encoding="utf-8")
+    try:
+        with atomic_path(path) as tmp_json, atomic_path(arrays_path) as tmp_arrays:
+            tmp_arrays.write_bytes(blob)
+            tmp_json.write_text(text, encoding="utf-8")
+    except BaseException:
+        if backup is not None and backup.exists() and _json_sha(path) != doc["arrays_sha256"]:
+            os.replace(backup, arrays_path)  # the old JSON stands: its arrays go back beside it
+        raise
+    finally:
+        if backup is not None:
+            backup.unlink(missing_ok=True)
+    for stale in arrays_path.parent.glob(f"{glob.escape(arrays_path.name)}.*.old"):  # an earlier killed save's
+        stale.unlink(missing_ok=True)
     return path, arrays_path
+
+
+def _old_arrays_name(arrays_path: Path, sha: str) -> Path:
+    """Where a model's previous arrays wait while a save replaces them (named by their sha256)."""
+    return arrays_path.with_name(f"{arrays_path.name}.{sha[:16]}.old")
+
+
+def _keep_old_arrays(arrays_path: Path) -> Path | None:
+    """Link (or copy) the arrays file about to be replaced under :func:`_old_arrays_name`; None if none."""
+    try:
+        blob = arrays_path.read_bytes()
+    except OSError:
+        return None
+    backup = _old_arrays_name(arrays_path, hashlib.sha256(blob).hexdigest())
+    backup.unlink(missing_ok=True)
+    try:
+        os.link(arrays_path, backup)
+    except OSError:
+        backup.write_bytes(blob)
+    return backup
+
+
+def _json_sha(path: Path) -> str | None:
+    """The arrays checksum the model JSON at ``path`` names (None if it cannot be read)."""
+    try:
+        return json.loads(path.read_text(encoding="utf-8")).get("arrays_sha256")
+    except (OSError, ValueError, AttributeError):
+        return None
 
 
 def load_model(path: str | os.PathLike[str], robot=None) -> IdentifiedModel:
@@ -1331,6 +1374,21 @@ def load_model(path: str | os.PathLike[str], robot=None) -> IdentifiedModel:
         raise ModelFileError(
             f"{name} keeps its arrays in {arrays_path.name}, which is missing; copy it beside {name} or identify again"
         ) from None
+    if hashlib.sha256(blob).hexdigest() != doc.get("arrays_sha256"):
+        # a save killed between its renames leaves the old arrays beside the old JSON, under their checksum
+        kept = _old_arrays_name(arrays_path, str(doc.get("arrays_sha256")))
+        try:
+            old_blob = kept.read_bytes()
+        except OSError:
+            old_blob = b""
+        if old_blob and hashlib.sha256(old_blob).hexdigest() == doc.get("arrays_sha256"):
+            warnings.warn(
+                f"{name}: a save was interrupted after it replaced {arrays_path.name}; the arrays {name} was "
+                f"written with were read from {kept.name} (save the model again to tidy up)",
+                IdentificationWarning,
+                stacklevel=2,
+            )
+            blob = old_blob
     if hashlib.sha256(blob).hexdigest() != doc.get("arrays_sha256"):
         raise ModelFileError(
             f"{arrays_path.name} is not the arrays file {name} was written with (checksum differs): the pair was "
