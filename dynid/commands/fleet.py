@@ -87,11 +87,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--method", default="irls", choices=("ols", "wls", "gls", "irls", "consistent"),
-        help="layer-1 method (default irls, as identify)",
+        help="layer-1 method (default irls: one pipeline for every recording, so that their parameters compare)",
     )
     parser.add_argument(
         "--friction", default="seed", choices=("none", "linear", "seed", "stribeck", "sigmoid"),
-        help="friction model (default seed, as identify)",
+        help="friction model (default seed, the paper's)",
     )
     parser.add_argument(
         "--gmm", default="auto", type=_gmm, metavar="{off,auto,K}", help="layer-3 correction (default auto)"
