@@ -424,13 +424,7 @@ def consistent_solution(
     D = _phi_scale(phi_ref, n)
     phi0 = phi_ref + D * np.linalg.lstsq(P * D, xm - P @ phi_ref, rcond=None)[0]
     J_ref = pseudo_inertia(robot.params.reshape(n, 10))
-    eps_l = np.empty(n)
-    J_ref_pd = []
-    for link in range(n):
-        w_ref = np.linalg.eigvalsh(J_ref[link])
-        scale = max(float(w_ref.max()), 1e-6)
-        eps_l[link] = min(float(eps), 0.5 * float(w_ref.min())) if w_ref.min() > 0 else float(eps)
-        J_ref_pd.append(_project_pd(J_ref[link], max(1e-6 * scale, 2 * eps_l[link])))
+    eps_l, J_ref_pd = _reference_bodies(robot.params, eps)
     e_idx = np.flatnonzero(enabled)
     kinds = [EXTRA_KINDS[e // n] for e in e_idx]
     lb_e = np.array([-np.inf if k == "offset" else 0.0 for k in kinds])
@@ -484,15 +478,13 @@ def consistent_solution(
     phi_f[10 * n + e_idx] = np.maximum(phi_f[10 * n + e_idx], np.where(lower, lb_e + 1e-2 * e_scale, -np.inf))
     v = np.concatenate([R @ (P[:, act] @ phi_f[act] - xm) / sigma, V2.T @ (phi_f[act] / D_a)])
 
-    eye4 = np.eye(4)
-    shift = eps_l[:, None, None] * eye4  # (n, 4, 4)
-    Jr_inv = np.linalg.inv(np.asarray(J_ref_pd))  # (n, 4, 4)
-    logdet_ref = np.linalg.slogdet(np.asarray(J_ref_pd))[1]
+    shift = eps_l[:, None, None] * np.eye(4)  # (n, 4, 4)
+    Jr_inv = np.linalg.inv(J_ref_pd)  # (n, 4, 4)
+    logdet_ref = np.linalg.slogdet(J_ref_pd)[1]
     B_all = np.stack(B)  # (n, nv, 4, 4)
     prior_grad = (
         reference_weight * np.einsum("lab,lkba->k", Jr_inv, B_all) if reference_weight > 0 else np.zeros(nv)
     )
-    diag16 = [0, 5, 10, 15]
 
     def bodies(v):
         pa = c0 + G @ v
@@ -517,32 +509,16 @@ def consistent_solution(
             )
         return out
 
-    def _logdet_terms(M, coef, grad, hess):
-        """-coef log det M_l summed over links: gradient -tr(M^-1 B_k), Hessian tr(M^-1 B_k M^-1 B_j)."""
-        Li = np.linalg.inv(np.linalg.cholesky(M))  # (n, 4, 4), lower triangular
-        T = (Li[:, None] @ B_all @ np.swapaxes(Li, 1, 2)[:, None]).reshape(n, nv, 16)
-        grad -= coef * T[:, :, diag16].sum(axis=(0, 2))
-        Tm = np.ascontiguousarray(T.transpose(1, 0, 2)).reshape(nv, 16 * n)
-        hess += coef * (Tm @ Tm.T)
-
     def newton_step(v, mu):
         Js, slack = bodies(v)
         grad = 2 * weight * (v - centre) + prior_grad
         hess = np.diag(2 * weight)
-        _logdet_terms(Js - shift, mu, grad, hess)
+        _add_neg_logdet(Js - shift, B_all, mu, grad, hess)
         if reference_weight > 0:
-            _logdet_terms(Js, reference_weight, grad, hess)
+            _add_neg_logdet(Js, B_all, reference_weight, grad, hess)
         grad -= mu * (Ge.T @ (1.0 / slack))
         hess += mu * (Ge.T / slack**2) @ Ge
-        d = 1.0 / np.sqrt(np.maximum(np.diag(hess), 1e-300))  # Jacobi scaling: entries span many decades
-        scaled = hess * np.outer(d, d)
-        try:
-            c = scipy.linalg.cho_factor(scaled, check_finite=False)
-            step = -d * scipy.linalg.cho_solve(c, d * grad, check_finite=False)
-            if not np.all(np.isfinite(step)):
-                raise np.linalg.LinAlgError
-        except (np.linalg.LinAlgError, ValueError):
-            step = -d * np.linalg.lstsq(scaled, d * grad, rcond=1e-14)[0]
+        step = _newton_direction(hess, grad)
         return step, float(-grad @ step)
 
     nu = 4 * n + int(lower.sum())  # barrier parameter: 4 per pseudo-inertia, 1 per bound
@@ -603,15 +579,55 @@ def consistent_solution(
     }
 
 
-def _link_margins(ref_params: NDArray[np.float64], eps: float | ArrayLike) -> NDArray[np.float64]:
-    """Per-link consistency margin: ``eps``, lowered to half the smallest eigenvalue of a thinner URDF body."""
-    J_ref = pseudo_inertia(ref_params.reshape(-1, 10))
+def _reference_bodies(
+    ref_params: NDArray[np.float64], eps: float | ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Per-link margin and described pseudo-inertia, as the consistent fit and its bodies use them.
+
+    The margin is ``eps``, lowered to half the smallest eigenvalue of a thinner URDF body; the described
+    pseudo-inertia is the URDF's, lifted to at least twice that margin (and 1e-6 of its size).
+
+    Returns
+    -------
+    eps_l : ndarray, shape (n,)
+    J_ref_pd : ndarray, shape (n, 4, 4)
+    """
+    J_ref = pseudo_inertia(np.asarray(ref_params, dtype=np.float64).reshape(-1, 10))
     eps_in = np.broadcast_to(np.asarray(eps, dtype=np.float64), (len(J_ref),))
-    out = np.empty(len(J_ref))
+    eps_l = np.empty(len(J_ref))
+    J_pd = np.empty_like(J_ref)
     for link, J in enumerate(J_ref):
-        w = np.linalg.eigvalsh(J).min()
-        out[link] = min(float(eps_in[link]), 0.5 * float(w)) if w > 0 else float(eps_in[link])
-    return out
+        w = np.linalg.eigvalsh(J)
+        eps_l[link] = min(float(eps_in[link]), 0.5 * float(w.min())) if w.min() > 0 else float(eps_in[link])
+        J_pd[link] = _project_pd(J, max(1e-6 * max(float(w.max()), 1e-6), 2 * eps_l[link]))
+    return eps_l, J_pd
+
+
+def _add_neg_logdet(M, B_all, coef: float, grad, hess) -> None:
+    """Add the derivatives of ``-coef sum_l log det M_l`` (``dM_l / dv_k = B_all[l, k]``) in place.
+
+    Gradient ``-coef tr(M^-1 B_k)``, Hessian ``coef tr(M^-1 B_k M^-1 B_j)``, batched over the links.
+    """
+    n, nv = B_all.shape[:2]
+    Li = np.linalg.inv(np.linalg.cholesky(M))  # (n, 4, 4), lower triangular
+    T = (Li[:, None] @ B_all @ np.swapaxes(Li, 1, 2)[:, None]).reshape(n, nv, 16)
+    grad -= coef * T[:, :, [0, 5, 10, 15]].sum(axis=(0, 2))
+    Tm = np.ascontiguousarray(T.transpose(1, 0, 2)).reshape(nv, 16 * n)
+    hess += coef * (Tm @ Tm.T)
+
+
+def _newton_direction(hess, grad):
+    """The Newton step ``-hess^-1 grad``, Jacobi-scaled (entries span many decades); least squares if singular."""
+    d = 1.0 / np.sqrt(np.maximum(np.diag(hess), 1e-300))
+    scaled = hess * np.outer(d, d)
+    try:
+        c = scipy.linalg.cho_factor(scaled, check_finite=False)
+        step = -d * scipy.linalg.cho_solve(c, d * grad, check_finite=False)
+        if not np.all(np.isfinite(step)):
+            raise np.linalg.LinAlgError
+    except (np.linalg.LinAlgError, ValueError):
+        step = -d * np.linalg.lstsq(scaled, d * grad, rcond=1e-14)[0]
+    return step
 
 
 def described_bodies(
@@ -684,13 +700,9 @@ def described_bodies(
     info: dict[str, Any] = {"iterations": 0, "directions": int(N.shape[1])}
     if N.shape[1] == 0:
         return phi, info
-    eps_l = _link_margins(robot.params, eps)
-    J_ref = pseudo_inertia(robot.params.reshape(n, 10))
-    A = []
-    for link in range(n):
-        w_ref = np.linalg.eigvalsh(J_ref[link])
-        floor = max(1e-6 * max(float(w_ref.max()), 1e-6), 2 * eps_l[link])
-        A.append(np.linalg.inv(_project_pd(J_ref[link], floor)))
+    eps_l, J_ref_pd = _reference_bodies(robot.params, eps)
+    A = np.linalg.inv(J_ref_pd)  # (n, 4, 4)
+    shift = eps_l[:, None, None] * np.eye(4)
     kinds = [EXTRA_KINDS[e // n] for e in e_idx]
     lb = np.array([-np.inf if k == "offset" else 0.0 for k in kinds])
     e_ref = ref[10 * n + e_idx]
@@ -701,7 +713,8 @@ def described_bodies(
     e0 = phi[10 * n + e_idx]
     phi[10 * n + e_idx] = np.where(bounded & (e0 <= lb + 1e-9 * e_scale), lb + 1e-9 * e_scale, e0)
     base = phi[act].copy()
-    B = [np.einsum("ik,iab->kab", N[10 * link : 10 * link + 10], _E) for link in range(n)]
+    B_all = np.stack([np.einsum("ik,iab->kab", N[10 * link : 10 * link + 10], _E) for link in range(n)])
+    trace_grad = np.einsum("lab,lkba->k", A, B_all)  # the gradient of sum_l tr(A_l J_l): constant
     Ne = N[10 * n :]
     kappa = 1e-9  # barrier weight of the extras' bounds (relative to the unit pull)
 
@@ -717,13 +730,12 @@ def described_bodies(
         out = _EXTRA_PULL * float(np.sum(((e - e_ref) / e_scale) ** 2)) - kappa * float(
             np.sum(np.log(slack / e_scale[bounded]))
         )
-        for link, J in enumerate(Js):
-            M = J - eps_l[link] * np.eye(4)
-            sign, logdet = np.linalg.slogdet(M)
-            if sign <= 0 or not np.all(np.linalg.eigvalsh(M) > 0):
-                return np.inf
-            out += float(np.trace(A[link] @ J)) - logdet
-        return out
+        try:
+            L = np.linalg.cholesky(Js - shift)
+        except np.linalg.LinAlgError:
+            return np.inf
+        logdet = 2 * float(np.log(np.diagonal(L, axis1=1, axis2=2)).sum())
+        return out + float(np.einsum("lab,lba->", A, Js)) - logdet
 
     w = np.zeros(N.shape[1])
     f = value(w)
@@ -738,16 +750,9 @@ def described_bodies(
         Nb = Ne[bounded]
         grad -= kappa * Nb.T @ (1.0 / slack)
         hess += kappa * (Nb.T / slack**2) @ Nb
-        for link, J in enumerate(Js):
-            grad += np.einsum("ab,kba->k", A[link], B[link])
-            Li = scipy.linalg.solve_triangular(
-                np.linalg.cholesky(J - eps_l[link] * np.eye(4)), np.eye(4), lower=True
-            )
-            T = np.einsum("ab,kbc,dc->kad", Li, B[link], Li).reshape(-1, 16)
-            grad -= T[:, [0, 5, 10, 15]].sum(axis=1)
-            hess += T @ T.T
-        d = 1.0 / np.sqrt(np.maximum(np.diag(hess), 1e-300))
-        step = -d * np.linalg.lstsq(hess * np.outer(d, d), d * grad, rcond=1e-14)[0]
+        grad += trace_grad
+        _add_neg_logdet(Js - shift, B_all, 1.0, grad, hess)
+        step = _newton_direction(hess, grad)
         decrement = float(-grad @ step)
         info["iterations"] = step_count
         if decrement <= 1e-10 * max(1.0, abs(f)):
