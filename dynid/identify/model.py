@@ -317,13 +317,15 @@ class IdentifiedModel:
         )
         return effect_values(src, terms)[0]
 
-    def predict_parts(self, ds: Dataset) -> dict[str, NDArray[np.float64]]:
+    def predict_parts(self, ds: Dataset, *, prep: Prepared | None = None) -> dict[str, NDArray[np.float64]]:
         """The prediction of a dataset split by layer, each treated as :meth:`predict` treats it.
 
         Parameters
         ----------
         ds : Dataset
             Data of the same robot.
+        prep : Prepared, optional
+            ``prepare(ds)`` when the caller has it already (it is not computed twice).
 
         Returns
         -------
@@ -332,7 +334,7 @@ class IdentifiedModel:
             (layer 2), ``gmm`` (layer 3): (m, n) arrays at :meth:`prepare` ``(ds).rows`` (N m); their sum
             is :meth:`predict` ``(ds)``.
         """
-        prep = self.prepare(ds)
+        prep = self.prepare(ds) if prep is None else prep
         rows = prep.rows
         self._check_range(prep.q[rows], prep.dq[rows])
         values = self.effect_columns(prep.q, prep.dq, prep.ddq, t=prep.t, runs=prep.runs, fs=prep.fs)

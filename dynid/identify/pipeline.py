@@ -92,8 +92,8 @@ def candidates(friction: str = "auto", gmm: str | int = "auto") -> list[tuple[st
 
 
 def _score(model, ds) -> NDArray[np.float64]:
-    parts = model.predict_parts(ds)
     prep = model.prepare(ds)
+    parts = model.predict_parts(ds, prep=prep)
     pred = parts["link"] + parts["friction"] + parts["gmm"]
     return np.mean((prep.tau_reference - pred) ** 2, axis=0)
 

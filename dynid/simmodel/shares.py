@@ -60,7 +60,7 @@ def heldout_shares(model, params, fmt: str, data: Dataset) -> dict[str, Any]:
     prep = model.prepare(data)
     rows = prep.rows
     ref = prep.tau_reference
-    parts = model.predict_parts(data)
+    parts = model.predict_parts(data, prep=prep)
     full = parts["link"] + parts["friction"] + parts["gmm"]
 
     def filt(tau):

@@ -328,7 +328,7 @@ def _parts(model: IdentifiedModel, prep: Prepared, data: Dataset) -> tuple[NDArr
     if hasattr(model, "predict_parts"):
         # The model's own split, so the parts always add up to model.predict(data); its "link" part
         # holds the friction identified with the links, taken out here for the friction figure.
-        parts = model.predict_parts(data)
+        parts = model.predict_parts(data, prep=prep)
         link, fric, gmm = parts["link"], parts["friction"], parts["gmm"]
         if layer1_friction:
             lf = prep.filter(
