@@ -75,6 +75,11 @@ class Session:
             self.stream.flush()
             self._last = time.monotonic()
 
+    def touch(self) -> None:
+        """The command printed a line of its own: the heartbeat waits its full interval again."""
+        with self._lock:
+            self._last = time.monotonic()
+
     def say(self, text: str) -> None:
         """A line of progress: what the command does now.
 
@@ -260,5 +265,4 @@ def touch() -> None:
     """Note that the command printed something of its own (the heartbeat waits again)."""
     s = active()
     if s is not None:
-        with s._lock:
-            s._last = time.monotonic()
+        s.touch()

@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import glob
 import hashlib
+import inspect
 import io
 import json
 import os
@@ -533,7 +534,7 @@ class ThreeLayerModel:
         (default): the pipeline chosen from the recording (:mod:`dynid.identify.pipeline`): OLS with
         linear friction and no correction, or the paper's IRLS + nonlinear friction + mixture, whichever
         predicts each half of the training recording from the other better (the richer one only if no
-        joint is worse); ``model_.info["pipeline"]`` records the choice and its reason.
+        joint is more than 10 % worse); ``model_.info["pipeline"]`` records the choice and its reason.
     friction : {"auto", "none", "linear", "seed", "stribeck", "sigmoid"}
         Friction model (layer 2; ``linear`` keeps the coefficients identified with the links).
         ``"auto"`` (default): chosen with ``method="auto"``, else ``seed`` (the paper's).
@@ -547,7 +548,7 @@ class ThreeLayerModel:
         Pull of the physically consistent links toward the description's (URDF / DH) bodies, in
         squared standard deviations of the data per unit of entropic divergence
         (:mod:`dynid.identify.prior`).  ``"auto"`` (default): the strongest pull whose blocked
-        cross-validated error on the training recording stays within 3 % of the best on every joint,
+        cross-validated mean relative error on the training recording stays within 2 % of the best,
         so the description stands wherever the data do not measurably predict better without it.
         0: only the directions the data cannot see at all keep the description.
     gmm_mode : {"position", "own", "per_joint", "vector"}
@@ -753,11 +754,8 @@ class ThreeLayerModel:
         return self
 
     def _with(self, **changes: Any) -> ThreeLayerModel:
-        """An unfitted copy with some settings changed."""
-        keys = (
-            "robot", "method", "friction", "gmm", "preprocessing", "armature", "reference_weight", "gmm_mode",
-            "random_state", "rounds", "physical", "effects",
-        )  # fmt: skip
+        """An unfitted copy with some settings changed (the settings: the keywords of ``__init__``)."""
+        keys = [k for k in inspect.signature(ThreeLayerModel.__init__).parameters if k != "self"]
         return ThreeLayerModel(**{k: changes.get(k, getattr(self, k)) for k in keys})
 
     def _adopt_into(self, target: ThreeLayerModel) -> ThreeLayerModel:

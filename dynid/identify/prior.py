@@ -150,7 +150,7 @@ def _extras_precision(cols: ColumnSet, H: NDArray[np.float64], scale: float) -> 
     return out
 
 
-def _block_moments(system) -> tuple[NDArray[np.float64], NDArray[np.intp], list[NDArray[np.intp]]]:
+def _block_moments(system) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
     """Per block and joint, the (p+1) x (p+1) moment matrix of ``[W_j, tau_j]`` over the block's rows."""
     Z = system.data_matrix()
     rows = system.prepared.rows
@@ -173,7 +173,7 @@ def _block_moments(system) -> tuple[NDArray[np.float64], NDArray[np.intp], list[
             G += chunk.T @ chunk
         for j in range(n):
             M[b, j] = T[j].T @ G @ T[j]
-    return M, edges, T
+    return M, edges
 
 
 def choose_prior(robot, system, *, grid: tuple[float, ...] = GRID, tolerance: float = TOLERANCE) -> PriorChoice:
@@ -206,7 +206,7 @@ def choose_prior(robot, system, *, grid: tuple[float, ...] = GRID, tolerance: fl
 
     cols = system.columns
     n, p = cols.n, cols.p
-    M, edges, _ = _block_moments(system)
+    M, edges = _block_moments(system)
     total = M.sum(axis=(0, 1))
 
     def ols(T):
