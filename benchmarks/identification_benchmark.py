@@ -44,6 +44,8 @@ def measured(label: str, func, results: dict):
 
 
 def main() -> None:
+    from dynid.data.preparation import Preprocessing
+    from dynid.data.preprocess import lowpass
     from dynid.identify.columns import column_set
     from dynid.identify.consistent import ConsistentLS
     from dynid.identify.estimators import IRLS, OLS
@@ -51,8 +53,6 @@ def main() -> None:
     from dynid.identify.gmr import GMRCorrection
     from dynid.identify.linear_system import build_system
     from dynid.identify.model import identify
-    from dynid.identify.preparation import Preprocessing
-    from dynid.identify.preprocess import lowpass
     from dynid.sim.synthetic import random_fourier, synthetic_dataset, true_parameters
     from dynid.symbolic import load_robot
     from dynid.validation.metrics import noise_floor

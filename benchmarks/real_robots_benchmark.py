@@ -25,7 +25,7 @@ Models, each identified on the training part only:
 - ``phys``: the default model's link + friction layers alone (no mixture correction);
 - ``ref``: the reference above;
 - TX40 only: ``wrist``, the defaults with the coupled wrist declared (the recording's robot from
-  :func:`dynid.identify.adapters.recording_robot`, as ``dynid identify --transmission`` takes it), and
+  :func:`dynid.data.adapters.recording_robot`, as ``dynid identify --transmission`` takes it), and
   ``+cfric``, the defaults with the effect the diagnosis ranks first on this recording added as a model
   term (``identify(..., effects="coupled_friction@5+6")``, as ``dynid identify --effects`` takes it).
 
@@ -92,7 +92,7 @@ def gaz_reference(urdf: str, full) -> tuple[np.ndarray, np.ndarray]:
     """Published Panda model on the whole recording: (t, tau) at the uniform grid of the prepared states."""
     import pinocchio as pin
 
-    from dynid.identify.preparation import Preprocessing, prepare
+    from dynid.data.preparation import Preprocessing, prepare
 
     prep = prepare(full, Preprocessing(cutoff=10.0, order=4, parallel=False, trim=0.0))
     model = pin.buildModelFromUrdf(urdf)
@@ -113,7 +113,7 @@ def plain_least_squares(urdf: str, train, full) -> tuple[np.ndarray, np.ndarray]
     """
     import pinocchio as pin
 
-    from dynid.identify.preparation import Preprocessing, prepare
+    from dynid.data.preparation import Preprocessing, prepare
 
     model = pin.buildModelFromUrdf(urdf)
     data = model.createData()
@@ -168,9 +168,9 @@ def spring_check(robot, full, train_end: float, held: tuple[float, float], cutof
     stays on 2 joints of 6, and the full model's held-out RMS goes from 0.220x OLS to 0.688x.  A
     spring is no default term without a test that the data ask for it.
     """
+    from dynid.data.preprocess import lowpass
     from dynid.identify.consistent import consistent_solution
     from dynid.identify.linear_system import build_system
-    from dynid.identify.preprocess import lowpass
 
     system = build_system(robot, full, friction=True, armature=True)
     prep = system.prepared
@@ -244,17 +244,17 @@ def main() -> None:
     args = parser.parse_args()
     setup = SETUPS[args.robot]
 
-    from dynid.identify.adapters import load_recording, recording_model_path
+    from dynid.data.adapters import load_recording, recording_model_path
+    from dynid.data.preparation import Preprocessing, prepare
+    from dynid.data.preprocess import lowpass
     from dynid.identify.model import identify
-    from dynid.identify.preparation import Preprocessing, prepare
-    from dynid.identify.preprocess import lowpass
     from dynid.symbolic import load_robot
 
     warnings.simplefilter("ignore")
     urdf = str(recording_model_path(setup["recording"]))
     robot = load_robot(urdf)
     if "heldout_run" in setup:  # two runs: the held-out one is scored whole
-        from dynid.identify.adapters import load_kuka_lwr4
+        from dynid.data.adapters import load_kuka_lwr4
 
         train = load_kuka_lwr4(run=setup["train_run"])
         full = load_kuka_lwr4(run=setup["heldout_run"])
@@ -315,7 +315,7 @@ def main() -> None:
     rows["plain"] = score(t, total)
     extra: tuple[str, ...] = ()
     if args.robot == "tx40":
-        from dynid.identify.adapters import recording_robot
+        from dynid.data.adapters import recording_robot
 
         t, _, total = model_parts(identify(recording_robot("tx40"), train), full)
         rows["wrist"] = score(t, total)

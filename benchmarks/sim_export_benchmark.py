@@ -51,7 +51,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from dynid.identify.adapters import load_recording, recording_model_path  # noqa: E402
+from dynid.data.adapters import load_recording, recording_model_path  # noqa: E402
 from dynid.identify.model import identify  # noqa: E402
 from dynid.simmodel.export import export_model  # noqa: E402
 from dynid.simmodel.nominal import description_friction  # noqa: E402

@@ -246,7 +246,7 @@ def _stage_timers() -> tuple[dict[str, list[float]], list]:
 
 
 def part_identify(repeat: int, stages: bool = False) -> None:
-    from dynid.identify.adapters import load_recording, recording_model_path
+    from dynid.data.adapters import load_recording, recording_model_path
     from dynid.identify.model import identify
     from dynid.symbolic import load_robot
 

@@ -40,10 +40,11 @@ _API: dict[str, tuple[str, str]] = {
     "ExcitationResult": ("dynid.optim.excitation", "ExcitationResult"),
     "design_excitation": ("dynid.optim.excitation", "design_excitation"),
     "load_trajectory": ("dynid.optim.trajectory", "load_trajectory"),
-    # data and identification (dynid.identify)
-    "Dataset": ("dynid.identify.dataset", "Dataset"),
-    "load_dataset": ("dynid.identify.dataset", "load_dataset"),
-    "save_dataset": ("dynid.identify.dataset", "save_dataset"),
+    # data (dynid.data)
+    "Dataset": ("dynid.data.dataset", "Dataset"),
+    "load_dataset": ("dynid.data.files", "load_dataset"),
+    "save_dataset": ("dynid.data.files", "save_dataset"),
+    # identification (dynid.identify)
     "IdentifiedModel": ("dynid.identify.model", "IdentifiedModel"),
     "identify_model": ("dynid.identify.model", "identify"),
     "load_model": ("dynid.identify.model", "load_model"),

@@ -330,7 +330,7 @@ def run_demo(
 
     # ------------------------------------------------------------------ 3. simulation
     def simulate_runs() -> str:
-        from dynid.identify.dataset import load_dataset
+        from dynid.data.files import load_dataset
         from dynid.sim.simulator import build_truth, simulate, write_simulation
 
         traj = state["trajectory"]

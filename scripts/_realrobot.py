@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from dynid.identify.adapters import load_recording, recording_model_path
-from dynid.identify.dataset import Dataset
+from dynid.data.adapters import load_recording, recording_model_path
+from dynid.data.dataset import Dataset
 from dynid.identify.model import save_model
 from dynid.symbolic import RobotModel, load_robot
 from dynid.validation.report import render_report
@@ -27,7 +27,7 @@ def load_with_robot(name: str, root: Path | None = None) -> tuple[Dataset, Robot
     Parameters
     ----------
     name : str
-        The recording (see :func:`dynid.identify.adapters.load_recording`).
+        The recording (see :func:`dynid.data.adapters.load_recording`).
     root : Path, optional
         The folder of the recordings (found beside the repository by default).
     """

@@ -39,11 +39,11 @@ def diagnose_recording(name: str, split: float, decimate: int, out: Path, root: 
     import numpy as np
     from _realrobot import load_with_robot, split_in_time
 
+    from dynid.data.preparation import Preprocessing
     from dynid.diagnosis.core import diagnose
     from dynid.diagnosis.report import write_diagnosis_report
     from dynid.diagnosis.result import settling_excitation
     from dynid.identify.model import identify, load_model, save_model
-    from dynid.identify.preparation import Preprocessing
 
     data, robot = load_with_robot(name, root)
     train, heldout = split_in_time(data, split)
@@ -112,8 +112,8 @@ def diagnose_recording(name: str, split: float, decimate: int, out: Path, root: 
 
 
 def main(out: Path) -> int:
+    from dynid.data.adapters import find_shared_data
     from dynid.exceptions import DataError
-    from dynid.identify.adapters import find_shared_data
 
     try:
         root = find_shared_data()

@@ -18,7 +18,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # the scripts' shared 
 
 from _realrobot import load_with_robot, print_heldout_table, run, split_in_time, write_outputs
 
-from dynid.identify.preparation import Preprocessing
+from dynid.data.preparation import Preprocessing
 from dynid.validation.validate import ValidationResult, compare_methods
 
 RECORDING = "panda_gaz2019"

@@ -124,8 +124,8 @@ def main(quick: bool = False, seed: int = 7, progress=print) -> dict:
     progress : callable
         Receives one line per step.
     """
+    from dynid.data.preparation import Preprocessing
     from dynid.identify.model import identify
-    from dynid.identify.preparation import Preprocessing
     from dynid.optim.excitation import ExcitationProblem, design_excitation
     from dynid.sim.simulator import build_truth, simulate
     from dynid.symbolic import load_robot

@@ -1,4 +1,4 @@
-"""Tests of dynid.identify.adapters on the real recordings in ../shared/data (skipped when absent).
+"""Tests of dynid.data.adapters on the real recordings in ../shared/data (skipped when absent).
 
 The physics checks compare the measured torque with the rigid-body torque of the recording's URDF,
 computed by numeric Pinocchio (``pin.rnea``) on states from dynid's own preprocessing.  Measured on
@@ -23,8 +23,7 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from dynid.exceptions import DataError
-from dynid.identify.adapters import (
+from dynid.data.adapters import (
     ADAPTERS,
     ENV_VAR,
     find_shared_data,
@@ -34,8 +33,9 @@ from dynid.identify.adapters import (
     recording_model_path,
     tx40_coupling_matrices,
 )
-from dynid.identify.dataset import Dataset
-from dynid.identify.preprocess import preprocess
+from dynid.data.dataset import Dataset
+from dynid.data.preprocess import preprocess
+from dynid.exceptions import DataError
 
 DATA = Path(os.environ.get(ENV_VAR) or Path(__file__).resolve().parents[2] / "shared" / "data")
 skip_without_data = pytest.mark.skipif(

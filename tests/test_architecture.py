@@ -1,11 +1,13 @@
 """The package's structure, read from the source (nothing is imported).
 
-* Layers import one way: symbolic <- optim <- identify <- sim <- validation <- simmodel <- diagnosis <- fleet <-
-  commands.
+* Layers import one way: symbolic <- optim <- data <- identify <- sim <- validation <- simmodel <- diagnosis <-
+  fleet <- commands.
   The bottom holds ``dynid._io``, ``dynid._threads``, ``dynid.exceptions`` and any other top-level helper; the top
   holds ``dynid.cli``, the package's face ``dynid/__init__.py`` and the demo's library module, which
   sits beside the commands.
 * No module imports :mod:`dynid.cli`.
+* Modules import each other without a circle (a package's face, which imports its modules on demand,
+  aside).
 * No module uses another module's private name (``from dynid.x import _y``, ``dynid_module._y``).
   A private module (``dynid.symbolic._export``) belongs to its package: modules of that package may
   import it; ``dynid._io`` and ``dynid._threads`` are private to ``dynid`` and so open to every module.
@@ -18,6 +20,7 @@ layer is still a dependency on it.
 from __future__ import annotations
 
 import ast
+import graphlib
 import pkgutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,11 +32,22 @@ import dynid
 PACKAGE = Path(dynid.__file__).resolve().parent
 
 # The layers, lowest first.  A module may import modules of its own layer or of lower ones.
-LAYERS = ("symbolic", "optim", "identify", "sim", "validation", "simmodel", "diagnosis", "fleet", "commands")
+LAYERS = (
+    "symbolic",
+    "optim",
+    "data",
+    "identify",
+    "sim",
+    "validation",
+    "simmodel",
+    "diagnosis",
+    "fleet",
+    "commands",
+)
 BOTTOM = -1  # dynid._io, dynid.exceptions, other top-level helpers
 TOP = len(LAYERS)  # dynid.cli and the package's face
 # Top-level modules that are not helpers: their layer.
-TOP_LEVEL = {"cli": TOP, "demo": LAYERS.index("commands"), "pipeline": LAYERS.index("commands")}
+TOP_LEVEL = {"cli": TOP, "demo": LAYERS.index("commands")}
 
 
 def _module_files() -> dict[str, Path]:
@@ -219,7 +233,8 @@ def test_the_walk_finds_every_layer():
     for name in LAYERS:
         assert f"dynid.{name}" in PACKAGES, name
     assert {"dynid._io", "dynid.exceptions", "dynid.cli"} <= MODULES.keys()
-    assert layer("dynid.symbolic.robot") < layer("dynid.optim.excitation") < layer("dynid.identify.model")
+    assert layer("dynid.symbolic.robot") < layer("dynid.optim.excitation") < layer("dynid.data.dataset")
+    assert layer("dynid.data.dataset") < layer("dynid.identify.model")
     assert layer("dynid.identify.model") < layer("dynid.sim.simulator") < layer("dynid.validation.validate")
     assert layer("dynid.validation.validate") < layer("dynid.diagnosis.core") < layer("dynid.commands.demo")
     assert layer("dynid.validation.validate") < layer("dynid.simmodel.export") < layer("dynid.diagnosis.core")
@@ -264,6 +279,25 @@ def test_the_checks_catch_what_they_forbid(tmp_path):
 
 def test_layers_import_one_way(violations):
     assert violations["layers"] == []
+
+
+def test_modules_import_without_a_circle():
+    graph = {}
+    for module, path in MODULES.items():
+        if module in PACKAGES:
+            continue
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        targets = {
+            target
+            for imp in _imports(module, tree)
+            for target in [imp.target, *(f"{imp.target}.{n}" for n in imp.names)]
+            if target in MODULES and target not in PACKAGES and target != module
+        }
+        graph[module] = targets
+    try:
+        tuple(graphlib.TopologicalSorter(graph).static_order())
+    except graphlib.CycleError as err:
+        pytest.fail(f"modules import each other in a circle: {' -> '.join(err.args[1])}")
 
 
 def test_no_module_imports_the_command_line(violations):

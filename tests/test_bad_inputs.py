@@ -1,7 +1,7 @@
 """Bad inputs end in one sentence: exit code 2, one line on stderr, no traceback, no file touched.
 
 Every dataset command (identify, validate, diagnose) reads its data through the one reader
-(:func:`dynid.identify.dataset.load_dataset`) and every robot command through
+(:func:`dynid.data.files.load_dataset`) and every robot command through
 :func:`dynid.symbolic.robot.load_robot`, so each bad file is tried through each command that reads it,
 then through the API.  The folder a command runs in holds its inputs and a pre-existing output; after a
 refusal every file in it is byte-identical and nothing was added (no stray temporary file).
@@ -25,8 +25,8 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from dynid.cli import main
+from dynid.data.files import load_dataset
 from dynid.exceptions import DataError, DataWarning, DynidError, RobotModelError, RobotModelWarning
-from dynid.identify.dataset import load_dataset
 from dynid.symbolic.robot import check_inertias, check_simulable, load_robot
 
 ROWS = 1100  # 1.1 s at 1 kHz: enough for identify's trimming, small enough to be quick
@@ -469,8 +469,8 @@ def test_torques_in_millinewton_metres_are_refused_given_the_robot(
 
 
 def test_torque_scale_accepts_the_real_recordings(shared_data: Path) -> None:
-    from dynid.identify.adapters import load_recording, recording_model_path
-    from dynid.identify.dataset import check_torque_scale
+    from dynid.data.adapters import load_recording, recording_model_path
+    from dynid.data.files import check_torque_scale
 
     for name in ("panda_gaz2019", "tx40"):
         ds = load_recording(name)

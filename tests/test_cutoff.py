@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dynid.identify.dataset import Dataset
-from dynid.identify.preparation import AUTO_CUTOFF_HZ, Preprocessing, prepare
-from dynid.identify.preprocess import BANDWIDTH_FACTOR, choose_cutoff
+from dynid.data.dataset import Dataset
+from dynid.data.preparation import AUTO_CUTOFF_HZ, Preprocessing, prepare
+from dynid.data.preprocess import BANDWIDTH_FACTOR, choose_cutoff
 
 RATE = 1000.0
 

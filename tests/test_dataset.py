@@ -1,4 +1,4 @@
-"""Tests of dynid.identify.dataset: the Dataset type, its checks, and its files."""
+"""Tests of dynid.data.dataset and dynid.data.files: the Dataset type, its checks, and its files."""
 
 from __future__ import annotations
 
@@ -9,8 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dynid.exceptions import DataError
-from dynid.identify.dataset import Dataset, DataWarning, load_dataset, save_dataset
+from dynid.data.dataset import Dataset
+from dynid.data.files import load_dataset, save_dataset
+from dynid.exceptions import DataError, DataWarning
 
 
 @pytest.fixture

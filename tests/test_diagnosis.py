@@ -19,6 +19,8 @@ import numpy as np
 import pytest
 
 from dynid.cli import main
+from dynid.data.dataset import Dataset
+from dynid.data.files import save_dataset
 from dynid.diagnosis import stats as st
 from dynid.diagnosis.baseline import crossfit_residual
 from dynid.diagnosis.candidates import EFFECT_NAMES, _relay
@@ -26,7 +28,6 @@ from dynid.diagnosis.cases import run_case
 from dynid.diagnosis.core import diagnose
 from dynid.diagnosis.crossfold import CrossFold
 from dynid.exceptions import DataError, IdentificationError, ShapeError, UsageError
-from dynid.identify.dataset import Dataset, save_dataset
 from dynid.sim.cases import case_excitation
 from dynid.sim.simulator import simulate
 from dynid.validation.noise import detect_period, encoder_step, measure_noise
@@ -282,7 +283,7 @@ def test_structured_change_picks_the_hypothesis_that_made_the_change(rng):
 
 # ---------------------------------------------------------------------------- noise floor
 def test_period_detection_and_noise_floor_of_a_periodic_run(ur5):
-    from dynid.identify.preparation import Preprocessing, prepare
+    from dynid.data.preparation import Preprocessing, prepare
 
     traj = case_excitation(ur5, 11, base_freq=0.5)
     res = simulate(ur5, traj, duration=8.0, friction="linear", seed=3)

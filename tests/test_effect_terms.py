@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from dynid.cli import main
+from dynid.data.files import save_dataset
 from dynid.exceptions import UsageError
 from dynid.identify import effect_terms
-from dynid.identify.dataset import save_dataset
 from dynid.identify.effect_terms import Candidate, parse_effect_terms
 from dynid.identify.model import identify, load_model, save_model
 from dynid.sim import effects as sim_effects

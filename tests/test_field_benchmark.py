@@ -93,8 +93,8 @@ def test_the_angles_are_quantised_and_the_files_have_no_derivatives(case) -> Non
 def test_the_training_periods_floor_measures_the_injected_noise(ur5, case, model) -> None:
     """The floor the diagnosis takes for an aperiodic held-out run (the training run's spread across its
     periods, same filter) is within 25 % of the injected held-out noise after that filter."""
+    from dynid.data.preparation import Preprocessing, prepare
     from dynid.diagnosis.baseline import model_structure
-    from dynid.identify.preparation import Preprocessing, prepare
     from dynid.validation.noise import measure_noise
 
     structure = model_structure(model, None, case.train, case.heldout)
@@ -126,6 +126,7 @@ def test_the_state_estimation_term_matches_what_the_quantisation_does(ur5, case,
     torque noise's variance on some joint)."""
     from dataclasses import replace
 
+    from dynid.data.preparation import Preprocessing, prepare
     from dynid.diagnosis.baseline import (
         model_structure,
         refit_baseline,
@@ -135,7 +136,6 @@ def test_the_state_estimation_term_matches_what_the_quantisation_does(ur5, case,
     )
     from dynid.diagnosis.fitting import mse, predict
     from dynid.diagnosis.settings import DiagnosisSettings
-    from dynid.identify.preparation import Preprocessing, prepare
 
     structure = model_structure(model, None, case.train, case.heldout)
     settings = DiagnosisSettings()

@@ -254,8 +254,8 @@ def test_a_period_the_motion_does_not_have_is_not_used(recordings, models, tmp_p
 def test_a_gap_splits_the_run_and_a_short_piece_after_it_is_left_out() -> None:
     """A 0.5 s hole in 100 Hz stamps is not bridged by interpolation; the 70 samples after a late gap are
     too short for a 2 Hz filter's trim and are left out with a warning instead of refusing the recording."""
-    from dynid.identify.dataset import Dataset
-    from dynid.identify.preprocess import preprocess, resample
+    from dynid.data.dataset import Dataset
+    from dynid.data.preprocess import preprocess, resample
 
     t = np.arange(4000) / RATE
     t = np.concatenate([t[:3880], t[3930:]])  # 0.5 s missing, 70 samples after it

@@ -272,7 +272,7 @@ def test_ros2_bags_go_through_the_same_reader_and_give_the_csv_rows(fleet, tmp_p
     from rosbags.typesys import Stores, get_typestore
 
     import dynid
-    from dynid.identify.dataset import load_dataset
+    from dynid.data.files import load_dataset
 
     store = get_typestore(Stores.LATEST)
     types, kind = store.types, "sensor_msgs/msg/JointState"
@@ -311,7 +311,7 @@ def test_the_diagnosis_names_an_effect_in_the_verdict_column(tmp_path, capsys):
     periods (two whole periods are needed; a floor from the spectrum would need 2,048 held-out samples).
     The delay (4 control steps, 17 ms at this size) is the diagnosis tests' clearly detectable one.
     """
-    from dynid.identify.dataset import save_dataset
+    from dynid.data.files import save_dataset
     from dynid.sim.cases import case_excitation
     from dynid.sim.simulator import simulate
     from dynid.symbolic.robot import load_robot

@@ -7,12 +7,12 @@ import dataclasses
 import numpy as np
 import pytest
 
+from dynid.data.dataset import Dataset
+from dynid.data.preparation import Preprocessing, prepare
 from dynid.exceptions import DataError, IdentificationError
 from dynid.identify.columns import column_set
-from dynid.identify.dataset import Dataset
 from dynid.identify.estimators import GLS, IRLS, OLS, WLS
 from dynid.identify.linear_system import build_system
-from dynid.identify.preparation import Preprocessing, prepare
 from dynid.sim.synthetic import random_fourier, synthetic_dataset, true_parameters
 
 

@@ -90,8 +90,8 @@ def test_bad_friction_input_is_refused(rng) -> None:
 def test_seed_model_fitted_through_the_torque_filter_finds_the_threshold(rng) -> None:
     # at 1 kHz with a 20 Hz filter the Coulomb step of every reversal is smeared over ~25 ms:
     # fitted unfiltered against the filtered torque, the threshold came out 3-10 times too small
-    from dynid.identify.dataset import Dataset
-    from dynid.identify.preparation import Preprocessing, prepare
+    from dynid.data.dataset import Dataset
+    from dynid.data.preparation import Preprocessing, prepare
 
     t = np.arange(40_000) * 1e-3
     q = 0.6 * np.sin(2 * np.pi * 0.2 * t) * np.sin(2 * np.pi * 0.05 * t)

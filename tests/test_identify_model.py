@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from dynid.cli import main
+from dynid.data.files import save_dataset
 from dynid.exceptions import ModelFileError
 from dynid.identify.columns import column_set
 from dynid.identify.consistent import (
@@ -21,7 +22,6 @@ from dynid.identify.consistent import (
     pseudo_inertia,
     standard_from_pseudo_inertia,
 )
-from dynid.identify.dataset import save_dataset
 from dynid.identify.estimators import IRLS, IdentificationWarning
 from dynid.identify.friction import SeedFriction
 from dynid.identify.linear_system import build_system

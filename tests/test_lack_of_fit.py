@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from dynid.data.dataset import Dataset
+from dynid.data.preparation import Preprocessing, prepare
 from dynid.diagnosis.fitting import WeightedFit
 from dynid.diagnosis.lack_of_fit import LEAD_MISFIT, QUANTISATION_FACTOR, LackOfFit, training_lack_of_fit
-from dynid.identify.dataset import Dataset
-from dynid.identify.preparation import Preprocessing, prepare
 
 RATE = 200.0  # Hz
 PERIOD = 5.0  # s

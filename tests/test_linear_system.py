@@ -10,14 +10,14 @@ import pinocchio as pin
 import pytest
 import scipy.linalg
 
+from dynid.data.dataset import Dataset
+from dynid.data.preparation import AUTO_CUTOFF_HZ, Preprocessing, prepare
 from dynid.exceptions import DataError, DynidError, IdentificationError, NotFittedError, UsageError
 from dynid.identify.columns import column_set, linear_torque
-from dynid.identify.dataset import Dataset
 from dynid.identify.estimators import OLS
 from dynid.identify.friction import FrictionLayer, SeedFriction
 from dynid.identify.gmr import GMRCorrection
 from dynid.identify.linear_system import LinearSystem, WeightedSolution, build_system
-from dynid.identify.preparation import AUTO_CUTOFF_HZ, Preprocessing, prepare
 from dynid.sim.synthetic import random_fourier, synthetic_dataset
 
 

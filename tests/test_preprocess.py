@@ -1,4 +1,4 @@
-"""Tests of dynid.identify.preprocess: resampling, zero-phase filtering, differences, parallel filtering."""
+"""Tests of dynid.data.preprocess: resampling, zero-phase filtering, differences, parallel filtering."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import pytest
 from numpy.typing import NDArray
 from scipy.signal import sosfilt
 
-import dynid.identify.preprocess as pp
-from dynid.exceptions import DataError
-from dynid.identify.dataset import Dataset, DataWarning
+import dynid.data.preprocess as pp
+from dynid.data.dataset import Dataset
+from dynid.exceptions import DataError, DataWarning
 
 FS = 1000.0  # Hz
 
@@ -106,8 +106,8 @@ def test_the_shortest_run_a_filter_takes_is_scipys(rng: np.random.Generator) -> 
 
 def test_the_identification_takes_the_shortest_run_the_filter_takes(ur5) -> None:
     # build_system filters the regressor columns run by run with the same rule as the torque's filter
+    from dynid.data.preparation import Preprocessing
     from dynid.identify.linear_system import build_system
-    from dynid.identify.preparation import Preprocessing
 
     t = np.arange(0.0, 1.2, 0.001)
     q = 0.3 * np.sin(2 * np.pi * 0.5 * t[:, None] + np.arange(ur5.n))

@@ -129,10 +129,10 @@ def panda_defaults(shared_data):
     scored as ``benchmarks/real_robots_benchmark.py`` scores them (raw torque, 10 Hz, 0.25 s trimmed)."""
     import warnings
 
-    from dynid.identify.adapters import load_recording, recording_model_path
+    from dynid.data.adapters import load_recording, recording_model_path
+    from dynid.data.preparation import Preprocessing, prepare
+    from dynid.data.preprocess import lowpass
     from dynid.identify.model import identify
-    from dynid.identify.preparation import Preprocessing, prepare
-    from dynid.identify.preprocess import lowpass
     from dynid.symbolic import load_robot
 
     bench = runpy.run_path(str(REPO / "benchmarks" / "real_robots_benchmark.py"), run_name="dynid_benchmark")
@@ -207,7 +207,7 @@ def test_tx40_whole_recording_defaults_keep_the_torque_in_the_physical_layers(sh
     # the joint's torque power).  The physical layers must hold it, and the mixture only add to them.
     import warnings
 
-    from dynid.identify.adapters import load_recording, recording_model_path
+    from dynid.data.adapters import load_recording, recording_model_path
     from dynid.identify.model import identify
     from dynid.symbolic import load_robot
 
@@ -234,7 +234,7 @@ def test_irls_stops_short_of_its_fixed_point_by_far_less_than_a_standard_deviati
     # point, which takes 101
     import warnings
 
-    from dynid.identify.adapters import load_recording, recording_model_path
+    from dynid.data.adapters import load_recording, recording_model_path
     from dynid.identify.estimators import IRLS
     from dynid.identify.linear_system import build_system
     from dynid.symbolic import load_robot

@@ -16,8 +16,8 @@ from matplotlib.figure import Figure
 from validation_cases import simulated_case
 
 from dynid.cli import main
+from dynid.data.files import load_dataset
 from dynid.exceptions import UsageError
-from dynid.identify.dataset import load_dataset
 from dynid.identify.model import load_model
 from dynid.validation import plots
 from dynid.validation.report import check_report_path, format_number, render_report

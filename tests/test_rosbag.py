@@ -25,8 +25,8 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from dynid.cli import main
+from dynid.data.files import load_dataset, save_dataset
 from dynid.exceptions import DataError, DataWarning
-from dynid.identify.dataset import load_dataset, save_dataset
 
 STORE = get_typestore(Stores.LATEST)
 JOINT_STATE = "sensor_msgs/msg/JointState"

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from dynid.cli import main
+from dynid.data.files import save_dataset
 from dynid.identify.columns import column_set
-from dynid.identify.dataset import save_dataset
 from dynid.sim.synthetic import random_fourier, synthetic_dataset
 from dynid.simmodel.export import default_template
 from dynid.simmodel.nominal import description_friction, description_model
@@ -54,7 +54,7 @@ def ur5_urdf(tmp_path_factory, ur5) -> tuple[Path, Path, Path]:
 
 
 def _nrms(path: Path, heldout: Path) -> float:
-    from dynid.identify.dataset import load_dataset
+    from dynid.data.files import load_dataset
 
     data = load_dataset(heldout)
     model = description_model(path, data)
@@ -229,7 +229,7 @@ def test_real_panda_nominal_urdf_diagnosed_and_corrected(shared_data, tmp_path, 
     """The Gaz URDF against the Panda recording (first 70 % to fit, the rest held out): the diagnosis names
     friction (the file has none) and the corrected URDF closes at least half of the held-out gap, as the
     diagnosis measures it; validate scores the written file as the command reported it."""
-    from dynid.identify.adapters import load_recording, recording_model_path
+    from dynid.data.adapters import load_recording, recording_model_path
 
     data = load_recording("panda_gaz2019", shared_data)
     urdf = recording_model_path("panda_gaz2019", shared_data)

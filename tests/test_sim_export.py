@@ -207,7 +207,7 @@ def test_a_modified_dh_table_gets_a_urdf_of_its_own(tmp_path):
 def test_tx40_with_its_coupled_wrist(shared_data, tmp_path):
     """The coupled motor's cross terms are listed as not carried; what is carried reloads exactly."""
     pytest.importorskip("mujoco", reason="the MJCF export needs mujoco (pip install dynid[mujoco])")
-    from dynid.identify.adapters import tx40_transmission
+    from dynid.data.adapters import tx40_transmission
     from dynid.symbolic import load_robot
 
     urdf = shared_data / "tx40" / "model" / "tx40_mdh_modified.urdf"
@@ -345,8 +345,8 @@ def test_real_panda_round_trip(shared_data, tmp_path):
     """The Panda recording: identified on 70 %, exported to MJCF with the Gaz URDF as template and
     reloaded; on the held-out 30 % the export beats the nominal URDF on every joint."""
     pytest.importorskip("mujoco", reason="the MJCF export needs mujoco (pip install dynid[mujoco])")
-    from dynid.identify.adapters import load_recording, recording_model_path
-    from dynid.identify.preparation import Preprocessing
+    from dynid.data.adapters import load_recording, recording_model_path
+    from dynid.data.preparation import Preprocessing
     from dynid.simmodel.nominal import description_model
     from dynid.symbolic import load_robot
     from dynid.validation.validate import validate

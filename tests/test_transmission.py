@@ -126,7 +126,7 @@ def test_a_coupled_transmission_is_recovered(coupled_robot, coupled_data, tmp_pa
 
 
 def test_the_tx40_recording_knows_its_coupled_wrist(shared_data) -> None:
-    from dynid.identify.adapters import recording_robot, tx40_coupling_matrices, tx40_transmission
+    from dynid.data.adapters import recording_robot, tx40_coupling_matrices, tx40_transmission
 
     Rm, _ = tx40_coupling_matrices()
     R = tx40_transmission()
@@ -140,7 +140,7 @@ def test_the_tx40_recording_knows_its_coupled_wrist(shared_data) -> None:
 def test_the_tx40_wrist_declared_coupled_predicts_joint_5(shared_data) -> None:
     """FIGAROH's split of the TX40 recording: the coupled wrist takes joint 5's held-out error below
     FIGAROH's 2.49 N m, where the same model without it stays near 7 N m."""
-    from dynid.identify.adapters import load_recording, recording_robot
+    from dynid.data.adapters import load_recording, recording_robot
     from dynid.validation.validate import validate
 
     full = load_recording("tx40", shared_data)
@@ -159,7 +159,7 @@ def test_the_tx40_wrist_declared_coupled_predicts_joint_5(shared_data) -> None:
 
 def test_identify_takes_a_transmission_file_beside_the_robot(coupled_data, tmp_path, capsys) -> None:
     from dynid.cli import main
-    from dynid.identify.dataset import save_dataset
+    from dynid.data.files import save_dataset
 
     data = coupled_data[2]
     save_dataset(data, tmp_path / "D.csv")

@@ -14,10 +14,11 @@ import pytest
 from validation_cases import PERIOD, simulated_case
 
 from dynid.cli import main
+from dynid.data.dataset import Dataset
+from dynid.data.files import load_dataset, save_dataset
+from dynid.data.preparation import Preprocessing, prepare
 from dynid.exceptions import DataError, ModelFileError, ShapeError, UsageError
-from dynid.identify.dataset import Dataset, load_dataset, save_dataset
 from dynid.identify.model import load_model
-from dynid.identify.preparation import Preprocessing, prepare
 from dynid.validation import plots, report
 from dynid.validation import validate as validate_module
 from dynid.validation.metrics import torque_metrics

@@ -31,8 +31,8 @@ class Case:
 def simulated_case(base: Path) -> Case:
     import warnings
 
+    from dynid.data.preparation import Preprocessing
     from dynid.identify.model import identify, save_model
-    from dynid.identify.preparation import Preprocessing
     from dynid.optim.excitation import ExcitationProblem
     from dynid.sim.simulator import build_truth, simulate, write_simulation
     from dynid.symbolic import load_robot
@@ -50,7 +50,7 @@ def simulated_case(base: Path) -> Case:
     heldout, _ = write_simulation(
         simulate(robot, heldout_traj, truth=truth, seed=2, duration=2 * PERIOD + 0.5), folder / "V.csv"
     )
-    from dynid.identify.dataset import load_dataset
+    from dynid.data.files import load_dataset
 
     data = load_dataset(train, robot.n)
     pre = Preprocessing(decimate=4)

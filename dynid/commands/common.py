@@ -92,7 +92,7 @@ def read_dataset(path: str | os.PathLike[str], n_joints: int | None = None, *, r
     """
     import inspect
 
-    from dynid.identify.dataset import load_dataset
+    from dynid.data.files import load_dataset
 
     kwargs: dict[str, Any] = {}
     if robot_name is not None:

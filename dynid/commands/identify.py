@@ -198,8 +198,8 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
+    from dynid.data.preparation import Preprocessing
     from dynid.identify.model import identify, save_model
-    from dynid.identify.preparation import Preprocessing
 
     check_outputs(
         [

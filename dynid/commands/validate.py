@@ -78,8 +78,8 @@ def _row(values, fmt: str = "{:>10.4g}") -> str:
 def run(args: argparse.Namespace) -> int:
     from dynid._io import to_jsonable
     from dynid._progress import say
+    from dynid.data.preparation import Preprocessing
     from dynid.identify.model import load_model
-    from dynid.identify.preparation import Preprocessing
     from dynid.simmodel.nominal import description_model, is_description
     from dynid.symbolic.robot import load_robot
     from dynid.validation.report import check_report_path, render_report

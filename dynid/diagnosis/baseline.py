@@ -25,14 +25,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from dynid.data.dataset import Dataset
+from dynid.data.preparation import Prepared, Preprocessing, prepare
 from dynid.diagnosis import stats as st
 from dynid.diagnosis.candidates import Candidate, FeatureSource, candidate_columns
 from dynid.diagnosis.fitting import WeightedFit, losses, mse, predict
 from dynid.diagnosis.settings import DiagnosisSettings
 from dynid.exceptions import DataError, IdentificationError, ShapeError, UsageError
 from dynid.identify.columns import ColumnSet, column_set, compiled_base_regressor
-from dynid.identify.dataset import Dataset
-from dynid.identify.preparation import Prepared, Preprocessing, prepare
 
 __all__ = [
     "Baseline",

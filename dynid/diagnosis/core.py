@@ -1,7 +1,7 @@
 """Sim-to-real gap diagnosis: where the identified model's error lies, which effect causes it, and how
 far adding that effect shrinks it (DIAGNOSIS.md).
 
->>> from dynid.identify import load_model, load_dataset
+>>> from dynid import load_dataset, load_model
 >>> result = diagnose(load_model("M.json"), load_dataset("D.csv"), load_dataset("V.csv"))
 >>> result.verdict                      # ["stribeck"], ["none"] or ["unexplained"]
 >>> print(result.summary())
@@ -90,6 +90,8 @@ from numpy.typing import NDArray
 
 from dynid._progress import say
 from dynid._threads import single_blas_thread
+from dynid.data.dataset import Dataset
+from dynid.data.preparation import Prepared
 from dynid.diagnosis import baseline as bl
 from dynid.diagnosis.candidates import EFFECT_NAMES, enumerate_candidates
 from dynid.diagnosis.consistency import MEMORY_SECONDS, Consistency, parameter_consistency
@@ -103,8 +105,6 @@ from dynid.diagnosis.screening import Context, confound_note, cross_fitted
 from dynid.diagnosis.selection import Selection, select
 from dynid.diagnosis.settings import DiagnosisSettings
 from dynid.exceptions import DataError
-from dynid.identify.dataset import Dataset
-from dynid.identify.preparation import Prepared
 from dynid.validation.metrics import NoiseFloor
 from dynid.validation.noise import measure_noise, periodic_deviation
 

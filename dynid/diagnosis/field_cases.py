@@ -30,8 +30,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from dynid.data.dataset import Dataset
 from dynid.diagnosis.cases import classify
-from dynid.identify.dataset import Dataset
 from dynid.sim.cases import NOISE_STD, calibrate_value, case_centre, case_excitation
 from dynid.sim.effects import EFFECT_NAMES, parse_effects
 from dynid.sim.sensors import NoiseModel, torque_noise
@@ -324,8 +324,8 @@ def process_noise_std(model, case: FieldCase, draws: int = 16) -> NDArray[np.flo
 def _filtered_variance(model, case: FieldCase, noises) -> NDArray[np.float64]:
     """Mean over ``noises`` (each (m, n), N m, at the held-out run's samples) of their variance per joint
     through the diagnosis' preprocessing of the held-out run, at the rows it keeps."""
+    from dynid.data.preparation import Preprocessing, prepare
     from dynid.diagnosis.baseline import model_structure
-    from dynid.identify.preparation import Preprocessing, prepare
 
     structure = model_structure(model, None, case.train, case.heldout)
     settings = Preprocessing.from_settings(structure.preprocessing)

@@ -13,10 +13,10 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from dynid.identify.dataset import Dataset
+from dynid.data.dataset import Dataset
+from dynid.data.preparation import Preprocessing
 from dynid.identify.effect_terms import Candidate
 from dynid.identify.model import IdentifiedModel, identify
-from dynid.identify.preparation import Preprocessing
 
 __all__ = ["identify_settings", "refit_with_effects"]
 

@@ -5,7 +5,7 @@
 >>> result.write("fleet/")                     # fleet.parquet, fleet.csv, drift.csv, report.html, summary.json
 >>> result.drift.flagged_robots                # {"robot_07": [DriftTest(parameter="fc3", ...)]}
 
-Each recording is read by the one dataset reader (:func:`dynid.identify.dataset.load_dataset`), split
+Each recording is read by the one dataset reader (:func:`dynid.data.files.load_dataset`), split
 in time: the first ``1 - holdout`` of its duration identifies the model (:func:`dynid.identify.model.identify`,
 the function ``dynid identify`` calls, with the same defaults unless given), the last ``holdout``
 (default 20 %) is predicted by it (:func:`dynid.validation.validate.validate`) for the held-out error,
@@ -187,9 +187,9 @@ def identify_recording(robot: Any, recording: Recording, settings: FleetSettings
         ``row`` (the table row; ``error`` holds the sentence when the recording was refused) and
         ``parameters`` (:func:`parameter_table`, None on error).
     """
-    from dynid.identify.dataset import load_dataset
+    from dynid.data.files import load_dataset
+    from dynid.data.preparation import Preprocessing
     from dynid.identify.model import identify
-    from dynid.identify.preparation import Preprocessing
     from dynid.validation.validate import validate
 
     robot = _resolve_robot(robot)

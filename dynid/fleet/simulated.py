@@ -99,7 +99,8 @@ def _simulate_state(
     robot: Any, trajectory: Any, index: int, change: Change | None, orders: list[int], out: str, settings: dict
 ) -> dict[str, Any]:
     """One robot state simulated once, its recordings written: the task of :func:`simulate_fleet`."""
-    from dynid.identify.dataset import Dataset, save_dataset
+    from dynid.data.dataset import Dataset
+    from dynid.data.files import save_dataset
     from dynid.sim.sensors import measured_torque
     from dynid.sim.simulator import simulate
 

@@ -1,20 +1,14 @@
-"""dynid.identify: datasets, preprocessing, the three layers (link parameters, friction, GMR), model files.
+"""dynid.identify: the three layers (link parameters, friction, GMR), the linear system and model files.
 
-The submodules are imported on demand: :mod:`dynid.identify.dataset` (the :class:`Dataset` type and its
-files), :mod:`dynid.identify.preprocess` (resampling, filtering, differentiation, parallel filtering),
-:mod:`dynid.identify.preparation` (the preprocessing settings and the prepared data),
-:mod:`dynid.identify.columns` (the identified parameters), :mod:`dynid.identify.linear_system` (the
-compressed least-squares system) and :mod:`dynid.identify.adapters` (the real recordings under
-``../shared/data``).
+The submodules are imported on demand: :mod:`dynid.identify.columns` (the identified parameters),
+:mod:`dynid.identify.linear_system` (the compressed least-squares system), the estimators, friction and
+GMR layers and :mod:`dynid.identify.model` (the three-layer pipeline and the model file).  The data they
+take (the :class:`~dynid.data.dataset.Dataset` type, its files, preprocessing) are :mod:`dynid.data`.
 """
 
 from __future__ import annotations
 
 from dynid._lazy import lazy_exports
-from dynid.exceptions import DataWarning
-from dynid.identify.dataset import Dataset, load_dataset, save_dataset
-
-__all__ = ["DataWarning", "Dataset", "load_dataset", "save_dataset"]
 
 # Identification: layer 1 (estimators, consistent fit), layer 2 (friction), layer 3 (GMR), the
 # three-layer pipeline and the model file.  Imported on first use (CasADi and scikit-learn are slow).
@@ -26,7 +20,6 @@ _IDENTIFY = {
     "ConsistentLS": "consistent",
     "FrictionLayer": "friction",
     "GMRCorrection": "gmr",
-    "Preprocessing": "preparation",
     "build_system": "linear_system",
     "IdentifiedModel": "model",
     "ThreeLayerModel": "model",
@@ -34,4 +27,4 @@ _IDENTIFY = {
     "load_model": "model",
     "save_model": "model",
 }
-__all__, __getattr__, __dir__ = lazy_exports(__name__, _IDENTIFY, eager=tuple(__all__))
+__all__, __getattr__, __dir__ = lazy_exports(__name__, _IDENTIFY)

@@ -52,11 +52,11 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
+from dynid.data.preparation import Preprocessing
 from dynid.exceptions import IdentificationWarning, UsageError
 from dynid.identify.columns import EXTRA_KINDS, ColumnSet
 from dynid.identify.estimators import ESTIMATORS, LinkEstimator
 from dynid.identify.linear_system import LinearSystem
-from dynid.identify.preparation import Preprocessing
 
 _RHO = 1e-6  # weight of the vanishing pull toward the starting bodies (fixes the directions data do not see)
 _MU_FACTOR = 0.1  # barrier weight decrease per centring

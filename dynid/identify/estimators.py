@@ -48,12 +48,12 @@ import scipy.linalg
 from numpy.typing import NDArray
 
 from dynid._threads import single_blas_thread
+from dynid.data.dataset import Dataset
+from dynid.data.preparation import Preprocessing, prepare
 from dynid.exceptions import IdentificationError, IdentificationWarning, UsageError
 from dynid.identify.checks import check_is_fitted
 from dynid.identify.columns import ColumnSet, linear_torque
-from dynid.identify.dataset import Dataset
 from dynid.identify.linear_system import LinearSystem, WeightedSolution, build_system
-from dynid.identify.preparation import Preprocessing, prepare
 
 __all__ = [
     "GLS",

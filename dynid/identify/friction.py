@@ -44,10 +44,10 @@ from scipy.optimize import least_squares, lsq_linear, nnls
 from scipy.special import expit
 
 from dynid._threads import JOINT_THREADS, one_blas_thread
+from dynid.data.preprocess import filtfilt_rows
 from dynid.exceptions import DataError, ModelFileError, UsageError
 from dynid.identify._qr import r_factor
 from dynid.identify.checks import check_is_fitted
-from dynid.identify.preprocess import filtfilt_rows
 
 __all__ = [
     "FRICTION_MODELS",
@@ -149,7 +149,7 @@ class _Sampling:
     def search_into(self, At: NDArray[np.float64], out: NDArray[np.float64]) -> None:
         """``search`` of columns given transposed, ``At`` (k, len(window)), written into ``out`` (k, m_s).
 
-        The window's columns filtered as :func:`dynid.identify.preprocess.lowpass` filters them (one run,
+        The window's columns filtered as :func:`dynid.data.preprocess.lowpass` filters them (one run,
         the same arithmetic), in the transposed layout the QR of the search takes without a copy.
         """
         if self.window is None:
@@ -760,7 +760,7 @@ class FrictionLayer:
         F : array_like, shape (m, n)
             Estimated friction torques (N m).
         prepared : Prepared, optional
-            The preprocessing of the data (:func:`dynid.identify.preparation.prepare`).  Given, the
+            The preprocessing of the data (:func:`dynid.data.preparation.prepare`).  Given, the
             models are fitted as they will predict the filtered torque: evaluated at full rate,
             filtered like the torque and taken at ``prepared.rows`` (the rows of ``F``).  See the
             module docstring.
@@ -818,7 +818,7 @@ class FrictionLayer:
         Parameters
         ----------
         prepared : Prepared
-            The preprocessing of the data (:func:`dynid.identify.preparation.prepare`).
+            The preprocessing of the data (:func:`dynid.data.preparation.prepare`).
         """
         kept = self.__dict__.pop("_filtered_basis", None)
         if kept is not None and kept[0] is prepared:

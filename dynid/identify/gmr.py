@@ -59,9 +59,9 @@ import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
 from dynid._threads import one_blas_thread
+from dynid.data.periodic import period_of  # one detector for the package; re-exported here
 from dynid.exceptions import DataError, ModelFileError, UsageError
 from dynid.identify.checks import check_is_fitted
-from dynid.identify.periodic import period_of  # one detector for the package; re-exported here
 
 __all__ = [
     "GMRCorrection",

@@ -8,8 +8,8 @@ WLS, GLS, IRLS) is solved exactly (:meth:`LinearSystem.solve`, a :class:`Weighte
 
 The data path
 -------------
-1. :func:`dynid.identify.preparation.prepare`: the states at full rate (zero-phase Butterworth on
-   ``q``, central differences for missing ``dq`` / ``ddq``; :func:`dynid.identify.preprocess.preprocess`),
+1. :func:`dynid.data.preparation.prepare`: the states at full rate (zero-phase Butterworth on
+   ``q``, central differences for missing ``dq`` / ``ddq``; :func:`dynid.data.preprocess.preprocess`),
    the rows kept after trimming and decimation, and the torque filter.
 2. The regressor columns through the compiled batch path (:func:`dynid.symbolic.export.compiled_functions`),
    a chunk of samples at a time, written once into one buffer ``Z`` of shape (m, c): one column per
@@ -23,7 +23,7 @@ The data path
    ``[R_Z T_1; ...; R_Z T_n]`` (n c rows), with ``T_i`` the (c x (p + 1)) map from the columns of
    ``Z`` to row i of the whitened regressor and torque.  No normal equations are formed.
 
-The preprocessing settings and the column set live in :mod:`dynid.identify.preparation` and
+The preprocessing settings and the column set live in :mod:`dynid.data.preparation` and
 :mod:`dynid.identify.columns`; their public names are importable from here too.
 """
 
@@ -38,6 +38,9 @@ import scipy.linalg
 from numpy.typing import NDArray
 
 from dynid._threads import JOINT_THREADS, single_blas_thread
+from dynid.data.dataset import Dataset
+from dynid.data.preparation import AUTO_CUTOFF_HZ, Prepared, Preprocessing, prepare, still_joints
+from dynid.data.preprocess import filter_order, filter_padding, filtfilt_rows
 from dynid.exceptions import DataError, IdentificationError, ShapeError
 from dynid.identify._qr import r_factor
 from dynid.identify.columns import (
@@ -48,10 +51,7 @@ from dynid.identify.columns import (
     compiled_base_regressor,
     linear_torque,
 )
-from dynid.identify.dataset import Dataset
 from dynid.identify.effect_terms import EffectColumns
-from dynid.identify.preparation import AUTO_CUTOFF_HZ, Prepared, Preprocessing, prepare, still_joints
-from dynid.identify.preprocess import filter_order, filter_padding, filtfilt_rows
 
 __all__ = [
     "AUTO_CUTOFF_HZ",

@@ -58,10 +58,11 @@ from numpy.typing import NDArray
 from dynid._io import atomic_path, dumps_json, to_jsonable
 from dynid._progress import say
 from dynid._threads import single_blas_thread
+from dynid.data.dataset import Dataset
+from dynid.data.preparation import Prepared, Preprocessing, prepare
 from dynid.exceptions import DynidError, ModelFileError, UsageError
 from dynid.identify.columns import ColumnSet, column_set, linear_torque
 from dynid.identify.consistent import ConsistentLS, consistent_projection, link_inertials, pseudo_inertia
-from dynid.identify.dataset import Dataset
 from dynid.identify.effect_terms import (
     Candidate,
     EffectColumns,
@@ -86,7 +87,6 @@ from dynid.identify.estimators import (
 from dynid.identify.friction import FRICTION_MODELS, FrictionLayer
 from dynid.identify.gmr import GMRCorrection
 from dynid.identify.linear_system import build_system
-from dynid.identify.preparation import Prepared, Preprocessing, prepare
 from dynid.identify.prior import PriorChoice, choose_prior, link_report
 from dynid.identify.refine import refine
 
@@ -1447,6 +1447,7 @@ def load_model(path: str | os.PathLike[str], robot=None) -> IdentifiedModel:
                 "prior",
                 "pipeline",
                 "torque_range",
+                "payload",
             )
         }
         if doc.get("gmm") is not None:

@@ -16,8 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from dynid._io import atomic_path, jsonable, write_text
+from dynid.data.dataset import Dataset
+from dynid.data.files import save_dataset
 from dynid.exceptions import DataError
-from dynid.identify.dataset import Dataset, save_dataset
 from dynid.sim.sensors import SENSOR_ORDER, NoiseModel
 from dynid.sim.tracking import ControllerGains
 from dynid.sim.truth import Truth

@@ -16,9 +16,9 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
+from dynid.data.dataset import Dataset
 from dynid.exceptions import UsageError
 from dynid.identify.columns import ColumnSet, linear_torque
-from dynid.identify.dataset import Dataset
 from dynid.optim.trajectory import FourierTrajectory
 
 __all__ = ["random_fourier", "synthetic_dataset", "true_parameters"]

@@ -32,8 +32,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from dynid.data.dataset import Dataset
 from dynid.identify.columns import column_set, linear_torque
-from dynid.identify.dataset import Dataset
 from dynid.simmodel.nominal import description_friction, description_model, is_description
 
 __all__ = ["GROUPS", "Correction", "correct_description", "description_format"]

@@ -17,12 +17,12 @@ from pathlib import Path
 
 import numpy as np
 
+from dynid.data.dataset import Dataset
+from dynid.data.preparation import Preprocessing, prepare
 from dynid.exceptions import UsageError
 from dynid.identify.columns import column_set
-from dynid.identify.dataset import Dataset
 from dynid.identify.friction import FrictionLayer
 from dynid.identify.model import IdentifiedModel
-from dynid.identify.preparation import Preprocessing, prepare
 from dynid.validation.validate import described_model
 
 __all__ = ["DESCRIPTION_SUFFIXES", "description_friction", "description_model", "is_description"]

@@ -23,8 +23,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from dynid.data.dataset import Dataset
 from dynid.identify.columns import column_set, linear_torque
-from dynid.identify.dataset import Dataset
 
 __all__ = ["heldout_shares"]
 

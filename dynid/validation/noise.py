@@ -21,9 +21,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import binary_opening, uniform_filter1d
 
+from dynid.data.periodic import overlap_autocorrelation, period_of
+from dynid.data.preparation import Prepared
 from dynid.exceptions import DataError
-from dynid.identify.periodic import overlap_autocorrelation, period_of
-from dynid.identify.preparation import Prepared
 from dynid.validation.metrics import NoiseFloor, noise_floor, period_stack
 
 __all__ = [
@@ -47,7 +47,7 @@ def detect_period(t: NDArray[np.float64], q: NDArray[np.float64], *, min_period:
     """Period (s) of a periodic motion, or None when the data hold fewer than two periods.
 
     The angles must repeat after the period to ``1e-3`` of their spread (quantised encoders and noise
-    pass; a non-periodic run does not): :func:`dynid.identify.periodic.period_of` with
+    pass; a non-periodic run does not): :func:`dynid.data.periodic.period_of` with
     ``rule="repeat"``, in seconds.
 
     Parameters

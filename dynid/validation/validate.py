@@ -42,12 +42,12 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from dynid.data.dataset import Dataset
+from dynid.data.preparation import Prepared, Preprocessing, prepare
 from dynid.exceptions import DataError, ModelFileError, ShapeError, UsageError
 from dynid.identify.columns import column_set, linear_torque
-from dynid.identify.dataset import Dataset
 from dynid.identify.friction import FrictionLayer
 from dynid.identify.model import IdentifiedModel, identify
-from dynid.identify.preparation import Prepared, Preprocessing, prepare
 from dynid.validation.metrics import NoiseFloor, torque_metrics
 from dynid.validation.noise import measure_noise
 
@@ -284,7 +284,7 @@ def sidecar_period(data: Dataset) -> float | None:
     Parameters
     ----------
     data : Dataset
-        Data read by :func:`dynid.identify.dataset.load_dataset` (its ``meta["source"]`` names the file).
+        Data read by :func:`dynid.data.files.load_dataset` (its ``meta["source"]`` names the file).
     """
     side = _sidecar(data)
     traj = (side or {}).get("trajectory") or {}

@@ -1,4 +1,4 @@
-"""Meta-tests of the public API of dynid.identify's data modules: every argument is documented."""
+"""Meta-tests of the public API of dynid.data's modules: every argument is documented."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ from typing import Any
 
 import pytest
 
-from dynid.identify import adapters, dataset, preprocess
+from dynid.data import adapters, dataset, files, preprocess, rosbag
 
-MODULES = (dataset, preprocess, adapters)
+MODULES = (dataset, files, rosbag, preprocess, adapters)
 
 
 def documented_parameters(obj: Any) -> set[str]:

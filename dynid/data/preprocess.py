@@ -37,8 +37,8 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import CubicSpline
 from scipy.signal import butter, sosfilt, sosfilt_zi
 
-from dynid.exceptions import DataError
-from dynid.identify.dataset import Dataset, DataWarning
+from dynid.data.dataset import Dataset
+from dynid.exceptions import DataError, DataWarning
 
 __all__ = [
     "BANDWIDTH_FACTOR",

@@ -16,7 +16,7 @@ goes with it.  The recordings are test fixtures, never part of the package; a fr
 
 Examples
 --------
->>> from dynid.identify.adapters import load_recording, recording_model_path
+>>> from dynid.data.adapters import load_recording, recording_model_path
 >>> ds = load_recording("tx40")                       # doctest: +SKIP
 >>> urdf = recording_model_path("tx40")               # doctest: +SKIP
 """
@@ -31,8 +31,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from dynid.data.dataset import Dataset
 from dynid.exceptions import DataError
-from dynid.identify.dataset import Dataset
 
 __all__ = [
     "ADAPTERS",
@@ -165,7 +165,7 @@ def load_panda_gaz2019(root: str | os.PathLike[str] | None = None) -> Dataset:
     sensors' tau (N m, gravity included), 7 values a sample.  The stamps are irregular (~1 kHz) and
     about 1255 samples repeat the previous sample's q exactly (the controller logged a stale state):
     those rows are dropped and the remaining stamps kept as they are.  Resample before differentiating
-    (:func:`dynid.identify.preprocess.preprocess` does it).
+    (:func:`dynid.data.preprocess.preprocess` does it).
 
     Parameters
     ----------
@@ -273,7 +273,7 @@ def load_tx40(root: str | os.PathLike[str] | None = None) -> Dataset:
     Conversions, exactly as the recording's README gives them: ``t = k * 0.0002`` s;
     ``q = Rm^-1 q_motor`` and ``tau = Rt tau_motor`` with :func:`tx40_coupling_matrices`; then
     ``q_2 -= pi/2`` and ``q_3 += pi/2`` to match the URDF's zero (modified DH).  No velocities are
-    recorded: differentiate (:func:`dynid.identify.preprocess.preprocess`; the source filtered at 100 Hz).
+    recorded: differentiate (:func:`dynid.data.preprocess.preprocess`; the source filtered at 100 Hz).
 
     Parameters
     ----------

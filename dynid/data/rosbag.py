@@ -3,8 +3,8 @@
 A robot under ROS 2 publishes its joint states as ``sensor_msgs/msg/JointState`` messages (names,
 positions in rad, velocities in rad/s, efforts in N m), and ``ros2 bag record`` stores them in a rosbag2
 folder (``metadata.yaml`` beside ``.db3`` or ``.mcap`` storage files) or in a bare ``.mcap`` file.
-:func:`read_rosbag` turns one such topic into a :class:`~dynid.identify.dataset.Dataset` in the robot's
-joint order; :func:`~dynid.identify.dataset.load_dataset` calls it for every path that
+:func:`read_rosbag` turns one such topic into a :class:`~dynid.data.dataset.Dataset` in the robot's
+joint order; :func:`~dynid.data.files.load_dataset` calls it for every path that
 :func:`is_rosbag` recognises, so every command's ``--data`` and ``--heldout`` accept bags.  The bag
 is read with the pure-Python ``rosbags`` package (``pip install "dynid[ros]"``), imported only here and
 only when a bag is read.
@@ -24,7 +24,7 @@ The rules, each said once (a :class:`~dynid.exceptions.DataWarning`) when it app
   unset) the bag's receive times are used instead.  Messages are put in stamp order (the bag stores
   them in the order they arrived), and a message whose stamp repeats an earlier one is dropped;
 * sampling: stamps that are not uniform (to a relative 1e-6) are resampled onto a uniform grid whose
-  step is their median interval rounded to the microsecond (:func:`dynid.identify.preprocess.resample`):
+  step is their median interval rounded to the microsecond (:func:`dynid.data.preprocess.resample`):
   linear interpolation of ``q`` and ``tau``, and of ``dq`` only when every message carries velocities
   (otherwise ``dq`` is left out and derived from ``q`` later, as for a CSV without ``dq`` columns).  A gap in the stamps is
   treated as for any file: it splits the data into separate runs and is never interpolated across.
@@ -36,15 +36,14 @@ import os
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from dynid.data.dataset import Dataset
+from dynid.data.preprocess import GAP_SECONDS, GAP_STEPS, resample
 from dynid.exceptions import DataError, DataWarning
-
-if TYPE_CHECKING:
-    from dynid.identify.dataset import Dataset
 
 __all__ = ["JOINT_STATE", "ROSBAG_SUFFIXES", "is_rosbag", "read_rosbag"]
 
@@ -176,8 +175,6 @@ def read_rosbag(
     DataWarning
         Joints ignored, receive times used, messages out of order or repeated, stamps resampled, gaps.
     """
-    from dynid.identify.dataset import Dataset
-
     path = Path(path)
     name = path.name or str(path)
     wanted = [str(j) for j in joint_names]
@@ -354,8 +351,6 @@ def _joint_map(
 
 def _resample(ds: Dataset) -> tuple[Dataset, str]:
     """Uniform grid at the median interval (linear); the note that says so."""
-    from dynid.identify.preprocess import GAP_SECONDS, GAP_STEPS, resample
-
     steps = np.diff(ds.t)
     median = float(np.median(steps))
     dt = round(median, 6) if median >= 1e-4 else median  # to the microsecond: 1000 Hz, not 999.7 Hz

@@ -1,7 +1,7 @@
 """How a dataset becomes the states and torques of the identification: settings and prepared data.
 
 :class:`Preprocessing` holds the settings (filters, trimming, decimation, parallel filtering);
-:func:`prepare` applies them to a dataset (:func:`dynid.identify.preprocess.preprocess` for the
+:func:`prepare` applies them to a dataset (:func:`dynid.data.preprocess.preprocess` for the
 states) and returns a :class:`Prepared`: the states at full rate, the rows kept after trimming and
 decimation, and the torque filter that every regressor column shares (parallel filtering).
 """
@@ -18,9 +18,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import sosfiltfilt
 
-from dynid.exceptions import DataError, DataWarning
-from dynid.identify.dataset import Dataset
-from dynid.identify.preprocess import (
+from dynid.data.dataset import Dataset
+from dynid.data.preprocess import (
     butter_sos,
     central_difference,
     choose_cutoff,
@@ -29,6 +28,7 @@ from dynid.identify.preprocess import (
     preprocess,
     resample,
 )
+from dynid.exceptions import DataError, DataWarning
 
 __all__ = ["AUTO_CUTOFF_HZ", "Prepared", "Preprocessing", "prepare", "still_joints"]
 
@@ -49,7 +49,7 @@ class Preprocessing:
         Cut-off (Hz) of the zero-phase Butterworth low-pass applied to the torque and, with
         ``parallel``, to every regressor column.  None: no filter.  ``"auto"`` (default): None when the
         dataset has measured ``dq`` and ``ddq``; else chosen from the recording by
-        :func:`dynid.identify.preprocess.choose_cutoff` (the motion's and the torque's signal band),
+        :func:`dynid.data.preprocess.choose_cutoff` (the motion's and the torque's signal band),
         at most a fifth of the sampling rate and, without a measured ``dq``, at least
         :data:`AUTO_CUTOFF_HZ`.  The prepared settings record the rule (``cutoff_rule``).
     state_cutoff : float or None or "auto"
