@@ -49,6 +49,9 @@ _API: dict[str, tuple[str, str]] = {
     "identify_model": ("dynid.identify.model", "identify"),
     "load_model": ("dynid.identify.model", "load_model"),
     "save_model": ("dynid.identify.model", "save_model"),
+    "PayloadResult": ("dynid.identify.payload", "PayloadResult"),
+    "identify_payload": ("dynid.identify.payload", "identify_payload"),
+    "attach_payload": ("dynid.identify.payload", "attach_payload"),
     # simulation (dynid.sim)
     "SimulationResult": ("dynid.sim.simulator", "SimulationResult"),
     "build_truth": ("dynid.sim.simulator", "build_truth"),

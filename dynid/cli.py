@@ -34,6 +34,7 @@ COMMANDS = {
     "simulate": "simulate",
     "identify": "identify",
     "validate": "validate",
+    "payload": "payload",
     "diagnose": "diagnose",
     "fleet": "fleet",
     "export": "export",
