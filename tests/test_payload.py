@@ -335,3 +335,27 @@ def test_mistakes_end_in_one_sentence(runs, tmp_path, capsys, extra, pattern):
     assert code == 2 and "Traceback" not in err, err
     assert len(lines) == 1 and re.search(pattern, lines[0]), err
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
+def test_export_writes_the_payload_as_a_link_of_its_own(runs, tmp_path):
+    """The model with the payload, exported: a fixed payload link at the tool frame, reload-checked, the
+    description's tool frame unchanged."""
+    import xml.etree.ElementTree as ET
+
+    from dynid.simmodel.export import export_model
+    from dynid.symbolic.robot import load_robot
+
+    res = identify_payload(runs["model"], runs["loaded"], reference=runs["reference"])
+    result = export_model(attach_payload(runs["model"], res), "urdf", tmp_path / "ur5_payload.urdf")
+    assert all(c["passed"] for c in result.checks)
+    root = ET.parse(tmp_path / "ur5_payload.urdf").getroot()
+    link = root.find("link[@name='payload']")
+    assert link is not None
+    assert float(link.find("inertial/mass").get("value")) == pytest.approx(res.mass, rel=1e-9)
+    joint = root.find("joint[@name='payload_joint']")
+    assert joint.get("type") == "fixed" and joint.find("parent").get("link") == "wrist_3_link"
+    again = load_robot(tmp_path / "ur5_payload.urdf")
+    assert again.tool_name == "tool0"
+    # loaded back, the payload link merges into the carrying link: the identified body, the payload once
+    assert again.params[50] == pytest.approx(result.params.standard[50], rel=1e-9)
+    assert result.params.standard[50] > res.mass

@@ -290,7 +290,7 @@ def export_model(
         shares = heldout_shares(model, params, fmt, heldout)
     items = _shares(model, params.not_carried, fmt, params, shares)
     comment = _comment(model_name, fmt, params, items, match.locked)
-    text = write_urdf(root, match, robot, params, comment)
+    text = write_urdf(root, match, robot, params, comment, payload=model.info.get("payload"))
     if fmt == "mjcf":
         from dynid.simmodel.mjcf import build_mjcf
 

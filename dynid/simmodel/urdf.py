@@ -133,7 +133,9 @@ def match_template(root: ET.Element, path: str | Path, robot) -> TemplateMatch:
         full = pin.buildModelFromUrdf(str(path))
     except (ValueError, RuntimeError) as err:
         first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
-        raise UsageError(f"Pinocchio cannot read the template '{path}' ({first}); check that it is a valid URDF") from None
+        raise UsageError(
+            f"Pinocchio cannot read the template '{path}' ({first}); check that it is a valid URDF"
+        ) from None
     names = list(full.names)[1:]
     locked = [nm for nm in names if nm not in robot.joint_names]
     reduced = full
@@ -169,7 +171,9 @@ def match_template(root: ET.Element, path: str | Path, robot) -> TemplateMatch:
         child = joints[name].find("child")
         link = child.get("link") if child is not None else None
         if link is None:
-            raise UsageError(f"the joint '{name}' of the template '{path}' has no <child link=...>; fix the URDF")
+            raise UsageError(
+                f"the joint '{name}' of the template '{path}' has no <child link=...>; fix the URDF"
+            )
         child_links.append(link)
         group, stack = [], [link]
         while stack:
@@ -235,7 +239,39 @@ def _replace_child(parent: ET.Element, new: ET.Element, tag: str) -> None:
         parent.insert(index, new)
 
 
-def write_urdf(root: ET.Element, match: TemplateMatch, robot, params, comment: str) -> str:
+def _rpy(R: NDArray[np.float64]) -> tuple[float, float, float]:
+    """URDF roll, pitch, yaw of a rotation matrix (``R = Rz(yaw) Ry(pitch) Rx(roll)``)."""
+    pitch = float(np.arcsin(np.clip(-R[2, 0], -1.0, 1.0)))
+    if abs(R[2, 0]) < 1.0 - 1e-12:
+        return float(np.arctan2(R[2, 1], R[2, 2])), pitch, float(np.arctan2(R[1, 0], R[0, 0]))
+    return 0.0, pitch, float(np.arctan2(-R[0, 1], R[1, 1]))
+
+
+def _payload_elements(root: ET.Element, parent_link: str, payload: dict) -> list[ET.Element]:
+    """A ``<link>`` holding the payload's body and the fixed ``<joint>`` placing it at its frame."""
+    names = {el.get("name") for el in root if el.tag in ("link", "joint")}
+    name = "payload"
+    while name in names or f"{name}_joint" in names:
+        name = f"dynid_{name}"
+    values = np.array(
+        [payload["params"][k] for k in ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")]
+    )
+    link = ET.Element("link", {"name": name})
+    link.append(_inertial(values))
+    joint = ET.Element("joint", {"name": f"{name}_joint", "type": "fixed"})
+    R = np.asarray(payload["frame_rotation"], dtype=np.float64)
+    xyz = np.asarray(payload["frame_translation"], dtype=np.float64)
+    ET.SubElement(
+        joint, "origin", {"xyz": " ".join(_num(a) for a in xyz), "rpy": " ".join(_num(a) for a in _rpy(R))}
+    )
+    ET.SubElement(joint, "parent", {"link": parent_link})
+    ET.SubElement(joint, "child", {"link": name})
+    return [link, joint]
+
+
+def write_urdf(
+    root: ET.Element, match: TemplateMatch, robot, params, comment: str, payload: dict | None = None
+) -> str:
     """The template's text with the identified bodies and friction (see the module docstring).
 
     Parameters
@@ -250,6 +286,9 @@ def write_urdf(root: ET.Element, match: TemplateMatch, robot, params, comment: s
         The values to write.
     comment : str
         Text of the comment put first inside ``<robot>``.
+    payload : dict, optional
+        A payload attached by ``dynid payload --out`` (the model's ``info["payload"]``): written as a link
+        of its own, fixed at its frame, and taken out of the carrying link's body.
 
     Returns
     -------
@@ -263,8 +302,22 @@ def write_urdf(root: ET.Element, match: TemplateMatch, robot, params, comment: s
     """
     links = {lk.get("name"): lk for lk in root.findall("link")}
     n = robot.n
+    carried = np.zeros(10 * n)
+    if payload is not None and payload.get("mass"):
+        k = int(payload["link"]) - 1
+        carried[10 * k : 10 * k + 10] = payload["link_params"]
     for i in range(n):
         body = params.standard[10 * i : 10 * i + 10] - match.locked_share[10 * i : 10 * i + 10]
+        if carried[10 * i : 10 * i + 10].any():
+            rest = body - carried[10 * i : 10 * i + 10]
+            if rest[0] > 0 and is_consistent(rest)[0]:
+                body = rest
+            else:  # the arm's own body without the payload is none: keep them merged, as identified
+                carried[:] = 0.0
+                comment += (
+                    f"\nThe payload is merged into the link of joint '{robot.joint_names[i]}': without it that "
+                    "link's identified body is no physical body."
+                )
         if not (body[0] > 0 and is_consistent(body)[0]):
             raise UsageError(
                 f"the identified body of joint '{robot.joint_names[i]}' minus the locked joints' bodies of the "
@@ -287,6 +340,20 @@ def write_urdf(root: ET.Element, match: TemplateMatch, robot, params, comment: s
         if old is not None:
             joint.remove(old)
         joint.append(dyn)
+    if carried.any():
+        assert payload is not None
+        k = int(payload["link"]) - 1
+        # after the carrying link, so that the description's own frames keep their order (its tool frame)
+        at = len(root)
+        for index, el in enumerate(root):
+            if (
+                el.tag == "joint"
+                and el.find("parent") is not None
+                and el.find("parent").get("link") == match.child_links[k]
+            ):
+                at = index + 1
+        for offset, el in enumerate(_payload_elements(root, match.child_links[k], payload)):
+            root.insert(at + offset, el)
     for old in [c for c in list(root) if c.tag is ET.Comment and "dynid export" in (c.text or "")]:
         root.remove(old)
     root.insert(0, ET.Comment(comment))
@@ -331,7 +398,11 @@ def robot_urdf(robot) -> str:
         ET.SubElement(j, "parent", {"link": links[joint.parent]})
         ET.SubElement(j, "child", {"link": link})
         rpy = pin.rpy.matrixToRpy(np.asarray(joint.rotation, dtype=float))
-        ET.SubElement(j, "origin", {"xyz": " ".join(_num(v) for v in joint.translation), "rpy": " ".join(_num(v) for v in rpy)})
+        ET.SubElement(
+            j,
+            "origin",
+            {"xyz": " ".join(_num(v) for v in joint.translation), "rpy": " ".join(_num(v) for v in rpy)},
+        )
         axis = _AXES.get(joint.kind[1]) if joint.kind[1] in _AXES else " ".join(_num(v) for v in joint.axis)
         ET.SubElement(j, "axis", {"xyz": axis})
         ET.SubElement(
