@@ -92,7 +92,8 @@ def draw_payload(rng):
 
 def plain_ls(model, loaded):
     """The plain fit: OLS on the arm model's residual, last body's ten parameters plus friction change."""
-    from dynid.identify.payload import payload_frame, payload_problem
+    from dynid.identify.payload import payload_problem
+    from dynid.symbolic.bodies import payload_frame
 
     _, A, N, b = payload_problem(model, loaded, payload_frame(model.robot))
     m, n, _ = A.shape
@@ -105,7 +106,7 @@ def plain_ls(model, loaded):
 
 
 def errors(true, params, determined):
-    from dynid.identify.payload import body_figures
+    from dynid.symbolic.bodies import body_figures
 
     t, e = body_figures(true), body_figures(params)
     mass = 100 * abs(e[0] - t[0]) / t[0]
@@ -124,8 +125,9 @@ def errors(true, params, determined):
 def run(robot_name: str, cases: int) -> list[dict]:
     import dynid
     from dynid.diagnosis.field_cases import field_noise
-    from dynid.identify.payload import frame_transform, identify_payload, payload_frame
+    from dynid.identify.payload import identify_payload
     from dynid.sim.simulator import build_truth, simulate
+    from dynid.symbolic.bodies import frame_transform, payload_frame
     from dynid.symbolic.robot import standard_from_com
 
     robot = dynid.load_robot(robot_name)

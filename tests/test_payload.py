@@ -17,14 +17,8 @@ import pytest
 
 from dynid.cli import main
 from dynid.identify.consistent import pseudo_inertia
-from dynid.identify.payload import (
-    PayloadFrame,
-    attach_payload,
-    body_figures,
-    frame_transform,
-    identify_payload,
-    payload_frame,
-)
+from dynid.identify.payload import attach_payload, identify_payload
+from dynid.symbolic.bodies import PayloadFrame, body_figures, frame_transform, payload_frame
 from dynid.symbolic.robot import standard_from_com
 
 MASS = 1.5

@@ -54,19 +54,23 @@ from dynid.exceptions import DataError, UsageError
 from dynid.identify.columns import CHUNK_SAMPLES, compiled_base_regressor
 from dynid.identify.consistent import pseudo_inertia
 from dynid.identify.estimators import long_run_factor
+from dynid.symbolic.bodies import (
+    PayloadFrame,
+    body_figures,
+    frame_transform,
+    inertia_matrix,
+    payload_frame,
+    point_mass,
+)
 
 __all__ = [
     "DETERMINED_LEAK",
     "DETERMINED_STD",
     "LENGTH",
     "PARAM_NAMES",
-    "PayloadFrame",
     "PayloadResult",
     "attach_payload",
-    "body_figures",
-    "frame_transform",
     "identify_payload",
-    "payload_frame",
     "payload_problem",
 ]
 
@@ -85,116 +89,6 @@ DETERMINED_LEAK = 0.2
 _MIN_MASS_SCALE = 0.05  # kg: the mass scale of the determinacy test is at least this
 _ALIGN_TOLERANCE = 0.05  # the aligned reference's angles may differ by this fraction of each joint's range
 _GAIN_ITERATIONS = 200
-
-
-# ---------------------------------------------------------------------------- frames
-@dataclass(frozen=True)
-class PayloadFrame:
-    """The frame a payload is written in, placed on the body that carries it.
-
-    Attributes
-    ----------
-    name : str
-        Frame name (the tool frame's, or the one given).
-    link : int
-        The body carrying it: index of its joint, from 0.
-    rotation : ndarray, shape (3, 3)
-        F's axes in that joint's frame.
-    translation : ndarray, shape (3,)
-        F's origin in that joint's frame (m).
-    """
-
-    name: str
-    link: int
-    rotation: NDArray[np.float64]
-    translation: NDArray[np.float64]
-
-
-def payload_frame(robot, frame: str | None = None) -> PayloadFrame:
-    """The frame F of a robot: its tool frame, or a frame of its description by name.
-
-    Parameters
-    ----------
-    robot : RobotModel
-    frame : str, optional
-        A frame name of the robot's URDF (or built-in robot); default the tool frame.
-
-    Raises
-    ------
-    UsageError
-        A frame the description does not have, or one on the fixed base.
-    """
-    from dynid.exceptions import RobotModelError
-    from dynid.symbolic.robot import load_robot
-
-    source = robot
-    if frame is not None and frame != robot.tool_name:
-        try:
-            source = load_robot(robot.source, tool=frame)
-        except RobotModelError as exc:
-            raise UsageError(f"--frame {frame}: {exc}") from None
-        if source.n != robot.n or source.joint_names != robot.joint_names:
-            raise UsageError(
-                f"--frame {frame}: the description {robot.source} now has other joints than the model; "
-                "give the model's own robot description"
-            )
-    parent = int(source.tool_parent)
-    if not 1 <= parent <= robot.n:
-        raise UsageError(
-            f"the frame '{source.tool_name}' is on the fixed base, which carries no payload the joints "
-            "feel; give --frame a frame on a moving link (the tool flange)"
-        )
-    return PayloadFrame(
-        name=str(source.tool_name),
-        link=parent - 1,
-        rotation=np.asarray(source.tool_rotation, dtype=np.float64),
-        translation=np.asarray(source.tool_translation, dtype=np.float64),
-    )
-
-
-def _inertia(v: NDArray[np.float64]) -> NDArray[np.float64]:
-    """The 3 x 3 inertia of the last six standard parameters ``[Ixx, Ixy, Iyy, Ixz, Iyz, Izz]``."""
-    return np.array([[v[0], v[1], v[3]], [v[1], v[2], v[4]], [v[3], v[4], v[5]]])
-
-
-def _six(inertia: NDArray[np.float64]) -> NDArray[np.float64]:
-    return np.array(
-        [inertia[0, 0], inertia[0, 1], inertia[1, 1], inertia[0, 2], inertia[1, 2], inertia[2, 2]]
-    )
-
-
-def _moved(v: NDArray[np.float64], R: NDArray[np.float64], p: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Standard parameters about F's origin in F's axes -> about the link frame's origin and axes."""
-    m, h = v[0], R @ v[1:4]
-    inertia = R @ _inertia(v[4:]) @ R.T + m * (p @ p * np.eye(3) - np.outer(p, p))
-    inertia += 2.0 * (p @ h) * np.eye(3) - np.outer(p, h) - np.outer(h, p)
-    return np.concatenate([[m], m * p + h, _six(inertia)])
-
-
-def frame_transform(frame: PayloadFrame) -> NDArray[np.float64]:
-    """The 10 x 10 matrix ``T`` with ``params_link = T @ params_F`` (the map is linear).
-
-    Parameters
-    ----------
-    frame : PayloadFrame
-    """
-    eye = np.eye(10)
-    return np.stack([_moved(e, frame.rotation, frame.translation) for e in eye], axis=1)
-
-
-def body_figures(v: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``[m, cx, cy, cz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz]``: mass, centre of mass and inertia about it."""
-    m = v[0]
-    c = v[1:4] / m if abs(m) > 1e-12 else np.zeros(3)
-    inertia = _inertia(v[4:]) - m * (c @ c * np.eye(3) - np.outer(c, c))
-    return np.concatenate([[m], c, _six(inertia)])
-
-
-def _point_mass(v: NDArray[np.float64]) -> NDArray[np.float64]:
-    """The point mass at the centre of mass of ``v`` (its inertia about the com zero)."""
-    m = v[0]
-    c = v[1:4] / m if abs(m) > 1e-12 else np.zeros(3)
-    return np.concatenate([[m], m * c, _six(m * (c @ c * np.eye(3) - np.outer(c, c)))])
 
 
 # ---------------------------------------------------------------------------- the columns
@@ -450,7 +344,7 @@ def _fit(system: _System, kappa_floor: float, *, pooled: bool) -> tuple[_Solutio
         first = _truncated(F, g, np.zeros(10), _scales(1.0))
         scale = _scales(first.x[0])
         first = _truncated(F, g, np.zeros(10), scale)
-        sol = _truncated(F, g, _point_mass(first.x), scale)
+        sol = _truncated(F, g, point_mass(first.x), scale)
         r = b - A @ sol.x
         kappa, _ = long_run_factor(r, kappa_floor)
         v = _weights(r) / kappa
@@ -459,7 +353,7 @@ def _fit(system: _System, kappa_floor: float, *, pooled: bool) -> tuple[_Solutio
     F, g = _information(A, v), np.einsum("mjk,j,mj->k", A, v, b)
     scale = _scales(sol.x[0])
     first = _truncated(F, g, np.zeros(10), scale)
-    sol = _truncated(F, g, _point_mass(first.x), scale)
+    sol = _truncated(F, g, point_mass(first.x), scale)
     return sol, v
 
 
@@ -554,7 +448,7 @@ class PayloadResult:
     @property
     def inertia(self) -> NDArray[np.float64]:
         """Inertia about the centre of mass, F's axes (kg m^2)."""
-        return _inertia(self._body()[0][4:])
+        return inertia_matrix(self._body()[0][4:])
 
     @property
     def link_params(self) -> NDArray[np.float64]:
@@ -576,8 +470,8 @@ class PayloadResult:
         def val(ok, a, b):
             return float(a) if ok else None
 
-        mat = _inertia(np.where(inertia_ok, v[4:], np.nan))
-        mat_s = _inertia(np.where(inertia_ok, s[4:], np.nan))
+        mat = inertia_matrix(np.where(inertia_ok, v[4:], np.nan))
+        mat_s = inertia_matrix(np.where(inertia_ok, s[4:], np.nan))
 
         def nested(M):
             return [[None if math.isnan(a) else float(a) for a in row] for row in M]
@@ -764,7 +658,7 @@ def _with_gains(result: PayloadResult, system: _System, w: NDArray[np.float64], 
         rhs = np.einsum("mjk,j,mj->k", Ag, w, b) - F[:, 0] * mass
         sub = _truncated(F[1:, 1:], rhs[1:], np.zeros(9), scale[1:])
         # the defaults of the undetermined directions: the point mass at the new centre of mass
-        start = _point_mass(np.concatenate([[mass], sub.x[:3], np.zeros(6)]))[1:]
+        start = point_mass(np.concatenate([[mass], sub.x[:3], np.zeros(6)]))[1:]
         sub = _truncated(F[1:, 1:], rhs[1:], start, scale[1:])
         x_new = np.concatenate([[mass], sub.x])
         done = np.allclose(g_new, g, rtol=1e-10, atol=1e-12) and np.allclose(x_new, x, rtol=1e-10, atol=1e-14)
