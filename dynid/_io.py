@@ -19,7 +19,7 @@ import math
 import os
 import shutil
 import tempfile
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +35,7 @@ __all__ = [
     "write_bytes",
     "write_json",
     "write_text",
+    "write_together",
 ]
 
 
@@ -172,6 +173,24 @@ def write_text(path: str | os.PathLike[str], text: str) -> Path:
 def write_json(path: str | os.PathLike[str], value: Any) -> Path:
     """Write ``value`` as strict, indented JSON (see :func:`dumps_json`) to ``path`` atomically."""
     return write_text(path, dumps_json(value))
+
+
+def write_together(writers: Sequence[tuple[str | os.PathLike[str], Callable[[Path], object]]]) -> None:
+    """Write several files so that they replace the old ones together or not at all.
+
+    Each writer writes its file's content to the temporary path it is given; only when every one has
+    succeeded are the files renamed onto their paths (renames need no space: a full disk stops the
+    writes, never the renames).  On an error or an interrupt every temporary file is removed and every
+    old file stands.
+
+    Parameters
+    ----------
+    writers : sequence of (path, write)
+        ``write(tmp)`` writes the content of ``path`` to the temporary path ``tmp``.
+    """
+    with contextlib.ExitStack() as stack:
+        for path, write in writers:
+            write(stack.enter_context(atomic_path(path)))
 
 
 @contextlib.contextmanager

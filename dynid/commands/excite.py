@@ -12,7 +12,6 @@ from dynid.commands.common import (
     output,
     robot_file,
     robot_from_args,
-    write_figures,
 )
 from dynid.exceptions import DynidError, UsageError
 
@@ -77,6 +76,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument(
         "--baseline", type=int, default=100, help="random feasible trajectories to compare with (default 100)"
     )
+    group = parser.add_argument_group("payload motion")
+    group.add_argument(
+        "--payload",
+        action="store_true",
+        help="design a short motion that determines a payload's ten parameters (for 'dynid payload'), starting "
+        "and ending at rest at --home, instead of a full excitation",
+    )
+    group.add_argument(
+        "--duration", type=float, default=10.0, metavar="S", help="length of the payload motion (s, at most 15; default 10)"
+    )
+    group.add_argument("--frame", metavar="F", help="the payload's frame (default: the tool frame)")
+    group.add_argument(
+        "--payload-speed",
+        type=float,
+        default=0.5,
+        metavar="FRACTION",
+        help="fraction of the velocity and acceleration limits the payload motion may use (default 0.5)",
+    )
     group = parser.add_argument_group("executable CSV")
     group.add_argument("--home", metavar="Q[,Q...]", help="start and end pose (rad); default the middle of the ranges")
     group.add_argument(
@@ -123,6 +140,68 @@ def _show(line: str) -> None:
     _progress.touch()
 
 
+def _write_outputs(trajectories, csv, sampled, json_path, figures) -> None:
+    """Every output of the command, replacing the old files together or not at all (a full disk while
+    writing the CSV leaves the old trajectory in place)."""
+    from dynid._io import dumps_json, write_together
+
+    writers = [(path, traj.save) for path, traj in trajectories]
+    if sampled is not None:
+        writers.append((csv, sampled.to_csv))
+    if json_path is not None:
+        text = dumps_json(figures)
+        writers.append((json_path, lambda tmp: Path(tmp).write_text(text, encoding="utf-8")))
+    write_together(writers)
+
+
+def _run_payload(args: argparse.Namespace, robot, out: Path, csv: Path | None, home) -> int:
+    """``--payload``: a short motion that determines the payload at the tool frame (or --frame)."""
+    import numpy as np
+
+    from dynid.optim.approach import executable_trajectory
+    from dynid.optim.payload_motion import design_payload_motion
+    from dynid.symbolic.bodies import frame_transform, payload_frame
+
+    place = payload_frame(robot, args.frame)
+    noise = _floats("noise-std", args.noise_std)
+    result = design_payload_motion(
+        robot,
+        place.link,
+        frame_transform(place),
+        pose=home,
+        duration=args.duration,
+        harmonics=args.harmonics,
+        speed_fraction=args.payload_speed,
+        noise_std=noise,
+        seed=args.seed,
+    )
+    traj = result.trajectory
+    traj.meta["files"] = [out.name]
+    traj.meta["frame"] = place.name
+    sampled = None
+    if csv is not None:
+        sampled = executable_trajectory(
+            robot, [traj], rate=args.rate, home=result.pose, periods=1, rest=args.rest,
+            speed_fraction=args.speed_fraction, jerk_factor=args.jerk_factor,
+        )  # fmt: skip
+    figures = {**result.to_dict(), "frame": place.name, "files": [str(out)]}
+    if sampled is not None:
+        figures["csv"] = {"path": str(csv), "rate": args.rate, "segments": sampled.meta["segments"]}
+    _write_outputs([(out, traj)], csv, sampled, args.json, figures)
+    std = figures["relative_std"]
+    print(
+        f"{robot.name}: payload motion at frame '{place.name}', {args.duration:g} s from pose "
+        f"{np.round(result.pose, 3)} and back; cond {result.cond:.4g} (best random start {result.baseline_cond:.4g}); "
+        f"feasible: {result.feasible}; {result.seconds:.1f} s"
+    )
+    print(
+        "std at unit noise (mass kg, com kg x 10 cm, inertia kg x (10 cm)^2): "
+        + ", ".join(f"{k} {v:.3g}" for k, v in std.items())
+    )
+    print(f"wrote {out}" + (f" and {csv}" if csv is not None else ""))
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -156,10 +235,15 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.screen_iter < 0:
         raise UsageError(f"--screen-iter is {args.screen_iter}; give 1 or more iterations, or 0 to solve every try to the end.")
-    check_harmonics(args.harmonics, args.base_freq, rate=args.rate)
+    if args.payload:
+        check_harmonics(args.harmonics, 1.0 / args.duration if args.duration > 0 else 1.0, rate=args.rate)
+    else:
+        check_harmonics(args.harmonics, args.base_freq, rate=args.rate)
     robot = robot_from_args(args)
     home = _floats("home", args.home, robot.n)
     home = check_pose(robot, home) if home is not None else None  # before the long design
+    if args.payload:
+        return _run_payload(args, robot, out, csv, home)
     box = _floats("box", args.box, 6)
     cartesian = None
     if args.z_min is not None or box is not None:
@@ -232,13 +316,11 @@ def run(args: argparse.Namespace) -> int:
     paths = output_paths(out, len(result.trajectories))
     figures = result.to_dict()
     figures["files"] = [str(p) for p in paths]
-    for path, traj in zip(paths, result.trajectories, strict=True):
+    for traj in result.trajectories:
         traj.meta["files"] = [p.name for p in paths]
-        traj.save(path)
     if sampled is not None:
-        sampled.to_csv(csv)
         figures["csv"] = {"path": str(csv), "rate": args.rate, "segments": sampled.meta["segments"]}
-    write_figures(args.json, figures)
+    _write_outputs(list(zip(paths, result.trajectories, strict=True)), csv, sampled, args.json, figures)
     ratio = result.cond / result.baseline_cond
     print(
         f"cond {result.cond:.4g} (best of {args.baseline} random feasible: {result.baseline_cond:.4g}, ratio "
