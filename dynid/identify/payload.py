@@ -299,6 +299,23 @@ def _nearest_body(
     return params(fit.x)
 
 
+def _inertia_resolved(
+    x: NDArray[np.float64], cov: NDArray[np.float64], determined: NDArray[np.bool_]
+) -> NDArray[np.bool_]:
+    """An inertia entry counts as determined only if its standard deviation is also within
+    :data:`DETERMINED_STD` of the payload's own largest principal moment (about its centre of mass).
+
+    The prior's scale is a 10 cm body: a compact payload's inertia (a 3 kg cylinder of 3 cm radius:
+    0.0017 kg m^2 at most) can be "determined" against it with a standard deviation twice its size.
+    """
+    moments = np.linalg.eigvalsh(inertia_matrix(body_figures(x)[4:]))
+    largest = max(float(moments.max()), 1e-12)
+    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    out = determined.copy()
+    out[4:] &= std[4:] < DETERMINED_STD * largest
+    return out
+
+
 def _weights(r: NDArray[np.float64]) -> NDArray[np.float64]:
     var = np.mean(r**2, axis=0)
     floor = 1e-12 * max(float(var.max()), 1e-300)
@@ -575,6 +592,7 @@ def identify_payload(
             f"the least-squares payload is no physical body (its pseudo-inertia is not positive semi-definite); the "
             f"nearest body is reported, {moved:.3g} standard deviations away in the fit's own metric"
         )
+    sol = dataclasses.replace(sol, determined=_inertia_resolved(x, sol.cov, sol.determined))
     if not sol.determined.all():
         missing = [k for k, ok in zip(PARAM_NAMES, sol.determined, strict=True) if not ok]
         notes.append(
@@ -659,11 +677,11 @@ def _with_gains(result: PayloadResult, system: _System, w: NDArray[np.float64], 
     cov = np.linalg.inv(Fk + np.diag(1.0 / prior**2))
     g_std = np.sqrt(np.maximum(np.diag(cov)[:n], 0.0))
     g_ok = (g_std < 0.05 * np.abs(g)) & (np.sum(tau**2, axis=0) > 0)
-    full = np.zeros((10, 10))
-    full[1:, 1:] = cov[n:, n:]
-    determined = np.concatenate([[True], sub.determined])
     x = _nearest_body(x, _information(A * g[None, :, None], w), scale)
     x[0] = mass
+    full_cov = np.zeros((10, 10))
+    full_cov[1:, 1:] = cov[n:, n:]
+    determined = _inertia_resolved(x, full_cov, np.concatenate([[True], sub.determined]))
     notes = list(result.notes)
     bad = [str(j + 1) for j in np.flatnonzero(~g_ok)]
     if bad:
@@ -674,7 +692,7 @@ def _with_gains(result: PayloadResult, system: _System, w: NDArray[np.float64], 
     return dataclasses.replace(
         result,
         params=x,
-        cov=full,
+        cov=full_cov,
         determined=determined,
         gains=g,
         gains_std=g_std,
