@@ -233,7 +233,7 @@ def test_no_joint_state_no_robot_no_rosbags(files, ur5, tmp_path, monkeypatch):
     for module in ("rosbags", "rosbags.rosbag2", "rosbags.typesys"):
         monkeypatch.setitem(sys.modules, module, None)  # as if the optional package were not installed
     with pytest.raises(DataError, match=r"needs the 'rosbags' package, which is not installed; install it with "
-                                        r'pip install "dynid\[ros\]"'):
+                                        r'pip install (-e )?"[^"]*\[ros\]"'):
         load_dataset(files["mcap"], robot=ur5)
 
 

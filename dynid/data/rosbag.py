@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from dynid._extras import install_hint
 from dynid.data.dataset import Dataset
 from dynid.data.preprocess import GAP_SECONDS, GAP_STEPS, resample
 from dynid.exceptions import DataError, DataWarning
@@ -53,7 +54,6 @@ JOINT_STATE = "sensor_msgs/msg/JointState"
 #: File extensions read as ROS 2 storage files (a rosbag2 folder is recognised by its ``metadata.yaml``).
 ROSBAG_SUFFIXES = (".mcap", ".db3")
 
-_INSTALL = 'pip install "dynid[ros]"'
 
 
 def is_rosbag(path: str | os.PathLike[str]) -> bool:
@@ -82,7 +82,7 @@ def _rosbags() -> tuple[Any, Any, Any]:
     except ImportError:
         raise DataError(
             "reading a ROS 2 recording needs the 'rosbags' package, which is not installed; install it "
-            f"with {_INSTALL}"
+            f"with {install_hint('ros')}"
         ) from None
     errors: tuple[type[BaseException], ...] = (ReaderError,)
     try:

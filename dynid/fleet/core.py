@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from dynid._extras import install_hint
 from dynid._io import atomic_dir, atomic_path, write_json, write_text
 from dynid.exceptions import DataError, DynidError, UsageError
 from dynid.fleet.recordings import Recording, find_recordings
@@ -337,7 +338,7 @@ class FleetResult:
         except ImportError:
             raise UsageError(
                 "writing the fleet table as Parquet needs pyarrow, which is not installed; install it with "
-                "pip install 'dynid[fleet]'."
+                f"{install_hint('fleet')}."
             ) from None
         return pa.table({c: [r.get(c) for r in self.rows] for c in self.columns})
 

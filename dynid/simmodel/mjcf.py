@@ -23,6 +23,7 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
+from dynid._extras import install_hint
 from dynid.exceptions import UsageError
 
 __all__ = ["build_mjcf", "import_mujoco", "write_into_mjcf"]
@@ -35,7 +36,7 @@ def import_mujoco():
     except ImportError:
         raise UsageError(
             "--format mjcf needs the package mujoco, which is not installed; install it with "
-            "'pip install dynid[mujoco]'"
+            f"{install_hint('mujoco')}"
         ) from None
     return mujoco
 
