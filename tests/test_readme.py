@@ -39,13 +39,16 @@ def test_readme_links_the_architecture():
 
 @pytest.mark.slow
 def test_the_python_section_runs(tmp_path, monkeypatch, capsys):
-    """Every ```python block of "## Python", in order, in one namespace, in an empty folder."""
+    """Every ```python block of "## Python", in order, each standalone (its own namespace: a reader
+    copies one block, not the page), in an empty folder."""
     blocks = _python_blocks(_section(README.read_text(encoding="utf-8"), "Python"))
     assert len(blocks) >= 2
     monkeypatch.chdir(tmp_path)
-    namespace: dict = {"__name__": "__readme__"}
+    namespace: dict = {}
     for k, block in enumerate(blocks):
-        exec(compile(block, f"README.md (## Python, block {k + 1})", "exec"), namespace)
+        own: dict = {"__name__": "__readme__"}
+        exec(compile(block, f"README.md (## Python, block {k + 1})", "exec"), own)
+        namespace.update(own)
     out = capsys.readouterr().out
     # the path ran end to end and wrote its files
     for name in ("excitation.json", "D.csv", "model.json"):
