@@ -32,6 +32,7 @@ COMMANDS = {
     "info": "info",
     "excite": "excite",
     "simulate": "simulate",
+    "convert": "convert",
     "identify": "identify",
     "validate": "validate",
     "payload": "payload",
