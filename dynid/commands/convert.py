@@ -62,28 +62,32 @@ def run(args: argparse.Namespace) -> int:
         {"data": args.data},
     )
     if args.recording is not None:
+        from dynid._progress import stage
         from dynid.data.adapters import load_recording
 
-        ds = load_recording(args.recording, args.root)
+        with stage(f"reading the recording {args.recording}"):
+            ds = load_recording(args.recording, args.root)
         source = f"the recording {args.recording}"
     else:
         if args.q is None or args.tau is None:
             raise UsageError(
                 "--data needs --q and --tau: the columns of the joint angles and torques (e.g. 'pos_*')"
             )
+        from dynid._progress import stage
         from dynid.data.convert import convert_table
 
-        ds = convert_table(
-            args.data,
-            time=args.time,
-            q=args.q,
-            tau=args.tau,
-            dq=args.dq,
-            ddq=args.ddq,
-            time_unit=args.time_unit,
-            degrees=args.degrees,
-            torque_scale=args.torque_scale,
-        )
+        with stage(f"reading {args.data}"):
+            ds = convert_table(
+                args.data,
+                time=args.time,
+                q=args.q,
+                tau=args.tau,
+                dq=args.dq,
+                ddq=args.ddq,
+                time_unit=args.time_unit,
+                degrees=args.degrees,
+                torque_scale=args.torque_scale,
+            )
         source = str(args.data)
     if args.robot is not None:
         from dynid.symbolic.robot import load_robot

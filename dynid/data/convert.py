@@ -11,6 +11,7 @@ writes in dynid's format (``dynid convert`` does both).  Lines starting with ``#
 from __future__ import annotations
 
 import fnmatch
+import io
 import math
 import os
 from collections.abc import Sequence
@@ -87,6 +88,13 @@ def read_table(path: str | os.PathLike[str]) -> tuple[list[str], NDArray[np.floa
         raise DataError(
             f"{path.name} has no header: line {header_no} holds numbers; add a line naming the columns"
         )
+    body = "\n".join(line for _, line in lines[1:])
+    try:
+        table = np.loadtxt(io.StringIO(body), delimiter=sep, dtype=np.float64, ndmin=2, quotechar='"')
+    except ValueError:
+        table = None  # the slow way below names the bad line
+    if table is not None and table.size and table.shape[1] == len(names):
+        return names, table
     rows = []
     for number, line in lines[1:]:
         cells = split(line)
