@@ -18,6 +18,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
+from dynid._extras import install_hint
 from dynid.exceptions import UsageError
 
 __all__ = ["cluster_client", "worker_peak_memory"]
@@ -32,7 +33,7 @@ def _distributed() -> Any:
     except ImportError:
         raise UsageError(
             "running on a Dask cluster needs the packages dask and distributed, which are not installed; "
-            "install them with pip install 'dynid[fleet]'."
+            f"install them with {install_hint('fleet')}."
         ) from None
     return distributed
 
@@ -137,6 +138,7 @@ def cluster_client(
     if scheduler is None:
         if int(workers) != workers or workers < 1:
             raise UsageError(f"the local cluster needs at least 1 worker; got {workers}; give --workers 1 or more.")
+        _ensure_open_files(int(workers))
         import dask
 
         overrides, saved = _spawn_environment()
@@ -165,6 +167,8 @@ def cluster_client(
             f"the scheduler file '{scheduler}' does not exist; give the file a running scheduler wrote "
             "(dask scheduler --scheduler-file), its address (tcp://HOST:8786), or leave --scheduler out."
         )
+    if str(scheduler).endswith(".json"):
+        _check_scheduler_file(str(scheduler))
     kwargs = {"scheduler_file": scheduler} if str(scheduler).endswith(".json") else {"address": scheduler}
     try:
         client = distributed.Client(**kwargs, timeout=timeout)
@@ -176,6 +180,62 @@ def cluster_client(
         ) from None
     with client:
         yield client
+
+
+def _ensure_open_files(workers: int) -> None:
+    """Raise the soft limit of open files to what a local cluster needs, or refuse if the hard limit is lower.
+
+    A local Dask cluster holds sockets, pipes and ``/proc`` reads for its scheduler, nanny and workers;
+    short of descriptors its event loops print tracebacks without end while the fleet crawls on.  A soft
+    limit below the need is raised up to the hard limit (no privilege needed); a hard limit below it is
+    refused with the fix.
+    """
+    try:
+        import resource
+    except ImportError:  # not POSIX
+        return
+    need = 64 + 16 * workers
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    unlimited = resource.RLIM_INFINITY
+    if soft == unlimited or soft >= 4 * need:
+        return
+    target = 4 * need if hard == unlimited else min(hard, 4 * need)
+    if target > soft:
+        try:
+            resource.setrlimit(resource.RLIMIT_NOFILE, (target, hard))
+            soft = target
+        except (ValueError, OSError):
+            pass
+    if soft < need:
+        raise UsageError(
+            f"the limit of open files is {soft} (ulimit -n), and a local Dask cluster of {workers} worker"
+            f"{'s' if workers > 1 else ''} needs at least {need}; raise it (ulimit -n 1024), give fewer --workers, "
+            "or run without a cluster (--serial)."
+        )
+
+
+def _check_scheduler_file(path: str) -> None:
+    """Refuse a scheduler file that is not the JSON object a Dask scheduler writes (with its ``address``)."""
+    import json
+
+    try:
+        with open(path, encoding="utf-8") as f:
+            doc = json.load(f)
+    except (ValueError, UnicodeDecodeError) as exc:
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise UsageError(
+            f"the scheduler file '{path}' is not valid JSON ({reason}); give the file a running scheduler wrote "
+            "(dask scheduler --scheduler-file), or its address (tcp://HOST:8786)."
+        ) from None
+    if not isinstance(doc, dict) or not isinstance(doc.get("address"), str) or not doc["address"]:
+        got = f"a JSON {type(doc).__name__}"
+        if isinstance(doc, dict):
+            got = "a JSON object without a text 'address'"
+        raise UsageError(
+            f"the scheduler file '{path}' holds {got}, not the object with the 'address' a Dask scheduler "
+            "writes; give the file a running scheduler wrote (dask scheduler --scheduler-file), or its address "
+            "(tcp://HOST:8786)."
+        )
 
 
 def worker_peak_memory(client: Any) -> dict[str, float]:

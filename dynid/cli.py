@@ -89,6 +89,32 @@ def _forget_nested_interrupt() -> None:
         pass
 
 
+def _check_matplotlib_backend() -> None:
+    """Refuse an ``MPLBACKEND`` that matplotlib does not know, before a report's figures fail on it.
+
+    matplotlib reads the variable when it is first imported and raises a ValueError from deep inside;
+    dynid draws its figures into files (no window), any valid backend will do.
+    """
+    import os
+
+    value = os.environ.get("MPLBACKEND")
+    if not value or "matplotlib" in sys.modules:
+        return
+    try:
+        import matplotlib  # noqa: F401
+    except ValueError as exc:
+        if "backend" not in str(exc):
+            raise
+        from dynid.exceptions import UsageError
+
+        raise UsageError(
+            f"the environment variable MPLBACKEND is '{value}', which matplotlib does not know; unset it or set "
+            "it to Agg (dynid draws its figures into files, no window)"
+        ) from None
+    except ImportError:  # no matplotlib: the commands that need it say so
+        return
+
+
 def build_parser() -> argparse.ArgumentParser:
     from dynid import __version__
 
@@ -154,6 +180,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         with warnings.catch_warnings():
             if argv is None:  # the console command (tests calling main(argv) keep pytest's warning capture)
                 warnings.showwarning = _one_line_warnings(args.command, warnings.showwarning)
+            _check_matplotlib_backend()
             with _progress.session(args.command, quiet=bool(getattr(args, "quiet", False))):
                 return int(args._module.run(args) or 0)
     except DynidError as exc:

@@ -230,6 +230,8 @@ def run_demo(
     def say(message: str) -> None:
         say_line(f"      {message}")
 
+    if isinstance(seed, bool) or int(seed) != seed or seed < 0:
+        raise UsageError(f"the seed is {seed}; give a whole number of at least 0.")
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise UsageError(f"out_dir '{out}' is a file; give a folder for the demo's files.")

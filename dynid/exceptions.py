@@ -7,6 +7,7 @@ line prints the message alone (no traceback) and exits with a non-zero code.
 from __future__ import annotations
 
 __all__ = [
+    "CacheWarning",
     "CompilerNotFoundError",
     "DataError",
     "DataWarning",
@@ -88,3 +89,7 @@ class IdentificationWarning(DynidWarning):
 
 class RobotModelWarning(DynidWarning):
     """A robot description that can be used but looks slightly off (e.g. a rounded inertia)."""
+
+
+class CacheWarning(DynidWarning):
+    """A file of dynid's cache was damaged (truncated, garbage) and has been rebuilt."""

@@ -57,6 +57,8 @@ def run(args: argparse.Namespace) -> int:
     from dynid._io import write_json
     from dynid.demo import DEMO_FILES, run_demo
 
+    if args.seed < 0:  # before the folder is made: a refused demo leaves nothing behind
+        raise UsageError(f"--seed is {args.seed}; give a whole number of at least 0 (default 0).")
     out = _check_out(args.out)
     check_outputs([output("out", out, folder=True), output("json", args.json, (".json",))])
     json_path = None if args.json is None else Path(args.json)

@@ -202,6 +202,32 @@ def _run_payload(args: argparse.Namespace, robot, out: Path, csv: Path | None, h
     return 0
 
 
+def _check_csv_options(args: argparse.Namespace) -> None:
+    """Refuse --periods, --rest, --speed-fraction and --jerk-factor the CSV cannot use, and a CSV too long."""
+    import math
+
+    from dynid.optim.approach import check_length
+
+    if args.periods < 1:
+        raise UsageError(f"--periods is {args.periods}; give a whole number of at least 1 (default 3).")
+    if not (math.isfinite(args.rest) and args.rest >= 0):
+        raise UsageError(f"--rest is {args.rest} s; give a duration of at least 0 s (default 2).")
+    if not (0.01 <= args.speed_fraction <= 1):
+        raise UsageError(
+            f"--speed-fraction is {args.speed_fraction:g}; give a fraction of the robot's limits from 0.01 to 1 "
+            "(default 0.5): slower, the approach would last hours."
+        )
+    if not (math.isfinite(args.jerk_factor) and args.jerk_factor > 0):
+        raise UsageError(f"--jerk-factor is {args.jerk_factor}; give a positive factor (default 5).")
+    if args.payload:
+        seconds = 2 * args.rest + args.duration
+    elif math.isfinite(args.base_freq) and args.base_freq > 0:
+        seconds = 2 * args.rest + args.trajectories * args.periods / args.base_freq
+    else:
+        return  # the design names a bad base frequency
+    check_length(seconds, args.rate, "the CSV (rests and excitations, before the approach moves)")
+
+
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -233,12 +259,16 @@ def run(args: argparse.Namespace) -> int:
             f"--scheduler and --backend {args.backend} exclude each other; --scheduler runs the tries through "
             "joblib's dask backend: give one of them."
         )
+    if args.seed < 0:
+        raise UsageError(f"--seed is {args.seed}; give a whole number of at least 0 (default 0).")
     if args.screen_iter < 0:
         raise UsageError(f"--screen-iter is {args.screen_iter}; give 1 or more iterations, or 0 to solve every try to the end.")
     if args.payload:
         check_harmonics(args.harmonics, 1.0 / args.duration if args.duration > 0 else 1.0, rate=args.rate)
     else:
         check_harmonics(args.harmonics, args.base_freq, rate=args.rate)
+    if csv is not None:  # the CSV's options, before the long design
+        _check_csv_options(args)
     robot = robot_from_args(args)
     home = _floats("home", args.home, robot.n)
     home = check_pose(robot, home) if home is not None else None  # before the long design

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 
+from dynid._extras import install_hint
 from dynid.commands.common import (
     add_degrees_argument,
     add_json_argument,
@@ -15,6 +16,7 @@ from dynid.commands.common import (
     robot_from_args,
     write_figures,
 )
+from dynid.identify.registry import FRICTION_MODELS, method_names
 
 __all__ = ["HELP", "add_arguments", "run"]
 
@@ -86,11 +88,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--topic", metavar="NAME", help="the JointState topic of ROS 2 recordings that hold several"
     )
     parser.add_argument(
-        "--method", default="irls", choices=("ols", "wls", "gls", "irls", "consistent"),
+        "--method", default="irls", choices=method_names(),
         help="layer-1 method (default irls: one pipeline for every recording, so that their parameters compare)",
     )
     parser.add_argument(
-        "--friction", default="seed", choices=("none", "linear", "seed", "stribeck", "sigmoid"),
+        "--friction", default="seed", choices=FRICTION_MODELS.names(),
         help="friction model (default seed, the paper's)",
     )
     parser.add_argument(
@@ -131,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
         if needed and importlib.util.find_spec(module) is None:
             raise UsageError(
                 f"dynid fleet needs the package {module}, which is not installed; install it with "
-                "pip install 'dynid[fleet]'."
+                f"{install_hint('fleet')}."
             )
     recordings = find_recordings(args.data, args.manifest)
     check_outputs(

@@ -17,6 +17,7 @@ from dynid.commands.common import (
     robot_from_args,
     write_figures,
 )
+from dynid.identify.registry import FRICTION_MODELS, method_names
 
 __all__ = ["HELP", "add_arguments", "run"]
 
@@ -61,7 +62,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--method",
         default="auto",
-        choices=("auto", "ols", "wls", "gls", "irls", "consistent"),
+        choices=("auto", *method_names()),
         help="layer-1 method; auto (default): ols with linear friction and no correction, or the paper's "
         "irls + seed friction + gmm, whichever predicts one half of the recording from the other better "
         "(the richer one only if no joint is worse)",
@@ -69,7 +70,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--friction",
         default="auto",
-        choices=("auto", "none", "linear", "seed", "stribeck", "sigmoid"),
+        choices=("auto", *FRICTION_MODELS.names()),
         help="friction model; auto (default): chosen with --method auto, else seed (the paper's)",
     )
     parser.add_argument(
@@ -219,6 +220,10 @@ def run(args: argparse.Namespace) -> int:
         from dynid.symbolic.robot import load_transmission
 
         robot = robot.with_transmission(load_transmission(args.transmission, robot.n))
+    if args.effects:  # a malformed term is refused before the data are read
+        from dynid.identify.effect_terms import parse_effect_terms
+
+        parse_effect_terms(args.effects, robot.n)
     start = time.perf_counter()
     data = read_dataset(
         args.data, robot.n, robot_name=robot.name, degrees=args.degrees, topic=args.topic,

@@ -283,7 +283,21 @@ def _check_units(ds: Dataset, source: str, degrees: bool) -> Dataset:
                 f"{source}: {name}_{j + 1} is {a[row, j]:.4g} at row {row}, beyond {limit:g} {units[name]} that "
                 f"no robot arm reaches; check the column's units ({units[name]}) and the export"
             )
+    if ds.m >= MIN_ROWS_DEAD_SENSOR:
+        dead = np.ptp(ds.tau, axis=0) == 0
+        if dead.any():
+            j = int(np.argmax(dead))
+            more = f" (and {int(dead.sum()) - 1} more)" if dead.sum() > 1 else ""
+            raise DataError(
+                f"{source}: tau_{j + 1}{more} holds {ds.tau[0, j]:g} N m in every one of its {ds.m} rows, which no "
+                "working torque sensor reads on a moving arm; check that the sensor was logged (a dead or "
+                "unplugged channel) and record again"
+            )
     return ds
+
+
+MIN_ROWS_DEAD_SENSOR = 20
+"""Rows from which a torque column that never changes is refused as a dead sensor."""
 
 
 def _torque_scale(robot: Any, samples: int = 256) -> NDArray[np.float64]:
@@ -428,6 +442,11 @@ def load_dataset(
         raise DataError(
             f"{path} is a folder; give the path of a .csv or .npz dataset file (a ROS 2 rosbag2 folder holds "
             "a metadata.yaml)"
+        )
+    if not path.is_file():  # a device (/dev/zero), a FIFO or a socket: reading it may never end
+        raise DataError(
+            f"{path} is not a regular file but a device, pipe or socket, which dynid does not read (it may "
+            "never end); save the recording to a .csv or .npz file and give that file"
         )
     meta: dict[str, Any] = {}
     try:

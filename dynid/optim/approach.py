@@ -26,7 +26,27 @@ from dynid.exceptions import UsageError
 from dynid.optim.trajectory import FourierTrajectory, SampledTrajectory
 from dynid.symbolic.robot import RobotModel
 
-__all__ = ["Segment", "default_home", "executable_trajectory", "point_to_point"]
+__all__ = [
+    "MAX_SAMPLES",
+    "Segment",
+    "check_length",
+    "default_home",
+    "executable_trajectory",
+    "point_to_point",
+]
+
+MAX_SAMPLES = 1_000_000
+"""Most samples of an executable trajectory (2000 s at 500 Hz): the sampled file is built in memory."""
+
+
+def check_length(seconds: float, rate: float, what: str = "the executable trajectory") -> None:
+    """Refuse a sampled trajectory longer than :data:`MAX_SAMPLES` samples at ``rate`` (Hz)."""
+    if seconds * rate > MAX_SAMPLES:
+        raise UsageError(
+            f"{what} would last {seconds:.4g} s, {seconds * rate:.3g} samples at {rate:g} Hz, beyond the "
+            f"{MAX_SAMPLES:,} dynid writes in one file; shorten it (fewer --periods, a shorter --rest, a higher "
+            "--base-freq or --speed-fraction)."
+        )
 
 
 def default_home(robot: RobotModel) -> np.ndarray:
@@ -94,7 +114,7 @@ class Segment:
 
 
 def _ruckig_limits(robot: RobotModel, speed_fraction: float, jerk_factor: float):
-    if not (0 < speed_fraction <= 1):
+    if not (0 < speed_fraction <= 1):  # also nan
         raise UsageError(f"speed_fraction is {speed_fraction}; give a fraction of the robot's limits in (0, 1].")
     if not (math.isfinite(jerk_factor) and jerk_factor > 0):
         raise UsageError(f"jerk_factor is {jerk_factor}; give a positive factor (jerk limit = factor x ddq_max).")
@@ -150,7 +170,16 @@ def point_to_point(
     inp.max_jerk = jmax.tolist()
     otg = Ruckig(n)
     traj = Trajectory(n)
-    result = otg.calculate(inp, traj)
+    try:
+        result = otg.calculate(inp, traj)
+    except ValueError:  # an error code the binding's enum lacks (-101: beyond ruckig's numerical range)
+        result = None
+    if result is None:
+        raise UsageError(
+            f"ruckig could not plan the {kind} from {np.round(start, 4).tolist()} to {np.round(goal, 4).tolist()}: "
+            f"at {speed_fraction:g} of the velocity and acceleration limits it would last beyond ruckig's numerical "
+            "range; give a larger speed fraction (--speed-fraction, default 0.5)."
+        )
     if result != Result.Working:
         raise UsageError(
             f"ruckig could not plan the {kind} from {np.round(start, 4).tolist()} to {np.round(goal, 4).tolist()} "
@@ -254,6 +283,7 @@ def executable_trajectory(
         segments.append(Segment(kind="rest", start=clock, duration=float(rest), _pose=np.asarray(home, float)))
         clock += float(rest)
 
+    check_length(clock, rate)
     steps = math.ceil(clock * rate - 1e-9)
     t = np.arange(steps + 1) / rate
     q = np.empty((t.size, robot.n))

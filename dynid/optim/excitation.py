@@ -118,6 +118,7 @@ from dynid.symbolic.robot import RobotModel
 __all__ = [
     "CRITERIA",
     "MAX_HARMONICS",
+    "MIN_BASE_FREQ",
     "CartesianLimits",
     "ExcitationError",
     "ExcitationProblem",
@@ -130,6 +131,10 @@ __all__ = [
 MAX_HARMONICS = 10
 """Most harmonics per joint (the paper uses 5).  The optimisation's size grows with their count: one
 IPOPT try with 15 harmonics on the UR5 took 71 s of CPU (a search runs up to 60 tries)."""
+
+MIN_BASE_FREQ = 0.01
+"""Lowest base frequency (Hz): a period of at most 100 s.  A slower excitation moves too slowly for its
+torques to show the inertial parameters, and its design and its repeated periods grow without bound."""
 
 _MIN_AMPLITUDE = 1e-3
 """Smallest amplitude (rad) worth a harmonic: the acceleration limit must allow at least this much."""
@@ -407,6 +412,11 @@ class ExcitationProblem:
             )
         if not (math.isfinite(self.base_freq) and self.base_freq > 0):
             raise UsageError(f"base_freq is {self.base_freq}; give a positive frequency in Hz, e.g. 0.1.")
+        if self.base_freq < MIN_BASE_FREQ:
+            raise UsageError(
+                f"base_freq is {self.base_freq:g} Hz, a period of {1 / self.base_freq:.3g} s; give at least "
+                f"{MIN_BASE_FREQ:g} Hz (a period of at most {1 / MIN_BASE_FREQ:g} s), e.g. 0.1."
+            )
         check_harmonics(int(self.harmonics), self.base_freq, robot=self.robot)
         grid = max(40, 12 * int(self.harmonics)) if self.grid is None else self.grid
         if int(grid) != grid or grid < 2:
@@ -1555,6 +1565,14 @@ def design_excitation(
         The regressor cannot reach full rank with these harmonics and grid, no random trajectory
         meets the Cartesian limits, or no try ends feasible.
     """
+    if isinstance(seed, bool) or int(seed) != seed or seed < 0:
+        raise UsageError(f"the seed is {seed}; give a whole number of at least 0.")
+    if backend is not None:
+        from joblib.parallel import BACKENDS, EXTERNAL_BACKENDS
+
+        known = sorted({*BACKENDS, *EXTERNAL_BACKENDS})
+        if backend not in known:
+            raise UsageError(f"the joblib backend '{backend}' is unknown; give one of {', '.join(known)}.")
     with _interruptible():
         return _design(
             problem,

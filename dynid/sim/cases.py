@@ -201,6 +201,7 @@ def calibrate_value(
         new = value * level / achieved
         if limit is not None:
             new = min(new, 0.95 * limit)
+        new = max(new, EFFECTS[effect].min_value)
         if abs(new - value) < 0.05 * value:
             value = new
             break

@@ -472,6 +472,12 @@ def _check_request(req: EffectRequest) -> None:
             f"the size of the effect '{req.name}' is {req.value:g}; it must stay below {limit:g} "
             f"({EFFECTS[req.name].why_limit})."
         )
+    low = EFFECTS[req.name].min_value
+    if req.value < low:
+        raise UsageError(
+            f"the size of the effect '{req.name}' is {req.value:g}; it must be at least {low:g} "
+            f"({EFFECTS[req.name].why_min})."
+        )
     if req.joints is not None and not EFFECTS[req.name].selectable:
         raise UsageError(
             f"the effect '{req.name}' acts on the whole arm and takes no joint selector; write '{req.name}' "
@@ -509,8 +515,10 @@ class Effect:
     name: ClassVar[str] = ""
     role: ClassVar[str] = ""
     selectable: ClassVar[bool] = True
-    max_value: ClassVar[float | None] = None
-    why_limit: ClassVar[str] = ""
+    max_value: ClassVar[float | None] = 100.0
+    why_limit: ClassVar[str] = "100 times the documented default size, far beyond a real arm's"
+    min_value: ClassVar[float] = 0.0
+    why_min: ClassVar[str] = ""
 
     value: float
     joints: tuple[int, ...]
@@ -633,6 +641,8 @@ class Delay(Effect):
 
     name: ClassVar[str] = "delay"
     role: ClassVar[str] = "sensor"
+    max_value: ClassVar[float | None] = 250.0
+    why_limit: ClassVar[str] = "a delay of 4 ms VALUE must stay below 1 s, far beyond any torque sensor's lag"
     delay: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @classmethod
@@ -957,6 +967,11 @@ class Elasticity(Effect):
 
     name: ClassVar[str] = "elasticity"
     role: ClassVar[str] = "transmission"
+    min_value: ClassVar[float] = 0.01
+    why_min: ClassVar[str] = (
+        "the locked-motor resonance 10 Hz / sqrt(VALUE) must stay at or below 100 Hz: a stiffer spring is a rigid "
+        "joint at a 1 kHz control rate, and its integration steps would grow without bound"
+    )
     stiffness: np.ndarray = field(default_factory=lambda: np.zeros(0))
     frequency: float = 10.0
 

@@ -88,6 +88,7 @@ from dynid.symbolic.robot import RobotModel
 
 __all__ = [
     "CONTROL_RATE",
+    "MAX_TICKS",
     "ControllerGains",
     "NoiseModel",
     "SimulationResult",
@@ -103,6 +104,10 @@ __all__ = [
 
 CONTROL_RATE = 1000.0
 """Default control and integration rate (Hz)."""
+
+MAX_TICKS = 1_000_000
+"""Most control ticks of one run (1000 s at 1 kHz): the run's states are held in memory, about 1 kB per
+tick for a 6-joint arm.  Record a longer experiment as several runs."""
 
 _LIMIT_TOL = 1e-6
 
@@ -154,8 +159,9 @@ def simulate(
     substeps : int, optional
         Integration steps per tick; default at least 2 and enough for the stiffest spring.
     truth : Truth, optional
-        A truth from :func:`build_truth` (then ``effects``, ``friction``, ``perturb``, ``truth_seed`` are
-        not used): the same robot on another trajectory.
+        A truth from :func:`build_truth`: the same robot on another trajectory.  Its effects, friction,
+        perturbation and seed are fixed already, so ``effects``, ``friction``, ``perturb`` and
+        ``truth_seed`` are refused beside it (give them to :func:`build_truth`).
     controller : ControllerGains, optional
         Default :meth:`ControllerGains.design` (10 Hz, damping 0.7).
     source : str
@@ -168,11 +174,28 @@ def simulate(
     Raises
     ------
     UsageError
-        Bad effect, friction, noise, rate or duration; a trajectory beyond the joint limits.
+        Bad effect, friction, noise, rate or duration; a trajectory beyond the joint limits; truth options
+        beside ``truth``.
     ShapeError
         A trajectory for another joint count.
     """
     started = time.perf_counter()
+    if truth is not None:
+        given = [
+            name
+            for name, value, default in (
+                ("effects", effects, None),
+                ("friction", friction, "linear"),
+                ("perturb", perturb, 0.0),
+                ("truth_seed", truth_seed, None),
+            )
+            if value != default
+        ]
+        if given:
+            raise UsageError(
+                f"simulate got truth= and also {', '.join(given)}, which the truth fixes already; give "
+                f"{'them' if len(given) > 1 else 'it'} to build_truth(robot, ...) instead, or drop truth=."
+            )
     noise = NoiseModel.parse(noise)
     n = robot.n
     if trajectory.n != n:
@@ -202,8 +225,17 @@ def simulate(
             f"the duration {duration:g} s is longer than {source} ({trajectory.duration:g} s), which does not "
             "repeat; give at most its duration."
         )
+    if duration * control_rate >= MAX_TICKS:
+        raise UsageError(
+            f"the duration {duration:g} s at the control rate {control_rate:g} Hz is {duration * control_rate:.3g} "
+            f"control ticks, beyond the {MAX_TICKS:,} that one run holds in memory; give at most "
+            f"{(MAX_TICKS - 1) / control_rate:g} s, and simulate a longer experiment as several runs."
+        )
     if substeps is not None and (int(substeps) != substeps or substeps < 1):
         raise UsageError(f"substeps is {substeps}; give a whole number >= 1.")
+    for label, value in (("seed", seed), ("truth seed", truth_seed)):
+        if value is not None and (int(value) != value or value < 0):
+            raise UsageError(f"the {label} is {value}; give a whole number of at least 0.")
     seed = int(seed)
 
     ticks = round(duration * control_rate) + 1

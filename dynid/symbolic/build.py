@@ -327,21 +327,25 @@ def generator_path(progress: Progress | None = stderr_progress) -> Path:
     return exe
 
 
-def robot_function_dir(spec: str, progress: Progress | None = stderr_progress) -> Path:
+def robot_function_dir(
+    spec: str, progress: Progress | None = stderr_progress, *, rebuild: bool = False
+) -> Path:
     """Folder of a robot's saved CasADi functions (``<name>.casadi``), generating them on first use.
 
     Parameters
     ----------
     spec : str
         The canonical tree of the robot (:attr:`dynid.symbolic.robot.RobotModel.spec`).
+    rebuild : bool
+        Generate them again even if the folder holds them (a damaged cache).
     """
     key = hashlib.sha256((_generator_key() + spec).encode()).hexdigest()[:20]
     folder = cache_dir() / "robots" / key
-    if all((folder / f"{name}.casadi").is_file() for name in FUNCTION_NAMES):
+    if not rebuild and all((folder / f"{name}.casadi").is_file() for name in FUNCTION_NAMES):
         return folder
     exe = generator_path(progress)
     with file_lock(cache_dir() / "robots" / f"{key}.lock"):
-        if all((folder / f"{name}.casadi").is_file() for name in FUNCTION_NAMES):
+        if not rebuild and all((folder / f"{name}.casadi").is_file() for name in FUNCTION_NAMES):
             return folder
         with atomic_dir(folder) as work:
             (work / "robot.spec").write_text(spec)

@@ -17,6 +17,7 @@ The same library, built in dynid's cache, is dynid's fast path for large batches
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import re
 import shutil
@@ -58,9 +59,23 @@ class ExportResult:
 
 
 def c_identifier(name: str) -> str:
-    """A valid C identifier made from a robot name (``tx40-mdh`` -> ``tx40_mdh``)."""
-    ident = re.sub(r"\W", "_", name)
-    return ident if ident and not ident[0].isdigit() else f"r_{ident}"
+    """A valid C identifier made from a robot name (``tx40-mdh`` -> ``tx40_mdh``).
+
+    ASCII letters and digits only, each run of anything else one underscore (CasADi refuses two in a
+    row, and C compilers non-ASCII names): ``bras-é`` -> ``bras``, ``we"ird*`` -> ``we_ird``.
+    """
+    ident = re.sub(r"[^A-Za-z0-9]+", "_", name).strip("_")
+    if not ident:
+        return "robot"
+    return ident if not ident[0].isdigit() else f"r_{ident}"
+
+
+def _c_text(name: str, *, literal: bool = False) -> str:
+    """A robot name safe inside a C comment (no ``*/``), or with ``literal`` inside a printf format string."""
+    text = re.sub(r"[\x00-\x1f\x7f]", " ", name).replace("*/", "* /")
+    if literal:
+        text = text.replace("\\", "\\\\").replace('"', '\\"').replace("%", "%%").replace("??", "?\\?")
+    return text
 
 
 def _functions_to_export(funcs: RobotFunctions, base: BaseParameters, names) -> list[ca.Function]:
@@ -176,7 +191,7 @@ def _compile(folder: Path, stem: str, progress: Progress | None) -> Path:
 def _example(stem: str, prefix: str, robot: RobotModel, base: BaseParameters) -> tuple[str, str]:
     n = robot.n
     nb = base.n_base
-    example = f"""/* Evaluate the base regressor of {robot.name} at one state and print it.
+    example = f"""/* Evaluate the base regressor of {_c_text(robot.name)} at one state and print it.
  * Build: make   (or: cc -O2 example.c {stem}.c -o example -lm)   Run: ./example */
 #include <stdio.h>
 
@@ -200,7 +215,7 @@ int main(void) {{
   arg[2] = ddq;
   res[0] = Yb;
   if ({prefix}_base_regressor(arg, res, iw, w, 0)) return 1;
-  printf("Y_b of {robot.name} ({n} x {nb}) at q_i = 0.1 i, dq = 0.2, ddq = -0.3:\\n");
+  printf("Y_b of {_c_text(robot.name, literal=True)} ({n} x {nb}) at q_i = 0.1 i, dq = 0.2, ddq = -0.3:\\n");
   for (i = 0; i < {n}; ++i) {{
     for (j = 0; j < {nb}; ++j) printf("% .6e ", Yb[i * {nb} + j]);
     printf("\\n");
@@ -309,10 +324,72 @@ def compiled_functions(
     if digest in _COMPILED:
         return _COMPILED[digest]
     folder = cache_dir() / "compiled" / digest
-    if not (folder / "manifest.json").is_file():
+    if _cache_damage(folder) is not None:
         with file_lock(cache_dir() / "compiled" / f"{digest}.lock"):
-            if not (folder / "manifest.json").is_file():
+            damage = _cache_damage(folder)
+            if damage is not None:
+                if damage:
+                    _say_rebuilt(folder, damage)
                 export_c(robot, folder, functions=functions, progress=progress)
-    lib = CompiledLibrary(folder)
+    try:
+        lib = CompiledLibrary(folder)
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:  # what the check cannot see
+        with file_lock(cache_dir() / "compiled" / f"{digest}.lock"):
+            _say_rebuilt(folder, f"it could not be loaded: {' '.join(str(exc).split())[:160]}")
+            export_c(robot, folder, functions=functions, progress=progress)
+        lib = CompiledLibrary(folder)
     _COMPILED[digest] = lib
     return lib
+
+
+def _say_rebuilt(folder: Path, damage: str) -> None:
+    import warnings
+
+    from dynid.exceptions import CacheWarning
+
+    warnings.warn(
+        f"the compiled library cached in {folder} was damaged ({damage}); it was built again",
+        CacheWarning,
+        stacklevel=3,
+    )
+
+
+def _cache_damage(folder: Path) -> str | None:
+    """None when a cached build looks whole; ``""`` when there is none; else what is wrong with it.
+
+    A truncated shared library still loads (the loader maps it), then kills the process with SIGBUS when
+    code past the end is run: its size is checked against what its ELF headers say it holds.
+    """
+    manifest_path = folder / "manifest.json"
+    if not manifest_path.is_file():
+        return ""
+    try:
+        manifest = json.loads(manifest_path.read_text())
+        library = folder / manifest["library"]
+        if not isinstance(manifest["functions"], list):
+            return "its manifest.json lists no functions"
+        data = library.read_bytes()
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        return f"its manifest.json or library cannot be read: {type(exc).__name__}"
+    return _elf_damage(data, library.name)
+
+
+def _elf_damage(data: bytes, name: str) -> str | None:
+    """None when ``data`` is a whole 64-bit little-endian ELF file, else what is wrong with it."""
+    import struct
+
+    if len(data) < 64 or data[:4] != b"\x7fELF":
+        return f"{name} is not a shared library ({len(data)} bytes)"
+    if data[4] != 2 or data[5] != 1:  # not ELF64 little-endian: not what dynid builds here
+        return None
+    phoff, shoff = struct.unpack_from("<QQ", data, 0x20)
+    phentsize, phnum, shentsize, shnum = struct.unpack_from("<HHHH", data, 0x36)
+    need = max(phoff + phentsize * phnum, shoff + shentsize * shnum)
+    if need > len(data):
+        return f"{name} holds {len(data)} bytes, its headers say at least {need}: it was cut short"
+    for k in range(phnum):
+        p_type, _, p_offset, _, _, p_filesz = struct.unpack_from("<IIQQQQ", data, phoff + k * phentsize)
+        if p_type == 1 and p_offset + p_filesz > len(data):  # PT_LOAD past the end
+            end = p_offset + p_filesz
+            return f"{name} holds {len(data)} bytes, a segment ends at {end}: it was cut short"
+    return None

@@ -101,6 +101,10 @@ class RobotFunctions:
         return outs[0] if len(outs) == 1 else tuple(outs)
 
 
+def _load_functions(folder: Path) -> dict[str, ca.Function]:
+    return {name: ca.Function.load(str(folder / f"{name}.casadi")) for name in FUNCTION_NAMES}
+
+
 def robot_functions(robot: RobotModel, *, progress: Progress | None = stderr_progress) -> RobotFunctions:
     """Load (generating once, then from cache) the CasADi functions of ``robot``.
 
@@ -115,7 +119,21 @@ def robot_functions(robot: RobotModel, *, progress: Progress | None = stderr_pro
     if cached is not None:  # same tree: same functions, whatever the limits
         return cached if cached.robot is robot else replace(cached, robot=robot)
     folder = robot_function_dir(robot.spec, progress)
-    loaded = {name: ca.Function.load(str(folder / f"{name}.casadi")) for name in FUNCTION_NAMES}
+    try:
+        loaded = _load_functions(folder)
+    except RuntimeError:  # a damaged cache file (truncated, overwritten): generated again
+        import warnings
+
+        from dynid.exceptions import CacheWarning
+
+        warnings.warn(
+            f"the cached CasADi functions of the robot '{robot.name}' in {folder} could not be read (a damaged "
+            "file: cut short or overwritten); they were generated again",
+            CacheWarning,
+            stacklevel=2,
+        )
+        folder = robot_function_dir(robot.spec, progress, rebuild=True)
+        loaded = _load_functions(folder)
     funcs = RobotFunctions(
         robot=robot,
         folder=folder,

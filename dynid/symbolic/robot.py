@@ -579,7 +579,7 @@ def _load_urdf(path: Path, *, name: str, source: str, lock=(), tool=None, ddq_ma
         raise RobotModelError(
             f"the URDF file '{path}' does not exist; give the path of an existing .urdf file."
         )
-    _refuse_mimic_joints(path, lock)
+    _check_urdf_xml(path, lock)
     try:
         with _captured_stderr() as said:
             model = pin.buildModelFromUrdf(str(path))
@@ -619,21 +619,83 @@ def _load_mjcf(path: Path, *, name: str, source: str, tool=None) -> RobotModel:
     return _from_pin_model(model, name=name, source=source, tool=tool, ddq_max=None)
 
 
-def _refuse_mimic_joints(path: Path, lock=()) -> None:
-    """Refuse a URDF whose movable joints include a mimic joint (dynid does not model them)."""
+def _check_urdf_xml(path: Path, lock=()) -> None:
+    """Refuse what Pinocchio's URDF parser would take silently, or crash on, before it sees the file.
+
+    * a movable joint that mimics another (dynid does not model them);
+    * a link tree that is not a tree: a joint whose child is the root link or one of its own ancestors
+      (a loop; Pinocchio's parser crashes on it), a link that is the child of two joints;
+    * limits that are not limits: ``lower`` above ``upper``, a ``velocity`` that is zero, negative or not
+      finite (Pinocchio's import would replace them with +-pi and pi rad/s, where a TOML table or the
+      command line refuse the same values).
+    """
     try:
         root = ET.parse(path).getroot()
     except (ET.ParseError, OSError):
         return  # the URDF parser names the problem
+    parent_of: dict[str, tuple[str, str]] = {}  # child link -> (joint, parent link)
     for joint in root.iter("joint"):
-        mimic = joint.find("mimic")
         name = joint.get("name", "?")
-        if mimic is None or joint.get("type") == "fixed" or name in lock:
+        kind = joint.get("type")
+        parent, child = joint.find("parent"), joint.find("child")
+        if parent is not None and child is not None:
+            child_link, parent_link = child.get("link", ""), parent.get("link", "")
+            if child_link in parent_of:
+                raise RobotModelError(
+                    f"link '{child_link}' of the URDF file '{path}' is the child of two joints, "
+                    f"'{parent_of[child_link][0]}' and '{name}'; a URDF is a tree, so give each link one "
+                    "parent joint."
+                )
+            parent_of[child_link] = (name, parent_link)
+        if kind == "fixed" or name in lock:
             continue
+        mimic = joint.find("mimic")
+        if mimic is not None:
+            raise RobotModelError(
+                f"joint '{name}' of the URDF file '{path}' mimics joint '{mimic.get('joint', '?')}', but "
+                "dynid models independent joints only; make the mimic joint fixed, or remove its <mimic> tag "
+                "to identify it as a joint of its own."
+            )
+        _check_urdf_limit(joint.find("limit"), name, kind, path)
+    for child_link, (name, parent_link) in parent_of.items():
+        seen = {child_link}
+        link = parent_link
+        while link in parent_of:
+            if link in seen:
+                raise RobotModelError(
+                    f"joint '{name}' of the URDF file '{path}' closes a loop: its child link '{child_link}' "
+                    f"is also an ancestor of its parent link '{parent_link}'; a URDF is a tree, so remove the "
+                    "joint or give it another child link."
+                )
+            seen.add(link)
+            link = parent_of[link][1]
+
+
+def _check_urdf_limit(limit: ET.Element | None, joint: str, kind: str | None, path: Path) -> None:
+    """Refuse a ``<limit>`` whose lower bound exceeds its upper one, or whose velocity is not positive."""
+    if limit is None:
+        return
+    unit = "m" if kind == "prismatic" else "rad"
+
+    def number(key: str) -> float | None:
+        text = limit.get(key)
+        if text is None:
+            return None
+        try:
+            return float(text)
+        except ValueError:
+            return None  # the URDF parser names the problem
+
+    lower, upper, velocity = number("lower"), number("upper"), number("velocity")
+    if kind != "continuous" and lower is not None and upper is not None and lower > upper:
         raise RobotModelError(
-            f"joint '{name}' of the URDF file '{path}' mimics joint '{mimic.get('joint', '?')}', but dynid "
-            "models independent joints only; make the mimic joint fixed, or remove its <mimic> tag to identify "
-            "it as a joint of its own."
+            f"joint '{joint}' of the URDF file '{path}' has the lower limit {lower:g} {unit} above its upper "
+            f"limit {upper:g} {unit}; give lower < upper in its <limit> tag (swap them if they were exchanged)."
+        )
+    if velocity is not None and not (math.isfinite(velocity) and velocity > 0):
+        raise RobotModelError(
+            f"joint '{joint}' of the URDF file '{path}' has the velocity limit {velocity:g} {unit}/s; give a "
+            f"positive velocity in its <limit> tag (the joint's top speed in {unit}/s)."
         )
 
 
@@ -819,12 +881,30 @@ def _column(table: dict, section: str, key: str, n: int | None, path: Path, defa
     return value
 
 
+_MAX_COUPLING = 1e3
+"""Largest coupling ratio (joint units per joint unit) of a transmission: real wrists couple at ratios near 1."""
+
+_MAX_TRANSMISSION_COND = 1e8
+"""Largest condition number of a transmission matrix: beyond it motor and joint angles cannot be told apart."""
+
+
+def _is_number(value) -> bool:
+    """A TOML/JSON number: an int or a float, not a bool (``true`` is not joint 1) nor a string."""
+    number = isinstance(value, int | float | np.integer | np.floating)
+    return number and not isinstance(value, bool | np.bool_)
+
+
 def _check_transmission(value, n: int, where: str) -> np.ndarray:
-    """The matrix R (n, n) of a coupled transmission, checked: finite, unit diagonal."""
-    try:
-        R = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        R = np.zeros(0)
+    """The matrix R (n, n) of a coupled transmission, checked: numbers, finite, unit diagonal, invertible."""
+    if isinstance(value, list | tuple) and not all(
+        _is_number(v) for row in value for v in (row if isinstance(row, list | tuple) else [row])
+    ):
+        R = np.zeros(0)  # strings or booleans as numbers
+    else:
+        try:
+            R = np.array(value, dtype=float)
+        except (TypeError, ValueError):
+            R = np.zeros(0)
     if R.shape != (n, n) or not np.all(np.isfinite(R)):
         raise RobotModelError(
             f"the transmission of {where} is {R.shape if R.size else 'not a matrix of numbers'}; give an "
@@ -834,6 +914,20 @@ def _check_transmission(value, n: int, where: str) -> np.ndarray:
         raise RobotModelError(
             f"the transmission of {where} has diagonal {np.diag(R).tolist()}; each motor turns with its own "
             "joint at ratio 1 in joint units: give a unit diagonal (fold the gear ratio into the coupling)."
+        )
+    big = np.abs(R - np.eye(n)) > _MAX_COUPLING
+    if np.any(big):
+        i, j = np.argwhere(big)[0]
+        raise RobotModelError(
+            f"the transmission of {where} couples motor {i + 1} to joint {j + 1} at ratio {R[i, j]:g}, beyond "
+            f"+-{_MAX_COUPLING:g}; give the ratio in joint units per joint unit (a wrist couples at about 1)."
+        )
+    cond = np.linalg.cond(R)
+    if not cond <= _MAX_TRANSMISSION_COND:
+        raise RobotModelError(
+            f"the transmission of {where} is singular (condition number {cond:.3g}): two motors turn with the "
+            "same combination of joints, so motor and joint angles cannot be told apart; couple each pair of "
+            "joints once (motor b with joint a, not also motor a with joint b at the same ratio)."
         )
     R.setflags(write=False)
     return R
@@ -847,20 +941,44 @@ def _transmission_table(section, n: int, where: str) -> np.ndarray:
             f"the [transmission] table of {where} has neither 'matrix' nor 'coupled'; write e.g. "
             "coupled = [[5, 6, 1.0]] (motor 6 also turns with joint 5) or an n x n matrix."
         )
+    unknown = sorted(set(section) - {"matrix", "coupled"})
+    if unknown:
+        raise RobotModelError(
+            f"the [transmission] table of {where} has the unknown key '{unknown[0]}'; it holds 'coupled' or "
+            "'matrix' only: remove or rename the key."
+        )
+    if len(section) > 1:
+        raise RobotModelError(
+            f"the [transmission] table of {where} has both 'matrix' and 'coupled'; give one of them."
+        )
     if "matrix" in section:
         return _check_transmission(section["matrix"], n, where)
+    coupled = section["coupled"]
+    if isinstance(coupled, list) and not coupled:
+        raise RobotModelError(
+            f"'transmission.coupled' in {where} is empty; list the couplings, e.g. coupled = [[5, 6, 1.0]], or "
+            "give no transmission when the joints are not coupled."
+        )
     R = np.eye(n)
-    for entry in section["coupled"] if isinstance(section["coupled"], list) else [None]:
+    seen: set[tuple[int, int]] = set()
+    for entry in coupled if isinstance(coupled, list) else [None]:
         ok = isinstance(entry, list) and len(entry) == 3
         if ok:
             a, b, r = entry
-            ok = all(isinstance(v, int) and 1 <= v <= n for v in (a, b)) and a != b
-            ok = ok and isinstance(r, int | float) and math.isfinite(r)
+            ok = all(_is_number(v) and int(v) == v and 1 <= v <= n for v in (a, b)) and a != b
+            ok = ok and _is_number(r) and math.isfinite(r)
         if not ok:
             raise RobotModelError(
                 f"the entry {entry!r} of 'transmission.coupled' in {where} is not [a, b, r] with joints a != b "
-                f"in 1..{n} and a finite ratio r; write e.g. coupled = [[5, 6, 1.0]]."
+                f"in 1..{n} and a finite ratio r (numbers, not text or true/false); write e.g. "
+                "coupled = [[5, 6, 1.0]]."
             )
+        a, b = int(a), int(b)
+        if (a, b) in seen:
+            raise RobotModelError(
+                f"'transmission.coupled' in {where} couples motor {b} to joint {a} twice; give each pair once."
+            )
+        seen.add((a, b))
         R[b - 1, a - 1] = float(r)
     return _check_transmission(R, n, where)
 
@@ -968,6 +1086,11 @@ def _load_mdh(path: Path, *, name: str) -> RobotModel:
             f"theta and [links] {', '.join(_LINK_COLUMNS)} (one value per joint)."
         )
     n = _joint_count(table)
+    if n == 0:
+        raise RobotModelError(
+            f"the table '{path}' lists no joint (its columns are empty); give one value per joint in each "
+            "column, for an arm with at least one joint."
+        )
     dh = {k: _column(table, "joints", k, n, path) for k in _DH_COLUMNS}
     kinds = table["joints"].get("type", ["R"] * n)
     if not isinstance(kinds, list) or len(kinds) != n or any(k not in ("R", "P") for k in kinds):
