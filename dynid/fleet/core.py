@@ -64,10 +64,10 @@ class FleetSettings:
 
     Parameters
     ----------
-    method : {"ols", "wls", "gls", "irls", "consistent"}
-        Layer-1 method.
-    friction : {"none", "linear", "seed", "stribeck", "sigmoid"}
-        Friction model.
+    method : str
+        Layer-1 method (:func:`dynid.identify.registry.method_names`).
+    friction : str
+        Friction model, a name of :data:`~dynid.identify.registry.FRICTION_MODELS`.
     gmm : "off" or "auto" or int
         Layer-3 correction.
     cutoff : float or "auto" or None

@@ -54,8 +54,10 @@ from dynid.exceptions import IdentificationError, IdentificationWarning, UsageEr
 from dynid.identify.checks import check_is_fitted
 from dynid.identify.columns import ColumnSet, linear_torque
 from dynid.identify.linear_system import LinearSystem, WeightedSolution, build_system
+from dynid.identify.registry import CONSTRAINED_METHODS, ESTIMATORS
 
 __all__ = [
+    "ESTIMATORS",
     "GLS",
     "IRLS",
     "OLS",
@@ -70,6 +72,7 @@ __all__ = [
     "long_run_factor",
     "long_run_variance",
     "physical_lower_bounds",
+    "register_estimator",
     "residual_correlation",
 ]
 
@@ -133,7 +136,13 @@ def whitener(omega: NDArray[np.float64]) -> NDArray[np.float64]:
 
 class LinkEstimator:
     """Base of the layer-1 estimators (not used alone; see :class:`OLS`, :class:`WLS`, :class:`GLS`,
-    :class:`IRLS`).
+    :class:`IRLS`), and of the registry :data:`ESTIMATORS`.
+
+    A new estimator sets its ``method`` name and implements ``_iterate(system) -> (WeightedSolution,
+    Omega)``, the weighting it solves on the compressed system (``self._weighted_fit(system, W)`` with
+    ``W`` the whitener, see :class:`GLS`); this class turns that into the attributes below and
+    :meth:`predict`.  :func:`register_estimator` makes it a ``method=`` of
+    :func:`dynid.identify.model.identify` and a ``--method`` choice.
 
     Parameters
     ----------
@@ -618,5 +627,39 @@ class IRLS(LinkEstimator):
         return sol, omega
 
 
-ESTIMATORS: dict[str, type[LinkEstimator]] = {"ols": OLS, "wls": WLS, "gls": GLS, "irls": IRLS}
-"""Layer-1 estimators by method name."""
+def register_estimator(cls: type[LinkEstimator], *, replace: bool = False) -> type[LinkEstimator]:
+    """Add a layer-1 estimator to :data:`ESTIMATORS` under its ``method`` (usable as a class decorator).
+
+    It is then a ``method=`` of :func:`dynid.identify.model.identify` (built there as
+    ``cls(robot=..., friction=..., armature=..., preprocessing=...)``) and a ``--method`` choice of
+    ``dynid identify`` and ``dynid fleet``.
+
+    Parameters
+    ----------
+    cls : type
+        A subclass of :class:`LinkEstimator` with a ``method`` name and its ``_iterate``.
+    replace : bool
+        Replace an estimator registered under the same name.
+
+    Returns
+    -------
+    type
+        ``cls``.
+
+    Raises
+    ------
+    UsageError
+        Not such a class, or a name that is taken (without ``replace``) or reserved.
+    """
+    if not (isinstance(cls, type) and issubclass(cls, LinkEstimator)):
+        raise UsageError(f"{cls!r} is not a layer-1 estimator; subclass dynid.identify.estimators.LinkEstimator")
+    name = cls.method
+    if not (isinstance(name, str) and name.isidentifier()) or name in ("auto", *CONSTRAINED_METHODS):
+        raise UsageError(
+            f"the estimator {cls.__name__} has the method name {name!r}; give it a method attribute made of "
+            f"letters, digits and underscores, other than auto and {', '.join(CONSTRAINED_METHODS)}"
+        )
+    if cls._iterate is LinkEstimator._iterate and cls._fit_system is LinkEstimator._fit_system:
+        raise UsageError(f"the estimator {cls.__name__} does not define _iterate(system); define its weighting")
+    ESTIMATORS.add(name, cls, replace=replace)
+    return cls

@@ -12,6 +12,9 @@ then ``model.predict(dq) -> F``.  :class:`FrictionLayer` fits one model per join
                Franka Emika Panda)
 =============  ==================================================================================
 
+The table is :data:`FRICTION_MODELS` (:mod:`dynid.identify.registry`): a model of one's own subclasses
+:class:`FrictionModel` and is added with :func:`register_friction_model`.
+
 Models linear in their coefficients for a fixed shape parameter (``lambda`` of the seed model, ``vs``
 of Stribeck) are fitted by a search over that parameter with a bounded linear least squares inside;
 each inner problem is first compressed by QR (m x k -> k x k), so a search over many candidates on
@@ -35,6 +38,8 @@ Every model also exposes its linear part at the fitted shape (:meth:`basis`, :me
 
 from __future__ import annotations
 
+import inspect
+from abc import ABC, abstractmethod
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, ClassVar, Self
 
@@ -48,10 +53,12 @@ from dynid.data.preprocess import filtfilt_rows
 from dynid.exceptions import DataError, ModelFileError, UsageError
 from dynid.identify._qr import r_factor
 from dynid.identify.checks import check_is_fitted
+from dynid.identify.registry import FRICTION_MODELS
 
 __all__ = [
     "FRICTION_MODELS",
     "FrictionLayer",
+    "FrictionModel",
     "LinearFriction",
     "NoFriction",
     "SeedFriction",
@@ -59,11 +66,30 @@ __all__ = [
     "StribeckFriction",
     "bounded_lsq",
     "friction_model",
+    "register_friction_model",
 ]
 
 _SEARCH_SAMPLES = 10_000  # samples used in shape-parameter searches (evenly strided)
 _SEARCH_WINDOW = 10_000  # full-rate samples filtered per candidate in a search on filtered data
 _GOLDEN_STEPS = 20  # golden-section refinements of a threshold search
+
+# What a simulator's damping and frictionloss leave out of the built-in models (FrictionModel.simulator_items)
+_SIMULATOR_ITEMS = {
+    "friction offset": "the constant torque fo of each joint (no simulator field)",
+    "Stribeck friction": "the static level above the Coulomb level at low speed",
+    "direction-dependent Coulomb friction": "different levels for positive and negative speed; their mean is "
+    "the frictionloss",
+    "nonlinear viscous friction": "the dq|dq| and dq^3 terms; only the linear term is damping",
+    "sigmoid friction shape": "the smooth sigmoid and its shift; half its span is the frictionloss, no damping",
+}
+
+
+def _items(*whats: str) -> dict[str, str]:
+    return {w: _SIMULATOR_ITEMS[w] for w in whats}
+
+
+def _present(*flags: tuple[str, bool]) -> tuple[str, ...]:
+    return tuple(what for what, on in flags if on)
 
 
 def _check_pair(
@@ -163,11 +189,41 @@ class _Sampling:
         return dq if self.window is None else dq[self.window]
 
 
-class _Friction:
-    """Common parts of the single-joint friction models."""
+class FrictionModel(ABC):
+    """Base of the single-joint friction models: ``fit(dq, F) -> self``, ``predict(dq) -> F``.
+
+    A model whose torque is linear in its coefficients needs only its name, its coefficients and their
+    columns; the base fits them by bounded least squares (filtered like the torque on prepared data)::
+
+        @register_friction_model
+        class QuadraticFriction(FrictionModel):
+            name = "quadratic"                  # the --friction choice and the model file's name
+            coef_names = ("kv2",)               # coef_, as the model file writes it
+            bounds = (0.0,)                     # lower bound of each coefficient: 0 or -inf
+
+            def columns(self, dq):              # (m,) rad/s -> (m, k)
+                return (dq * np.abs(dq))[:, None]
+
+    A model with a shape parameter (a threshold, a Stribeck speed) keeps it as its last coefficient,
+    lists its linear coefficients' positions in ``_linear``, overrides ``_fit`` (see
+    :class:`SeedFriction`) and gives :meth:`columns` at the fitted shape.  The constructor takes
+    keyword arguments with defaults only (a model file rebuilds the model as ``cls()``).
+
+    What a simulator description can hold of the model (a joint's ``damping`` and ``frictionloss``) is
+    :meth:`simulator_terms`; by default none of it, and the export lists the whole model as not carried.
+
+    Attributes
+    ----------
+    coef_ : ndarray, shape (len(coef_names),)
+        The fitted coefficients.
+    rms_ : float
+        RMS (N m) of ``F - predict(dq)`` on the fitting data.
+    """
 
     name: ClassVar[str] = ""
     coef_names: ClassVar[tuple[str, ...]] = ()
+    bounds: ClassVar[tuple[float, ...]] = ()
+    """Lower bound of each linear coefficient, in the order of :meth:`columns`: 0 or -inf."""
     _min_samples: ClassVar[int] = 1  # fewer samples than this: DataError
 
     def __repr__(self) -> str:
@@ -195,17 +251,6 @@ class _Friction:
         self._fit(dq, F, dq_k, sampling, around)
         return self
 
-    def _fit(
-        self,
-        dq: NDArray[np.float64],
-        F: NDArray[np.float64],
-        dq_k: NDArray[np.float64],
-        sampling: _Sampling | None,
-        around: float | None,
-    ) -> None:
-        """Fit on checked inputs (see :func:`_inputs`) and store the result with :meth:`_set`."""
-        raise NotImplementedError
-
     def _check_fitted(self) -> None:
         check_is_fitted(self, "coef_", call="fit(dq, F)")
 
@@ -231,7 +276,7 @@ class _Friction:
             Joint velocity (rad/s).
         """
         self._check_fitted()
-        return self._basis(np.asarray(dq, dtype=np.float64).ravel())
+        return self.columns(np.asarray(dq, dtype=np.float64).ravel())
 
     def linear_coef(self) -> NDArray[np.float64]:
         """The coefficients that enter linearly (k,), in the order of :meth:`basis`."""
@@ -255,13 +300,62 @@ class _Friction:
     @property
     def linear_bounds(self) -> NDArray[np.float64]:
         """Lower bounds of the linear coefficients (0 or -inf)."""
-        return np.array(self._bounds[: len(self._linear)], dtype=np.float64)
+        return np.array(self.bounds[: len(self._linear)], dtype=np.float64)
 
-    _linear: tuple[int, ...] = ()
-    _bounds: tuple[float, ...] = ()
+    @property
+    def _linear(self) -> tuple[int, ...]:
+        """Positions in ``coef_`` of the coefficients that enter linearly (default: all of them)."""
+        return tuple(range(len(self.coef_names)))
 
-    def _basis(self, dq: NDArray[np.float64]) -> NDArray[np.float64]:
-        raise NotImplementedError
+    @abstractmethod
+    def columns(self, dq: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The columns of the linear coefficients, at the fitted shape for a model with one: (m, k).
+
+        Parameters
+        ----------
+        dq : ndarray, shape (m,)
+            Joint velocity (rad/s).
+        """
+
+    @classmethod
+    def simulator_items(cls) -> dict[str, str]:
+        """What a simulator's joint damping and frictionloss may leave out of this model: ``{what: detail}``,
+        in the order the export lists them.  Default: the whole model."""
+        return {
+            f"{cls.name} friction": f"the {cls.name} friction model ({', '.join(cls.coef_names)}) has no "
+            "simulator field; no damping and frictionloss were written for it"
+        }
+
+    def simulator_terms(self) -> tuple[float, float, tuple[str, ...]]:
+        """This joint's fit in a simulator's terms.
+
+        Returns
+        -------
+        damping : float
+            Viscous coefficient (N m s/rad).
+        frictionloss : float
+            Coulomb level (N m).
+        left : tuple of str
+            The keys of :meth:`simulator_items` that the two leave out of this fit.  Default: no
+            damping, no frictionloss, the whole model left out.
+        """
+        self._check_fitted()
+        return 0.0, 0.0, tuple(self.simulator_items())
+
+    def _fit(
+        self,
+        dq: NDArray[np.float64],
+        F: NDArray[np.float64],
+        dq_k: NDArray[np.float64],
+        sampling: _Sampling | None,
+        around: float | None,
+    ) -> None:
+        """Fit on checked inputs (see :func:`_inputs`) and store the result with :meth:`_set`.
+
+        Default: the bounded least squares of :meth:`columns` (a model linear in all its coefficients).
+        """
+        coef, rss = self._fit_columns(self.columns, dq, F, sampling, self.bounds)
+        self._set(coef, rss, len(F))
 
     def _fit_columns(
         self,
@@ -380,7 +474,7 @@ def _shape_search(
     return float(min(best)[1]), sse
 
 
-class NoFriction(_Friction):
+class NoFriction(FrictionModel):
     """No friction: predicts zero."""
 
     name = "none"
@@ -389,11 +483,19 @@ class NoFriction(_Friction):
     def _fit(self, dq, F, dq_k, sampling, around) -> None:
         self._set([], float(F @ F), len(F))
 
-    def _basis(self, dq):
+    def columns(self, dq):
         return np.zeros((len(dq), 0))
 
+    @classmethod
+    def simulator_items(cls) -> dict[str, str]:
+        return {}
 
-class LinearFriction(_Friction):
+    def simulator_terms(self) -> tuple[float, float, tuple[str, ...]]:
+        self._check_fitted()
+        return 0.0, 0.0, ()
+
+
+class LinearFriction(FrictionModel):
     """``F = fc sign(dq) + fv dq + fo`` with ``fc, fv >= 0`` (METHOD.md's linear baseline plus an offset).
 
     Fitted by bounded linear least squares.
@@ -406,7 +508,7 @@ class LinearFriction(_Friction):
 
     name = "linear"
     coef_names = ("fc", "fv", "fo")
-    _bounds = (0.0, 0.0, -np.inf)
+    bounds = (0.0, 0.0, -np.inf)
     _min_samples = 3
 
     def __init__(self, *, offset: bool = True) -> None:
@@ -418,15 +520,23 @@ class LinearFriction(_Friction):
 
     def _fit(self, dq, F, dq_k, sampling, around) -> None:
         k = 3 if self.offset else 2
-        coef, rss = self._fit_columns(lambda v: self._columns(v)[:, :k], dq, F, sampling, self._bounds[:k])
+        coef, rss = self._fit_columns(lambda v: self._columns(v)[:, :k], dq, F, sampling, self.bounds[:k])
         self._set(np.append(coef, 0.0) if k == 2 else coef, rss, len(F))
 
     @staticmethod
     def _columns(dq):
         return np.column_stack([np.sign(dq), dq, np.ones_like(dq)])
 
-    def _basis(self, dq):
+    def columns(self, dq):
         return self._columns(dq)[:, : len(self._linear)]
+
+    @classmethod
+    def simulator_items(cls) -> dict[str, str]:
+        return _items("friction offset")
+
+    def simulator_terms(self) -> tuple[float, float, tuple[str, ...]]:
+        c = self.to_dict()["coef"]
+        return max(c["fv"], 0.0), max(c["fc"], 0.0), _present(("friction offset", abs(c["fo"]) > 0))
 
 
 def _seed_columns(dq: NDArray[np.float64], lam: float) -> NDArray[np.float64]:
@@ -475,7 +585,7 @@ def _seed_rows(s: _SeedSpeeds, lam: float) -> NDArray[np.float64]:
     return A
 
 
-class _ShapedFriction(_Friction):
+class _ShapedFriction(FrictionModel):
     """Models linear in their coefficients at a fixed shape parameter, the last coefficient.
 
     The shape parameter is searched among candidates between the quantiles ``quantiles`` of ``|dq|``
@@ -513,7 +623,7 @@ class _ShapedFriction(_Friction):
         lo, hi = np.quantile(a, self.quantiles)
         lo = max(lo, hi * 1e-4)
         cands = np.geomspace(lo, hi, int(self.n_candidates)) if around is None else _near(around, lo, hi)
-        bounds = self._bounds
+        bounds = self.bounds
         columns = self._columns
         if sampling is None:
             s = _stride(len(dq))
@@ -538,7 +648,7 @@ class _ShapedFriction(_Friction):
         self.candidate_sse_ = sse
         self._set(np.append(coef, shape), rss, len(F))
 
-    def _basis(self, dq):
+    def columns(self, dq):
         return self._columns(dq, self.coef_[-1])
 
     def _speeds(self, dq: NDArray[np.float64]) -> Any:
@@ -583,7 +693,7 @@ class SeedFriction(_ShapedFriction):
     name = "seed"
     coef_names = ("kc_pos", "kc_neg", "kv1", "kv2", "kv3", "ks_pos", "ks_neg", "lam")
     _linear = (0, 1, 2, 3, 4, 5, 6)
-    _bounds = (0.0,) * 7
+    bounds = (0.0,) * 7
 
     _search_label = "seed"
     _move_advice = ": record a motion of that joint"
@@ -595,6 +705,19 @@ class SeedFriction(_ShapedFriction):
     _columns = staticmethod(_seed_columns)
     _speeds = staticmethod(_SeedSpeeds)  # type: ignore[assignment]
     _rows = staticmethod(_seed_rows)  # type: ignore[assignment]
+
+    @classmethod
+    def simulator_items(cls) -> dict[str, str]:
+        return _items("Stribeck friction", "direction-dependent Coulomb friction", "nonlinear viscous friction")
+
+    def simulator_terms(self) -> tuple[float, float, tuple[str, ...]]:
+        c = self.to_dict()["coef"]
+        left = _present(
+            ("Stribeck friction", c["ks_pos"] != c["kc_pos"] or c["ks_neg"] != c["kc_neg"]),
+            ("direction-dependent Coulomb friction", c["kc_pos"] != c["kc_neg"]),
+            ("nonlinear viscous friction", c["kv2"] > 0 or c["kv3"] > 0),
+        )
+        return c["kv1"], 0.5 * (c["kc_pos"] + c["kc_neg"]), left
 
 
 class StribeckFriction(_ShapedFriction):
@@ -614,7 +737,7 @@ class StribeckFriction(_ShapedFriction):
     name = "stribeck"
     coef_names = ("fc", "fs", "fv", "fo", "vs")
     _linear = (0, 1, 2, 3)
-    _bounds = (0.0, 0.0, 0.0, -np.inf)
+    bounds = (0.0, 0.0, 0.0, -np.inf)
 
     _search_label = "Stribeck"
     _refine = False
@@ -629,8 +752,17 @@ class StribeckFriction(_ShapedFriction):
         sg = np.sign(dq)
         return np.column_stack([sg * (1.0 - e), sg * e, dq, np.ones_like(dq)])
 
+    @classmethod
+    def simulator_items(cls) -> dict[str, str]:
+        return _items("friction offset", "Stribeck friction")
 
-class SigmoidFriction(_Friction):
+    def simulator_terms(self) -> tuple[float, float, tuple[str, ...]]:
+        c = self.to_dict()["coef"]
+        left = _present(("friction offset", abs(c["fo"]) > 0), ("Stribeck friction", abs(c["fs"] - c["fc"]) > 0))
+        return max(c["fv"], 0.0), max(c["fc"], 0.0), left
+
+
+class SigmoidFriction(FrictionModel):
     """``F = phi1 / (1 + exp(-phi2 (dq + phi3))) - phi1 / (1 + exp(-phi2 phi3))`` (Gaz et al. 2019).
 
     ``phi1`` (N m) scales, ``phi2`` (s/rad) sets the steepness, ``phi3`` (rad/s) shifts; ``F(0) = 0``.
@@ -647,7 +779,7 @@ class SigmoidFriction(_Friction):
     name = "sigmoid"
     coef_names = ("phi1", "phi2", "phi3")
     _linear = (0,)
-    _bounds = (-np.inf,)
+    bounds = (-np.inf,)
     _min_samples = 10
 
     def __init__(self, *, max_samples: int = 20_000) -> None:
@@ -675,25 +807,72 @@ class SigmoidFriction(_Friction):
         best = min(fits, key=lambda sol: sol.cost)  # the first of the least cost, as before
         phi2, phi3 = float(np.exp(best.x[0])), float(best.x[1])
         coef, rss = self._fit_columns(
-            lambda v: self._shape(v, phi2, phi3)[:, None], dq, F, sampling, self._bounds
+            lambda v: self._shape(v, phi2, phi3)[:, None], dq, F, sampling, self.bounds
         )
         self._set([float(coef[0]), phi2, phi3], rss, len(F))
 
-    def _basis(self, dq):
+    def columns(self, dq):
         return self._shape(dq, self.coef_[1], self.coef_[2])[:, None]
 
+    @classmethod
+    def simulator_items(cls) -> dict[str, str]:
+        return _items("sigmoid friction shape")
 
-FRICTION_MODELS: dict[str, type[_Friction]] = {
-    "none": NoFriction,
-    "linear": LinearFriction,
-    "seed": SeedFriction,
-    "stribeck": StribeckFriction,
-    "sigmoid": SigmoidFriction,
-}
-"""Friction models by name (the ``--friction`` choices)."""
+    def simulator_terms(self) -> tuple[float, float, tuple[str, ...]]:
+        c = self.to_dict()["coef"]
+        return 0.0, 0.5 * abs(c["phi1"]), ("sigmoid friction shape",)
 
 
-def friction_model(name: str, **options: Any) -> _Friction:
+def register_friction_model(cls: type[FrictionModel], *, replace: bool = False) -> type[FrictionModel]:
+    """Add a friction model to :data:`FRICTION_MODELS` under its ``name`` (usable as a class decorator).
+
+    It is then a ``friction=`` of :func:`dynid.identify.model.identify` and a ``--friction`` choice of
+    ``dynid identify`` and ``dynid fleet``, and model files that use it load in this process.
+
+    Parameters
+    ----------
+    cls : type
+        A concrete subclass of :class:`FrictionModel` with a ``name``, ``coef_names`` and a constructor
+        whose arguments all have defaults.
+    replace : bool
+        Replace a model registered under the same name.
+
+    Returns
+    -------
+    type
+        ``cls``.
+
+    Raises
+    ------
+    UsageError
+        Not such a class, or a name that is taken (without ``replace``) or reserved.
+    """
+    if not (isinstance(cls, type) and issubclass(cls, FrictionModel)):
+        raise UsageError(f"{cls!r} is not a friction model; subclass dynid.identify.friction.FrictionModel")
+    name = cls.name
+    if not (isinstance(name, str) and name.isidentifier()) or name == "auto":
+        raise UsageError(
+            f"the friction model {cls.__name__} has the name {name!r}; give it a name attribute made of letters, "
+            "digits and underscores, other than 'auto'"
+        )
+    if inspect.isabstract(cls):
+        missing = ", ".join(sorted(cls.__abstractmethods__))
+        raise UsageError(f"the friction model {cls.__name__} does not define {missing}; define it")
+    required = [
+        p.name
+        for p in inspect.signature(cls).parameters.values()
+        if p.default is inspect.Parameter.empty and p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)
+    ]
+    if required:
+        raise UsageError(
+            f"the friction model {cls.__name__} needs the arguments {', '.join(required)}; give every constructor "
+            "argument a default (a model file rebuilds it without arguments)"
+        )
+    FRICTION_MODELS.add(name, cls, replace=replace)
+    return cls
+
+
+def friction_model(name: str, **options: Any) -> FrictionModel:
     """A new, unfitted single-joint friction model by name.
 
     Parameters
@@ -704,7 +883,10 @@ def friction_model(name: str, **options: Any) -> _Friction:
         Constructor arguments of that model.
     """
     if name not in FRICTION_MODELS:
-        raise UsageError(f"unknown friction model {name!r}; choose one of {', '.join(FRICTION_MODELS)}")
+        raise UsageError(
+            f"unknown friction model {name!r}; choose one of {', '.join(FRICTION_MODELS)} (or register one with "
+            "register_friction_model)"
+        )
     return FRICTION_MODELS[name](**options)
 
 
@@ -714,7 +896,8 @@ class FrictionLayer:
     Parameters
     ----------
     model : str
-        Friction model of every joint: ``none``, ``linear``, ``seed``, ``stribeck`` or ``sigmoid``.
+        Friction model of every joint: a name of :data:`FRICTION_MODELS` (the table of the module
+        docstring, and any model registered with :func:`register_friction_model`).
     options : dict, optional
         Constructor arguments of the model.
 
@@ -779,7 +962,7 @@ class FrictionLayer:
         elif dq.shape != F.shape:
             raise DataError(f"dq has shape {dq.shape} but F has {F.shape}; give (m, n) arrays of one shape")
 
-        def fit_joint(j: int) -> _Friction | DataError:
+        def fit_joint(j: int) -> FrictionModel | DataError:
             try:
                 mdl = friction_model(self.model, **(self.options or {}))
                 hint = None
@@ -872,6 +1055,12 @@ class FrictionLayer:
         data : dict
             ``{"model": name, "joints": [{coef name: value}, ...]}``.
         """
+        name = data.get("model") if isinstance(data, dict) else None
+        if isinstance(name, str) and name not in FRICTION_MODELS:
+            raise ModelFileError(
+                f"the model file's friction model {name!r} is not registered (the models are "
+                f"{', '.join(FRICTION_MODELS)}); register its class with register_friction_model before loading"
+            )
         try:
             name = data["model"]
             joints = data["joints"]

@@ -89,9 +89,9 @@ from dynid.identify.gmr import GMRCorrection
 from dynid.identify.linear_system import build_system
 from dynid.identify.prior import PriorChoice, choose_prior, link_report
 from dynid.identify.refine import refine
+from dynid.identify.registry import method_names
 
 __all__ = [
-    "METHODS",
     "TAKEOVER",
     "TAKEOVER_GAIN",
     "TAKEOVER_SHARE",
@@ -128,8 +128,6 @@ to the joint fit's, for a share past :data:`TAKEOVER_SHARE` to put the physical 
 Measured: the whole TX40 recording, at most 1.07 (the joint fit bought nothing for the torque its mixture
 moved); the paper reproduction's ripple, 1.17 on the joint past the share and 1.7-2.4 on the others; a
 1 N m position bump on every joint of a UR5 (tests/test_physical_layers.py), 1.4-3.1."""
-METHODS = (*ESTIMATORS, "consistent")
-"""Layer-1 methods: ``ols``, ``wls``, ``gls``, ``irls``, ``consistent``."""
 FORMAT = "dynid-model"
 VERSION = 3
 """Model file version: 2 adds effect terms and a coupled transmission; 3 the links' consistent standard
@@ -529,15 +527,17 @@ class ThreeLayerModel:
     ----------
     robot : RobotModel
         The robot that recorded the data.
-    method : {"auto", "ols", "wls", "gls", "irls", "consistent"}
-        Layer-1 method (``consistent``: IRLS weighting with physically consistent links).  ``"auto"``
-        (default): the pipeline chosen from the recording (:mod:`dynid.identify.pipeline`): OLS with
-        linear friction and no correction, or the paper's IRLS + nonlinear friction + mixture, whichever
-        predicts each half of the training recording from the other better (the richer one only if no
-        joint is more than 10 % worse); ``model_.info["pipeline"]`` records the choice and its reason.
-    friction : {"auto", "none", "linear", "seed", "stribeck", "sigmoid"}
-        Friction model (layer 2; ``linear`` keeps the coefficients identified with the links).
-        ``"auto"`` (default): chosen with ``method="auto"``, else ``seed`` (the paper's).
+    method : str
+        Layer-1 method: a weighting of :data:`~dynid.identify.registry.ESTIMATORS` (``ols``, ``irls``, ...)
+        or ``consistent`` (IRLS weighting with physically consistent links).  ``"auto"`` (default): the
+        pipeline chosen from the recording (:mod:`dynid.identify.pipeline`): OLS with linear friction and
+        no correction, or the paper's IRLS + nonlinear friction + mixture, whichever predicts each half of
+        the training recording from the other better (the richer one only if no joint is more than 10 %
+        worse); ``model_.info["pipeline"]`` records the choice and its reason.
+    friction : str
+        Friction model (layer 2): a name of :data:`~dynid.identify.registry.FRICTION_MODELS` (``none``,
+        ``seed``, ...); ``linear`` keeps the coefficients identified with the links.  ``"auto"``
+        (default): chosen with ``method="auto"``, else ``seed`` (the paper's).
     gmm : "off" or "auto" or int
         Layer 3: off, mixture size by validation, or a fixed number of components.
     preprocessing : Preprocessing, optional
@@ -612,8 +612,8 @@ class ThreeLayerModel:
         )
 
     def _check(self) -> None:
-        if self.method not in ("auto", *METHODS):
-            raise UsageError(f"unknown method {self.method!r}; choose one of auto, {', '.join(METHODS)}")
+        if self.method not in ("auto", *method_names()):
+            raise UsageError(f"unknown method {self.method!r}; choose one of auto, {', '.join(method_names())}")
         if self.friction != "auto" and self.friction not in FRICTION_MODELS:
             raise UsageError(
                 f"unknown friction model {self.friction!r}; choose one of auto, {', '.join(FRICTION_MODELS)}"
@@ -1164,10 +1164,10 @@ def identify(
         The robot that recorded the data.
     data : Dataset
         Measured data.
-    method : {"auto", "ols", "wls", "gls", "irls", "consistent"}
+    method : str
         Layer-1 method (``"auto"``: the pipeline chosen from the recording; see :class:`ThreeLayerModel`).
-    friction : {"auto", "none", "linear", "seed", "stribeck", "sigmoid"}
-        Friction model (``"auto"``: chosen with the pipeline, else ``seed``).
+    friction : str
+        Friction model (``"auto"``: chosen with the pipeline, else ``seed``; see :class:`ThreeLayerModel`).
     gmm : "off" or "auto" or int
         Layer-3 correction.
     preprocessing : Preprocessing, optional

@@ -273,8 +273,9 @@ def refine(
         The layer-1 estimate to start from.
     omega : ndarray, shape (n, n)
         Layer-1 joint-noise covariance (its diagonal weighs the joints).
-    friction : {"none", "linear", "seed", "stribeck", "sigmoid"}
-        Friction model; ``linear`` is the layer-1 friction, refined with the link parameters.
+    friction : str
+        Friction model, a name of :data:`~dynid.identify.registry.FRICTION_MODELS`; ``linear`` is the
+        layer-1 friction, refined with the link parameters.
     gmm : "off" or "auto" or int
         Layer 3: off, size by validation, or a fixed number of components.
     gmm_mode : str

@@ -20,6 +20,7 @@ import numpy as np
 
 from dynid._io import atomic_path
 from dynid.exceptions import IdentificationError, UsageError
+from dynid.identify.registry import FRICTION_MODELS
 from dynid.simmodel.checks import check_mjcf, check_urdf
 from dynid.simmodel.parameters import SimParameters, simulator_parameters
 from dynid.simmodel.urdf import match_template, read_template, robot_urdf, write_urdf
@@ -118,29 +119,28 @@ def default_template(robot) -> Path:
     )
 
 
-_FRICTION_ITEMS = (
-    "friction offset",
-    "Stribeck friction",
-    "direction-dependent Coulomb friction",
-    "nonlinear viscous friction",
-    "sigmoid friction shape",
-    "negative Coulomb or viscous coefficient",
-)
+def _friction_items() -> set[str]:
+    """The ``what`` of every friction item :func:`simulator_parameters` may leave out: each registered
+    friction model's (:meth:`dynid.identify.friction.FrictionModel.simulator_items`) and negative ones."""
+    return {"negative Coulomb or viscous coefficient"} | {
+        what for name in FRICTION_MODELS for what in FRICTION_MODELS[name].simulator_items()
+    }
 
 
 def _measured(heldout: dict[str, Any], item: dict[str, Any]) -> str | None:
     """The held-out share of a part left out, from :func:`heldout_shares`; None when not measured."""
     what = item["what"]
+    friction_items = _friction_items()
     for part in heldout["parts"]:
         name = part["part"]
         hit = (
-            (what in _FRICTION_ITEMS and name.startswith("friction beyond"))
+            (what in friction_items and name.startswith("friction beyond"))
             or (what == "GMM correction" and name == "GMM correction")
             or (what == name)
             or (what in ("armature", "coupled transmission") and name.startswith("rigid body"))
         )
         if hit:
-            together = " (with the other friction terms)" if what in _FRICTION_ITEMS else ""
+            together = " (with the other friction terms)" if what in friction_items else ""
             if what in ("armature", "coupled transmission"):
                 together = " (with the rest of the rigid-body change: consistency projection, armature)"
             return (

@@ -16,8 +16,10 @@ identified model holds base parameters, which fix only combinations of the stand
 Friction is mapped per joint onto what simulators have, a viscous coefficient (``damping``, N m s/rad)
 and a Coulomb level (``frictionloss``, N m); whatever the friction model holds beyond that (offset,
 Stribeck hump, direction-dependent levels, higher-order viscous terms, a sigmoid's shift) is listed in
-:attr:`SimParameters.not_carried`, as are the mixture correction, effect terms and a coupled
-transmission.
+:attr:`SimParameters.not_carried`.  Each friction model says what a simulator holds of it
+(:meth:`dynid.identify.friction.FrictionModel.simulator_terms`); a registered model that does not is
+written as no damping and no frictionloss and listed whole.  Listed too are the mixture correction,
+effect terms and a coupled transmission.
 """
 
 from __future__ import annotations
@@ -133,63 +135,36 @@ def _whitened_factor(cov: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def _friction(model: IdentifiedModel, n: int) -> tuple[np.ndarray, np.ndarray, list[dict[str, Any]]]:
-    """Per-joint (damping, frictionloss) from the friction model, and what the two leave out."""
+    """Per-joint (damping, frictionloss) from the friction model, and what the two leave out.
+
+    Each model says what a simulator holds of it (:meth:`dynid.identify.friction.FrictionModel.simulator_terms`);
+    a model that does not say is left out whole, and listed.
+    """
     damping, loss = np.zeros(n), np.zeros(n)
     left: list[dict[str, Any]] = []
     if model.friction is None:
         return damping, loss, left
-    kind = model.friction.model
+    models = model.friction.models_
     coefs = model.friction.to_dict()["joints"]
 
     def leave(what: str, joints: list[int], detail: str) -> None:
         if joints:
             left.append({"what": what, "joints": joints, "detail": detail})
 
-    offsets, asym, stribeck, higher, shift = [], [], [], [], []
-    for j, c in enumerate(coefs):
-        if kind == "linear":
-            loss[j], damping[j] = max(c["fc"], 0.0), max(c["fv"], 0.0)
-            if abs(c["fo"]) > 0:
-                offsets.append(j + 1)
-        elif kind == "stribeck":
-            loss[j], damping[j] = max(c["fc"], 0.0), max(c["fv"], 0.0)
-            if abs(c["fs"] - c["fc"]) > 0:
-                stribeck.append(j + 1)
-            if abs(c["fo"]) > 0:
-                offsets.append(j + 1)
-        elif kind == "seed":
-            loss[j] = 0.5 * (c["kc_pos"] + c["kc_neg"])
-            damping[j] = c["kv1"]
-            if c["kc_pos"] != c["kc_neg"]:
-                asym.append(j + 1)
-            if c["kv2"] > 0 or c["kv3"] > 0:
-                higher.append(j + 1)
-            if c["ks_pos"] != c["kc_pos"] or c["ks_neg"] != c["kc_neg"]:
-                stribeck.append(j + 1)
-        elif kind == "sigmoid":
-            loss[j] = 0.5 * abs(c["phi1"])
-            shift.append(j + 1)
-        else:  # "none"
-            pass
+    outside: list[tuple[str, ...]] = []
+    items: dict[str, str] = {}
+    for j, mdl in enumerate(models):
+        damping[j], loss[j], out = mdl.simulator_terms()
+        outside.append(out)
+        items.update(type(mdl).simulator_items())
     negative = [j + 1 for j, c in enumerate(coefs) if c.get("fc", 0.0) < 0 or c.get("fv", 0.0) < 0]
     leave(
         "negative Coulomb or viscous coefficient",
         negative,
         "identified below zero (an unconstrained fit); a simulator needs >= 0, so 0 was written",
     )
-    leave("friction offset", offsets, "the constant torque fo of each joint (no simulator field)")
-    leave("Stribeck friction", stribeck, "the static level above the Coulomb level at low speed")
-    leave(
-        "direction-dependent Coulomb friction",
-        asym,
-        "different levels for positive and negative speed; their mean is the frictionloss",
-    )
-    leave("nonlinear viscous friction", higher, "the dq|dq| and dq^3 terms; only the linear term is damping")
-    leave(
-        "sigmoid friction shape",
-        shift,
-        "the smooth sigmoid and its shift; half its span is the frictionloss, no damping",
-    )
+    for what, detail in items.items():
+        leave(what, [j + 1 for j, out in enumerate(outside) if what in out], detail)
     return damping, loss, left
 
 
