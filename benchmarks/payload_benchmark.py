@@ -15,6 +15,9 @@ Estimators, all on the same data:
 
 - ``dynid+ref``: :func:`dynid.identify.payload.identify_payload` with the reference run;
 - ``dynid``: the same without it (the arm model's prediction as the reference);
+- ``motion+ref``: the same with a reference run, on the 10 s payload motion that ``dynid excite --payload``
+  designs from the robot's posture (:func:`dynid.optim.payload_motion.design_payload_motion`) instead
+  of the 50 s excitation: the one that determines the inertia;
 - ``plain LS``: the payload as the last body's ten parameters fitted by ordinary least squares on what
   the arm model leaves of the loaded run, a per-joint Coulomb, viscous and offset change beside it,
   no weighting, no determinacy test, no physical consistency: the plain fit the issue measured.
@@ -126,6 +129,7 @@ def run(robot_name: str, cases: int) -> list[dict]:
     import dynid
     from dynid.diagnosis.field_cases import field_noise
     from dynid.identify.payload import identify_payload
+    from dynid.optim.payload_motion import design_payload_motion
     from dynid.sim.simulator import build_truth, simulate
     from dynid.symbolic.bodies import frame_transform, payload_frame
     from dynid.symbolic.robot import standard_from_com
@@ -135,6 +139,7 @@ def run(robot_name: str, cases: int) -> list[dict]:
     truth = build_truth(robot, friction="linear", truth_seed=0)
     place = payload_frame(robot)
     T = frame_transform(place)
+    short = design_payload_motion(robot, place.link, T, pose=POSTURES[robot_name], duration=10.0).trajectory
     rng = np.random.default_rng(11)
     rows = []
     for noise_name, noise in (("lab", None), ("field", field_noise())):
@@ -154,12 +159,17 @@ def run(robot_name: str, cases: int) -> list[dict]:
             loaded = simulate(robot, motion, truth=loaded_truth, seed=seed, noise=noise, duration=DURATION)
             ref = simulate(robot, motion, truth=truth, seed=seed + 1, noise=noise, duration=DURATION)
             loaded, ref = loaded.to_dataset(), ref.to_dataset()
-            for est in ("dynid+ref", "dynid", "plain LS"):
+            short_loaded = simulate(robot, short, truth=loaded_truth, seed=seed + 2, noise=noise).to_dataset()
+            short_ref = simulate(robot, short, truth=truth, seed=seed + 3, noise=noise).to_dataset()
+            for est in ("dynid+ref", "motion+ref", "dynid", "plain LS"):
                 start = time.perf_counter()
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
                     if est == "plain LS":
                         x, det = plain_ls(model, loaded), np.ones(10, dtype=bool)
+                    elif est == "motion+ref":
+                        res = identify_payload(model, short_loaded, reference=short_ref)
+                        x, det = res.params, res.determined
                     else:
                         res = identify_payload(model, loaded, reference=ref if est == "dynid+ref" else None)
                         x, det = res.params, res.determined
