@@ -7,13 +7,18 @@ to test every one of them.  Fast: nothing is simulated.
 
 from __future__ import annotations
 
+import itertools
+import math
 import re
 
+import numpy as np
 import pytest
 
 import dynid.diagnosis.candidates as candidates
 import dynid.sim.effects as effects
 from dynid.cli import main
+from dynid.diagnosis.screening import _nested
+from dynid.diagnosis.stats import principal_angles
 from dynid.exceptions import UsageError
 
 # The catalogue's order is part of the diagnosis' behaviour: it breaks ties between candidates.
@@ -113,3 +118,61 @@ def test_an_unknown_effect_names_the_catalogue():
     listed = re.search(r"the known effects are (.*)\.$", message)
     assert listed is not None, message
     assert tuple(listed.group(1).split(", ")) == effects.EFFECT_NAMES
+
+
+# Candidates whose columns contain a simpler one's by design, (simpler, richer): the motor-inertia column
+# of a flexible transmission is the armature's; backlash's first-order columns hold the teeth's stiffness,
+# elasticity's column.  The simpler-candidate test (dynid.diagnosis.screening.parsimonious) tells them
+# apart, which needs the nesting to be exact.
+NESTED = {("armature", "elasticity"), ("armature", "backlash"), ("elasticity", "backlash")}
+MIN_ANGLE_DEG = 5.0  # below this, two candidates' columns are one column under two names
+
+
+def _generic_source(ur5):
+    """A generic random motion of the UR5 and an unrelated random torque: no column is tied to another by
+    the motion (a torque that never changes sign, a wrist torque that is mostly friction), only by the
+    catalogue's algebra."""
+    rng = np.random.default_rng(37)
+    fs, m, n = 100.0, 800, ur5.n
+    t = np.arange(m) / fs
+
+    def smooth(scale):
+        w = 2 * math.pi * rng.uniform(0.05, 1.5, size=(5, n))
+        a, p = rng.normal(size=(5, n)), rng.uniform(0, 2 * math.pi, size=(5, n))
+        x = sum(a[k] * np.sin(np.outer(t, w[k]) + p[k]) for k in range(5))
+        dx = sum(a[k] * w[k] * np.cos(np.outer(t, w[k]) + p[k]) for k in range(5))
+        ddx = sum(-a[k] * w[k] ** 2 * np.sin(np.outer(t, w[k]) + p[k]) for k in range(5))
+        return scale * x, scale * dx, scale * ddx
+
+    q, dq, ddq = smooth(0.5)
+    tau = smooth(10.0)[0] + rng.normal(size=(m, n))
+    return candidates.FeatureSource(
+        t=t, q=q, dq=dq, ddq=ddq, tau_pred=tau, robot=ur5, fs=fs, runs=[slice(0, m)]
+    )
+
+
+def test_no_two_candidates_on_a_joint_span_the_same_columns(ur5):
+    """Every pair of candidates acting on one joint (every hyper-parameter variant of the screen) has
+    columns at least 5 degrees apart on a generic motion, unless one is nested in the other by design
+    (then exactly, and with fewer columns).  Issue 37, item 5: load friction's second column
+    sign(dq) |tau| sign(dq tau) is tau, the drive gain's column, and the two tied on every joint."""
+    src = _generic_source(ur5)
+    groups = candidates.enumerate_candidates(src, effects.EFFECT_NAMES, motor_inertia=True)
+    cols = {}
+    for group in groups:
+        for cand in group:
+            C = candidates.candidate_columns(src, cand)
+            cols[(cand.key, repr(sorted(cand.hyper.items())))] = (cand, C.reshape(-1, C.shape[2]))
+    tied = []
+    for (a, A), (b, B) in itertools.combinations(cols.values(), 2):
+        if a.key == b.key or not set(a.joints) & set(b.joints):
+            continue
+        if (a.effect, b.effect) in NESTED or (b.effect, a.effect) in NESTED:
+            small, big = ((a, A), (b, B)) if (a.effect, b.effect) in NESTED else ((b, B), (a, A))
+            assert _nested(small[1][:, None, :], big[1][:, None, :]), (small[0].key, big[0].key)
+            assert small[1].shape[1] < big[1].shape[1]
+            continue
+        angle = math.degrees(float(principal_angles(A, B)[0]))
+        if angle < MIN_ANGLE_DEG:
+            tied.append((a.key, b.key, round(angle, 2)))
+    assert not tied, tied

@@ -234,3 +234,35 @@ def test_the_links_shifted_torque_is_the_exact_shift_to_first_order(ur5) -> None
     err = np.linalg.norm(first - exact, axis=0) / np.linalg.norm(exact, axis=0)
     assert np.all(err < 2e-3), err
     assert f"link_sensitivity_{j}" in src.cache
+
+
+def test_a_load_friction_term_is_one_column_and_older_two_column_files_keep_theirs(ur5) -> None:
+    """Load friction is sign(dq) |tau|: its former second column, sign(dq) |tau| sign(dq tau), is tau, the
+    drive gain's column (issue 37, item 5).  A model file written with the two columns still predicts with them."""
+    rng = np.random.default_rng(5)
+    m, n = 50, ur5.n
+    src = effect_terms.FeatureSource(
+        t=np.arange(m) / 100.0,
+        q=rng.normal(size=(m, n)),
+        dq=rng.normal(size=(m, n)),
+        ddq=rng.normal(size=(m, n)),
+        tau_pred=rng.normal(size=(m, n)),
+        robot=ur5,
+        fs=100.0,
+        runs=[slice(0, m)],
+    )
+    (term,) = parse_effect_terms("load_friction@2", n)
+    C = effect_terms.candidate_columns(src, term)
+    assert C.shape == (m, n, 1)
+    np.testing.assert_allclose(C[:, 1, 0], np.sign(src.dq[:, 1]) * np.abs(src.tau_pred[:, 1]))
+    assert effect_terms.coefficient_names(term, 1) == ("load_friction@2.mu",)
+    doc = {**effect_terms.effect_to_dict(term), "coefficients": {"mu": 0.03, "mu_drive": 0.01}}
+    old = effect_terms.effect_from_dict(doc)
+    assert old.hyper == {"asymmetric": 1.0}
+    C2 = effect_terms.candidate_columns(src, old)
+    assert C2.shape == (m, n, 2)
+    np.testing.assert_allclose(C2[:, 1, 1], src.tau_pred[:, 1])  # the second column is tau itself
+    assert (
+        effect_terms.effect_from_dict({**effect_terms.effect_to_dict(term), "coefficients": {"mu": 0.03}})
+        == term
+    )

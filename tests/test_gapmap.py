@@ -142,3 +142,40 @@ def test_coloured_residual_is_not_white(case):
     result, _ = case
     white = result["flags"]["whiteness"][5]
     assert not white["white"] and white["p_value"] < 1e-6
+
+
+def test_a_correlation_rising_to_the_window_edge_is_not_a_delay(ur5):
+    """A residual that follows the predicted torque 200 ms late, far outside the +-50 ms window: across
+    the window the correlation climbs monotonically toward the edge, where its largest value sits.  That
+    is a slope, not a maximum, and no delay (issue 37, item 2: joints 5 and 6 of the demo)."""
+    rng = np.random.default_rng(37)
+    t = np.arange(0.0, 24.0, 1.0 / FS)
+    m, n = t.size, 6
+    w = 2 * math.pi * 0.25 * (1.0 + 0.1 * np.arange(n))
+    q = np.sin(np.outer(t, w))
+    dq = w * np.cos(np.outer(t, w))
+    ddq = -(w**2) * q
+    slow = np.sin(2 * math.pi * 0.7 * t) + 0.5 * np.sin(2 * math.pi * 1.3 * t + 1.0)
+    tau_pred = np.tile(slow[:, None], (1, n))
+    late = np.interp(t - 0.2, t, slow)
+    residual = 0.05 * rng.standard_normal((m, n)) * SIGMA
+    residual[:, 0] += 0.5 * late
+    result = gap_map(
+        t=t,
+        q=q,
+        dq=dq,
+        ddq=ddq,
+        tau=tau_pred + residual,
+        tau_pred=tau_pred,
+        residual=residual,
+        noise=NoiseFloor(std=SIGMA.copy(), method="periods", detail="constructed"),
+        block=25,
+        robot=ur5,
+    )
+    delay = result["flags"]["delay"][0]
+    rho = np.abs(np.asarray(delay["curve"]["rho"]))
+    assert np.all(np.diff(rho) > 0) or np.all(np.diff(rho) < 0)  # monotone across the window: a slope
+    assert abs(delay["rho"]) > delay["threshold"]  # large enough to pass the threshold
+    assert abs(delay["lag_ms"]) == pytest.approx(max(np.abs(delay["curve"]["lag_ms"])))  # on the edge
+    assert not delay["flag"]
+    assert delay["at_edge"]

@@ -106,6 +106,10 @@ def run(args: argparse.Namespace) -> int:
         effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
     if not 0 < args.alpha < 1:
         raise UsageError(f"--alpha is {args.alpha}; give a probability between 0 and 1, e.g. 0.05.")
+    if args.max_effects < 0:
+        raise UsageError(
+            f"--max-effects is {args.max_effects}; give a whole number of at least 0 (default 3)."
+        )
     robot = None
     if args.robot is not None:
         if described:
@@ -321,15 +325,16 @@ def _write_refit(model, train, heldout, result, out: str) -> dict:
     from dynid.identify.model import save_model
     from dynid.validation.validate import validate
 
-    accepted = [r.candidate for r in result.accepted]
-    if not accepted:
+    if not result.accepted:
         print(f"--out: no effect was accepted; {out} is not written (the model stays as it is)")
         return {"written": False, "effects": []}
-    refitted, notes = refit_with_effects(model, train, accepted)
+    # Each effect goes in only if it mends the model on the held-out data (cross-fitted on its joints, and
+    # no joint's held-out RMS raised by more than 2 %); a delay at the delay the diagnosis measured.
+    refitted, notes = refit_with_effects(model, train, result.accepted, heldout=heldout)
     for note in notes:
         print(f"  refit note: {note}")
     if refitted is model:
-        print(f"--out: every accepted effect is part of the model already; {out} is not written")
+        print(f"--out: no accepted effect is added to the model (the notes say why); {out} is not written")
         return {"written": False, "effects": [], "notes": notes}
     json_path, arrays_path = save_model(refitted, out)
     before = validate(model, heldout)

@@ -13,7 +13,7 @@ effect                    columns on joint j (``s = sign``)                    h
 offset                    1                                                    -
 armature                  ddq_j                                                -
 stribeck                  s(dq_j) exp(-(|dq_j| / vs)^2)                        vs
-load_friction             s(dq_j) |tau_j|,  s(dq_j) |tau_j| s(dq_j tau_j)      -
+load_friction             s(dq_j) |tau_j|                                      -
 temperature               h(t) s(dq_j),  h(t) dq_j;  h = 1 - exp(-t / T)       T
 cogging                   sin(k N q_j), cos(k N q_j), k = 1, 2                 N (gear ratio)
 elasticity                M(q)[:, j] d^2 tau_j / dt^2 (all joints; first      -
@@ -30,6 +30,13 @@ payload                   (absorbed by the base parameters: parametric test)   -
 
 ``tau`` is the identified model's predicted torque (the "first fit"); for backlash its links' share,
 which the transmission carries (the motor's armature and friction act before the gear).
+No two candidates on a joint span the same columns: a load friction that differs between driving and
+back-driven motion has no column of its own for the difference, ``s(dq_j) |tau_j| s(dq_j tau_j)`` being
+``tau_j`` itself, the drive gain's column (the simulator's load friction, 0.05 driving and 0.025
+back-driven, is a load friction of 0.0375 and a drive gain of 0.0125 on its joint).  Candidates whose
+columns contain a simpler one's by design (the motor-inertia column of elasticity and backlash is the
+armature's; backlash holds the teeth's stiffness, elasticity's column) are told apart by the
+simpler-candidate test (:func:`dynid.diagnosis.screening.parsimonious`).
 The column builders live in :mod:`dynid.identify.effect_terms`, shared with ``identify --effects``.
 Elasticity, backlash and delay are not linear in their parameters: the screen uses the first-order
 columns above, the refit (:mod:`dynid.diagnosis.refinement`) fits their physical parameters (for
@@ -226,7 +233,7 @@ def describe_hyper(cand: Candidate) -> str:
     units = {"vs": "rad/s", "T": "s", "N": "", "eps": "N m", "sign": ""}
     parts = []
     for k, v in cand.hyper.items():
-        if k in ("motor", "exact"):
+        if k in ("motor", "exact", "asymmetric"):
             continue
         if k == "sign":
             parts.append("w = dq_a + dq_b" if v > 0 else "w = dq_a - dq_b")

@@ -108,7 +108,7 @@ from dynid.exceptions import DataError
 from dynid.validation.metrics import NoiseFloor
 from dynid.validation.noise import measure_noise, periodic_deviation
 
-__all__ = ["Diagnosis", "DiagnosisSettings", "RankedCandidate", "diagnose", "run_diagnosis"]
+__all__ = ["Diagnosis", "DiagnosisSettings", "RankedCandidate", "diagnose", "heldout_noise_floor", "run_diagnosis"]
 
 
 def diagnose(
@@ -211,7 +211,7 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
     bl.check_training_length(structure, train)
     tr_sample = bl.sample(structure, train, settings)
     ho_sample = bl.sample(structure, heldout, settings)
-    noise = _noise_floor(tr_sample.prep, ho_sample.prep, settings.period)
+    noise = heldout_noise_floor(tr_sample.prep, ho_sample.prep, settings.period)
     sigma = np.maximum(noise.std, 1e-12)
     block = _block_rows(ho_sample, settings.block_seconds)
 
@@ -461,7 +461,7 @@ def _training_noise(tr: bl.Side) -> NDArray[np.float64] | None:
     return found[0][::stride]
 
 
-def _noise_floor(train_prep, heldout_prep, period: float | None) -> NoiseFloor:
+def heldout_noise_floor(train_prep, heldout_prep, period: float | None) -> NoiseFloor:
     """The held-out data's noise floor, from the training run's periods when the held-out run has none.
 
     The spread across repeated periods measures the noise; the spectrum's high-frequency level is only a

@@ -5,8 +5,8 @@ The residual of each joint is binned by the conditions under which unmodelled ef
 back-driven, gravity load, acceleration, joint angle modulo a gear period, time in the run and
 frequency band.  The excess of a bin is ``mean(r^2) / sigma^2`` (1 = at the noise floor), with a
 moving-block bootstrap interval.  Three global flags complete it: whiteness (Ljung-Box), the
-cross-correlation of the residual with the predicted torque over +-50 ms (a delay), and the
-angle-domain spectrum (cogging).
+cross-correlation of the residual with the predicted torque over +-50 ms (a delay: a maximum inside
+the window, never one on its edge), and the angle-domain spectrum (cogging).
 """
 
 from __future__ import annotations
@@ -221,13 +221,17 @@ def _frequency_bins(r, sigma2, fs, filter_gain, noise_signal, j) -> list[dict[st
 
 
 def _xcorr(r, tau, fs, block) -> dict[str, Any]:
-    """Cross-correlation of the residual with the predicted torque over +-50 ms."""
+    """Cross-correlation of the residual with the predicted torque over +-50 ms.
+
+    Flagged when its largest magnitude exceeds the threshold at a non-zero lag inside the window; on the
+    window's edge (``at_edge``) the correlation rises monotonically toward a longer lag, which is no delay.
+    """
     L = max(1, round(0.05 * fs))
     a = r - r.mean()
     b = tau - tau.mean()
     da, db = float(np.sqrt(a @ a)), float(np.sqrt(b @ b))
     if da == 0 or db == 0:
-        return {"lag_ms": 0.0, "rho": 0.0, "threshold": None, "flag": False}
+        return {"lag_ms": 0.0, "rho": 0.0, "threshold": None, "at_edge": False, "flag": False}
     lags = np.arange(-L, L + 1)
     rho = np.array(
         [
@@ -239,11 +243,15 @@ def _xcorr(r, tau, fs, block) -> dict[str, Any]:
     # Effective sample count of low-passed signals: about one independent value per block / 10.
     m_eff = max(r.size / max(block / 10.0, 1.0), 4.0)
     thr = 3.0 / math.sqrt(m_eff)
+    # A peak on the window's edge is no peak: the correlation still grows beyond the window (a slope, as a
+    # slow residual against a slow torque gives), and a delay would show as a maximum inside it.
+    at_edge = k in (0, lags.size - 1)
     return {
         "lag_ms": float(1000.0 * lags[k] / fs),
         "rho": float(rho[k]),
         "threshold": thr,
-        "flag": bool(abs(rho[k]) > thr and lags[k] != 0),
+        "at_edge": bool(at_edge),
+        "flag": bool(abs(rho[k]) > thr and lags[k] != 0 and not at_edge),
         "curve": {"lag_ms": (1000.0 * lags / fs).tolist(), "rho": rho.tolist()},
     }
 

@@ -95,12 +95,17 @@ def parameter_change_test(
         Aa[: cols.p] = cols.P[:, 10 * n : 11 * n]
     else:
         Aa[:nb] = _absorbed_armature(cols)
+    # An armature cannot be negative (identify keeps it at zero or above): its change is at least minus
+    # the nominal one.
+    nominal_armature = np.maximum(np.asarray(robot.armature, dtype=float), 0.0)
+    lower: dict[str, float] = {}
     for j in range(n):
         if np.linalg.norm(Aa[idx, j]) > 0:
             hyp[f"armature@{j + 1}"] = Aa[idx, j : j + 1]
+            lower[f"armature@{j + 1}"] = -float(nominal_armature[j])
     for j, d in (gain_dirs or {}).items():
         hyp[f"drive_gain@{j + 1}"] = d[idx]
-    fits = st.structured_change_test(delta, C, hyp, n_obs=fit.shape[0])
+    fits = st.structured_change_test(delta, C, hyp, n_obs=fit.shape[0], lower=lower)
     best = fits[0]
     h0 = next(f for f in fits if f.name == "none")
     out: dict[str, Any] = {
@@ -113,6 +118,7 @@ def parameter_change_test(
                 "p_value": f.p_value,
                 "bic": f.bic,
                 "theta": f.theta.tolist(),
+                "at_bound": f.at_bound,
             }
             for f in fits
         ],
@@ -147,9 +153,13 @@ def parameter_change_test(
             )
         else:
             joint = int(best.name.split("@")[1])
+            change = float(best.theta[0])
+            total = float(nominal_armature[joint - 1]) + change
             text = (
-                f"Parameter change: an armature (rotor inertia) of {float(best.theta[0]):.3g} kg m^2 on joint {joint}, "
-                "absorbed by the base parameters."
+                f"Parameter change: an armature (rotor inertia) change of {change:.3g} kg m^2 on joint {joint} "
+                f"(to {total:.3g} kg m^2"
+                + (", its lower bound: an armature is never negative" if best.at_bound else "")
+                + "), absorbed by the base parameters."
             )
     elif clear:
         finding = "unstructured"
@@ -176,6 +186,12 @@ def parameter_change_test(
             np.zeros(len(idx_k)) if kind == "offset" else np.array([robot.armature[j - 1] for j in joints_k])
         )
         change = x[idx_k] - nominal
+        if kind == "armature":
+            # The refit here is unconstrained; an armature is not negative (identify keeps it at zero or
+            # above), so a change below minus the nominal armature is the bound's, no more: a refit that
+            # goes below zero shows something else (a delay, a gain) taking the ddq column, not a rotor.
+            nominal = np.maximum(nominal, 0.0)
+            change = np.maximum(change, -nominal)
         sd = np.sqrt(np.maximum(np.diag(jack)[idx_k], 1e-300))
         p_holm = st.holm(2 * stats.t.sf(np.abs(change) / sd, JACKKNIFE_GROUPS - 1))
         torque = np.abs(change) * (1.0 if kind == "offset" else ddq_rms[np.array(joints_k) - 1])
@@ -184,12 +200,16 @@ def parameter_change_test(
                 "joint": jt,
                 "value": float(v),
                 "nominal": float(nm),
+                "change": float(dc),
+                "at_bound": bool(v < nm + dc),
                 "std": float(d),
                 "p_value": float(p),
                 "size_noise": float(tq / sigma[jt - 1]),
                 "relevant": bool(tq >= 0.5 * sigma[jt - 1]),
             }
-            for jt, v, nm, d, p, tq in zip(joints_k, x[idx_k], nominal, sd, p_holm, torque, strict=True)
+            for jt, v, nm, dc, d, p, tq in zip(
+                joints_k, x[idx_k], nominal, change, sd, p_holm, torque, strict=True
+            )
         ]
         out[kind + "s"] = rows
         # A stricter level than alpha: with enough data a small model error makes any parameter "changed".
@@ -203,8 +223,7 @@ def parameter_change_test(
         text = (
             f"Absorbed by the model's {kind} parameters: {what} "
             + ", ".join(
-                f"joint {r['joint']}: {r['value'] - r['nominal']:.3g} +- {r['std']:.2g} {unit}"
-                for _, unit, r in sig
+                f"joint {r['joint']}: {r['change']:.3g} +- {r['std']:.2g} {unit}" for _, unit, r in sig
             )
             + " (change from nominal)."
         )

@@ -446,7 +446,7 @@ def render_diagnosis_html(
                 "yes" if w["white"] else "no",
                 d["lag_ms"],
                 d["rho"],
-                "yes" if d["flag"] else "no",
+                "yes" if d["flag"] else ("no (peak on the window's edge)" if d.get("at_edge") else "no"),
                 c.get("peak_ratio"),
                 c.get("peak"),
                 "yes" if c.get("flag") else "no",

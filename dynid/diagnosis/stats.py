@@ -493,6 +493,8 @@ class HypothesisFit:
         ``chi2 + k ln(n_obs)``.
     theta : ndarray, shape (k,)
         Fitted values.
+    at_bound : bool
+        Its one parameter was held at its lower bound (the free fit fell below what is physically possible).
     """
 
     name: str
@@ -502,10 +504,16 @@ class HypothesisFit:
     p_value: float
     bic: float
     theta: NDArray[np.float64]
+    at_bound: bool = False
 
 
 def structured_change_test(
-    delta: ArrayLike, cov: ArrayLike, hypotheses: dict[str, ArrayLike], *, n_obs: int
+    delta: ArrayLike,
+    cov: ArrayLike,
+    hypotheses: dict[str, ArrayLike],
+    *,
+    n_obs: int,
+    lower: dict[str, float] | None = None,
 ) -> list[HypothesisFit]:
     """Fit a parameter change against linear hypotheses by generalised least squares.
 
@@ -519,6 +527,10 @@ def structured_change_test(
         ``delta = A theta`` for each hypothesis; ``"none"`` (A with no column) is always added.
     n_obs : int
         Number of observations behind the estimate (the BIC penalty is ``k ln(n_obs)``).
+    lower : dict of str to float, optional
+        Lower bounds of one-parameter hypotheses, by name (an armature change of at least minus the
+        nominal armature: the armature cannot be negative).  A fit below its bound is held at the bound
+        (the bounded least squares of one parameter) and its chi^2 is that of the bound.
 
     Returns
     -------
@@ -538,9 +550,13 @@ def structured_change_test(
     for name, A in {"none": np.zeros((p, 0)), **hypotheses}.items():
         A = np.asarray(A, dtype=float).reshape(p, -1)
         Aw = W @ A
+        bounded = False
         if Aw.shape[1]:
             theta, *_ = np.linalg.lstsq(Aw, dw, rcond=1e-10)
             k = int(np.linalg.matrix_rank(Aw, tol=1e-8 * max(np.abs(Aw).max(), 1e-300)))
+            low = (lower or {}).get(name)
+            if low is not None and theta.size == 1 and theta[0] < low:
+                theta, bounded = np.array([float(low)]), True
         else:
             theta, k = np.zeros(0), 0
         chi2 = float(np.sum((dw - Aw @ theta) ** 2)) if Aw.shape[1] else float(dw @ dw)
@@ -554,6 +570,7 @@ def structured_change_test(
                 p_value=float(stats.chi2.sf(chi2, dof)),
                 bic=chi2 + k * math.log(max(n_obs, 2)),
                 theta=theta,
+                at_bound=bounded,
             )
         )
     return sorted(out, key=lambda h: h.bic)

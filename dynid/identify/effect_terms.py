@@ -16,6 +16,7 @@ with the hyper-parameters given or tuned on the training data (the diagnosis ref
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -238,11 +239,18 @@ def _stribeck(src, c):
 
 
 def _load_friction(src, c):
+    # Coulomb friction growing with the load, mu |tau| sign(dq): one column.  Its driving / back-driven
+    # asymmetry is no column of its own: sign(dq) |tau| sign(dq tau) is tau itself wherever the joint
+    # moves, the drive_gain column, so an asymmetric load friction (mu_d driving, mu_b back-driven) is
+    # (mu_d + mu_b) / 2 here and a drive gain (mu_d - mu_b) / 2 beside it.  Model files written with the
+    # two columns load with ``asymmetric`` set (:func:`effect_from_dict`).
     j = c.joint
     s = src.sign(src.dq[:, j])
     a = np.abs(src.tau_pred[:, j])
-    drive = np.sign(src.dq[:, j] * src.tau_pred[:, j])
-    return _on_joint(src, j, [s * a, s * a * drive])
+    if c.hyper.get("asymmetric"):
+        drive = np.sign(src.dq[:, j] * src.tau_pred[:, j])
+        return _on_joint(src, j, [s * a, s * a * drive])
+    return _on_joint(src, j, [s * a])
 
 
 def _temperature(src, c):
@@ -481,7 +489,7 @@ _COEF_NAMES = {
     "offset": ("fo",),
     "armature": ("ia",),
     "stribeck": ("fs",),
-    "load_friction": ("mu", "mu_drive"),
+    "load_friction": ("mu", "mu_drive"),  # mu_drive: files written with the two columns (asymmetric)
     "temperature": ("fc_T", "fv_T"),
     "cogging": ("a1", "b1", "a2", "b2"),
     "elasticity": ("c",),
@@ -518,6 +526,65 @@ def _joint_list(text: str, n: int, item: str) -> list[int]:
             "A+B (a coupled pair), e.g. stribeck@3 or coupled_friction@5+6"
         )
     return [j - 1 for j in js]
+
+
+def _positive(v: float) -> bool:
+    return math.isfinite(v) and v > 0
+
+
+def _flag(v: float) -> bool:
+    return v in (0.0, 1.0)
+
+
+# Hyper-parameters a user may give, per effect: key -> (rule, its text).
+_HYPER_RULES: dict[str, dict[str, tuple[Callable[[float], bool], str]]] = {
+    "stribeck": {"vs": (_positive, "a positive Stribeck speed in rad/s (or m/s)")},
+    "temperature": {"T": (_positive, "a positive warm-up time constant in s")},
+    "cogging": {
+        "N": (lambda v: math.isfinite(v) and 1 <= v <= 1e4, "the ripple cycles per revolution, 1 to 10000")
+    },
+    "backlash": {
+        "eps": (_positive, "a positive torque scale of the dead zone in N m"),
+        "h": (_positive, "a positive hysteresis, a fraction of the torque's spread"),
+        "a": (math.isfinite, "a finite half-gap in rad"),
+        "d": (lambda v: math.isfinite(v) and 0 <= v < 1, "a crossing time from 0 to 1 s"),
+        "w": (_positive, "a positive natural frequency in rad/s"),
+        "z": (lambda v: math.isfinite(v) and v >= 0, "a damping ratio of at least 0"),
+        "motor": (_flag, "0 or 1"),
+    },
+    "elasticity": {
+        "w": (_positive, "a positive natural frequency in rad/s"),
+        "z": (lambda v: math.isfinite(v) and v >= 0, "a damping ratio of at least 0"),
+        "motor": (_flag, "0 or 1"),
+    },
+    "delay": {
+        "d": (
+            lambda v: math.isfinite(v) and 0 < abs(v) < 1,
+            "a delay in s, non-zero and within +-1 s (the diagnosis measures a sensor that leads as negative)",
+        )
+    },
+    "coupled_friction": {"sign": (lambda v: v in (1.0, -1.0), "the coupling sign, 1 or -1")},
+    "load_friction": {"asymmetric": (_flag, "0 or 1")},
+}
+
+
+def _check_hyper(name: str, key: str, value: float, item: str) -> str:
+    """The canonical spelling of a hyper-parameter of ``name``, its value checked; else a UsageError."""
+    rules = _HYPER_RULES.get(name, {})
+    canonical = {k.lower(): k for k in rules}.get(key.lower())
+    if canonical is None:
+        known = ", ".join(rules) if rules else "none"
+        raise UsageError(
+            f"the effect '{item}' has the hyper-parameter '{key}', which {name} does not take (it takes: "
+            f"{known}); remove it or fix its name"
+        )
+    ok, rule = rules[canonical]
+    if not ok(value):
+        raise UsageError(
+            f"the hyper-parameter {canonical} of the effect '{item}' is {value:g}; give {rule}, or leave it out "
+            "to have it tuned on the data"
+        )
+    return canonical
 
 
 def parse_effect_terms(spec: str | Sequence[str] | None, n: int) -> tuple[Candidate, ...]:
@@ -567,17 +634,20 @@ def parse_effect_terms(spec: str | Sequence[str] | None, n: int) -> tuple[Candid
                 f"unknown effect '{name}'; the catalogue's effects with model terms are {', '.join(BUILDERS)}"
             )
         hyper: dict[str, float] = {}
-        for part in (match["hyper"] or "").split(";"):
+        hyper_text = str(item).partition(":")[2]  # its keys keep their case (N, T)
+        for part in hyper_text.split(";"):
             if not part:
                 continue
             key, _, value = part.partition("=")
             try:
-                hyper[key] = float(value)
+                number = float(value)
             except ValueError:
                 raise UsageError(
                     f"the hyper-parameter '{part}' of the effect '{item}' is not KEY=NUMBER; write e.g. "
                     f"{name}:vs=0.05"
                 ) from None
+            key = _check_hyper(name, key, number, item)
+            hyper[key] = number
         if name == "delay" and hyper:
             hyper["exact"] = 1.0
         joints_text = match["joints"]
@@ -627,13 +697,19 @@ def effect_to_dict(term: Candidate) -> dict[str, Any]:
 
 
 def effect_from_dict(doc: dict[str, Any]) -> Candidate:
-    """The term written by :func:`effect_to_dict`."""
+    """The term written by :func:`effect_to_dict` (with its coefficients, as a model file lists it).
+
+    A load friction written with two coefficients (``mu``, ``mu_drive``: the form before its second
+    column, which is the drive gain's, was dropped) keeps its two columns (``asymmetric``)."""
     joint = doc.get("joint")
+    hyper = {str(k): float(v) for k, v in doc.get("hyper", {}).items()}
+    if doc["name"] == "load_friction" and "mu_drive" in (doc.get("coefficients") or {}):
+        hyper["asymmetric"] = 1.0
     return Candidate(
         str(doc["name"]),
         None if joint is None else int(joint) - 1,
         tuple(int(j) - 1 for j in doc["joints"]),
-        {str(k): float(v) for k, v in doc.get("hyper", {}).items()},
+        hyper,
         str(doc.get("label", "")),
     )
 
