@@ -107,3 +107,38 @@ def test_default_fit_keeps_armature_and_friction_physical_and_names_active_bound
     assert free.info["bounds"] == {"physical": False, "active": []}
     # bounded least squares costs little fit where the truth sits on the bound
     assert np.all(np.array(phys.rms) <= 1.01 * np.array(free.rms))
+
+
+def test_the_mixture_never_carries_physics(ur5) -> None:
+    """A position torque of 60 % of joint 2's torque RMS (physics the link and friction layers miss, as a
+    CAD description's wrong angle puts it there) is not left to the mixture: its correction is switched
+    off on that joint, with a note; a ripple of 10 % on joint 3 keeps its correction."""
+    from dynid.identify.model import MIXTURE_SHARE
+
+    rng = np.random.default_rng(5)
+    cols = column_set(ur5)
+    x = true_parameters(cols, rng)
+    x[~cols.link_mask] = np.abs(x[~cols.link_mask])
+    traj = random_fourier(ur5, rng, periods=3, scaling="arm", centre=np.zeros(ur5.n))
+    plain = synthetic_dataset(cols, x, traj, rate=200, rng=np.random.default_rng(1), noise=0.0)
+    rms = np.sqrt(np.mean(plain.tau**2, axis=0))
+    size = np.zeros(ur5.n)
+    size[1], size[2] = (
+        0.6 * rms[1] * np.sqrt(2),
+        0.1 * rms[2] * np.sqrt(2),
+    )  # RMS of a cosine: amplitude / sqrt 2
+
+    def extra(q, dq):
+        return size * np.sin(4 * np.pi * q / REACH)  # too fine in q for the gravity columns to take
+
+    data = synthetic_dataset(cols, x, traj, rate=200, rng=np.random.default_rng(1), noise=0.02, extra=extra)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = identify(ur5, data, method="irls", friction="linear", gmm="auto", preprocessing=None)
+    share = np.asarray(model.info["mixture_share"])
+    assert share[1] > MIXTURE_SHARE, share  # what the mixture would have carried on joint 2
+    assert not model.gmr.active_[1]
+    assert model.gmr.active_[2] and share[2] < MIXTURE_SHARE, share
+    assert any("mixture correction is off on joint(s) 2" in note for note in model.info["notes"])
+    # the model's figures say what it now predicts there: the physical layers' residual
+    assert model.rms_layers["gmm"][1] == model.rms_layers["friction"][1]
