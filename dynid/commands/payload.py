@@ -15,7 +15,6 @@ from dynid.commands.common import (
     model_files,
     output,
     read_dataset,
-    write_figures,
 )
 
 __all__ = ["HELP", "add_arguments", "run"]
@@ -191,17 +190,26 @@ def run(args: argparse.Namespace) -> int:
     for note in figures["notes"]:
         print(f"  note: {note}")
 
+    # every output computed first, then written: the model pair, then the report and the figures together
+    writers = []
     if report_path is not None:
         say(f"drawing the report {report_path}")
         text = payload_report(
             result, figures, title=f"Payload of {model.robot.name} from {Path(args.data).name}"
         )
-        from dynid._io import write_text
+        writers.append((report_path, lambda tmp: Path(tmp).write_text(text, encoding="utf-8")))
+    if args.json is not None:
+        from dynid._io import dumps_json
 
-        write_text(report_path, text)
-        print(f"wrote {report_path}")
+        figures_text = dumps_json(figures)
+        writers.append((Path(args.json), lambda tmp: Path(tmp).write_text(figures_text, encoding="utf-8")))
     if args.out is not None:
         json_path, arrays_path = save_model(attach_payload(model, result), args.out)
         print(f"wrote {json_path} and {arrays_path} (the arm with the payload on link {figures['link']})")
-    write_figures(args.json, figures)
+    if writers:
+        from dynid._io import write_together
+
+        write_together(writers)
+        for path, _ in writers:
+            print(f"wrote {path}")
     return 0
