@@ -338,7 +338,7 @@ BAD_DATA: list[tuple[str, Callable[[Path], str], str]] = [
         r"BAD\.csv is a folder; give the path of a \.csv",
     ),
     ("absent", lambda f: "ABSENT.csv", r"no dataset file at .*ABSENT\.csv; check the path"),
-    ("extension", lambda f: _text(f, lambda s: s, name="BAD.txt"), r"unknown extension '\.txt'.*README"),
+    ("extension", lambda f: _text(f, lambda s: s, name="BAD.txt"), r"unknown extension '\.txt'.*docs/commands\.md"),
 ]
 
 DATA_COMMANDS = {

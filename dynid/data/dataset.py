@@ -37,7 +37,7 @@ DEGREES_THRESHOLD = 10.0
 #: The signals of a dataset beside the time, each of shape (m, n) (``dq``, ``ddq`` optional).
 SIGNALS = ("q", "tau", "dq", "ddq")
 _OPTIONAL = ("dq", "ddq")
-_CONTRACT = "a dataset needs t, q_1..q_n and tau_1..tau_n (see 'Dataset files' in the README)"
+_CONTRACT = "a dataset needs t, q_1..q_n and tau_1..tau_n (see 'Dataset files' in docs/commands.md)"
 _COLUMN = re.compile(r"^(q|tau|dq|ddq)_([0-9]+)$")
 _UNIFORM_RTOL = 1e-6
 

@@ -1,6 +1,6 @@
 """Dataset files: the one reader every command uses (CSV, npz, ROS 2 recordings) and the writer.
 
-Files follow the contract of the README: a CSV file whose header names the columns ``t``, ``q_1..q_n``,
+Files follow the contract of docs/commands.md ('Dataset files'): a CSV file whose header names the columns ``t``, ``q_1..q_n``,
 ``tau_1..tau_n`` and optionally ``dq_1..dq_n``, ``ddq_1..ddq_n`` (joints numbered from 1 in the model's
 joint order), or an ``.npz`` archive with the same names.  :func:`save_dataset` writes a temporary file
 in the target folder and renames it, so a file is either complete or absent.  A ROS 2 recording is read by
@@ -71,7 +71,7 @@ def _check_extension(path: Path) -> str:
     if suffix not in _EXTENSIONS:
         raise DataError(
             f"{path.name}: unknown extension '{path.suffix}'; a dataset file ends in .csv or .npz, or is a "
-            "ROS 2 recording (.mcap, or a rosbag2 folder) (see 'Dataset files' in the README)"
+            "ROS 2 recording (.mcap, or a rosbag2 folder) (see 'Dataset files' in docs/commands.md)"
         )
     return suffix
 
