@@ -300,6 +300,29 @@ CASES = {
         ["export-c", "--robot", "ur5", "--out", "."],
         [r"is replaced as a whole, and it holds the current folder"],
     ),
+    "export-c-out-holds-model": (
+        ["export-c", "--model", "{d}/M.json", "--out", "{d}"],
+        [r"is replaced as a whole, and it holds the --model file '.*M.json'", "another folder"],
+    ),
+    "export-c-model-and-robot": (
+        ["export-c", "--model", "{d}/M.json", "--robot", "ur5", "--out", "{d}/c"],
+        [r"give --robot R \(a robot's regressors\) or --model M.json .*, not both"],
+    ),
+    "export-c-neither-robot-nor-model": (
+        ["export-c", "--out", "{d}/c"],
+        [r"give --robot R \(a robot's regressors\) or --model M.json \(an identified model's torque", r"\)$"],
+    ),
+    "export-c-model-with-limits": (
+        ["export-c", "--model", "{d}/M.json", "--q-min", "0", "--tool", "tool0", "--out", "{d}/c"],
+        [
+            r"--q-min, --tool apply to --robot; a model carries the robot",
+            "it was identified for: leave them out",
+        ],
+    ),
+    "export-c-model-unknown-function": (
+        ["export-c", "--model", "{d}/M.json", "--functions", "jac", "--out", "{d}/c"],
+        [r"cannot export jac; the exportable functions are base_regressor"],
+    ),
     "demo-out-file": (["demo", "--out", "{d}/D.csv"], [r"is a file"]),
     "demo-json-txt": (["demo", "--out", "{d}/demo", "--json", "{d}/F.txt"], [r"has the extension '.txt'"]),
     "demo-json-is-its-file": (
@@ -357,6 +380,7 @@ def test_bad_output_or_command_line_is_refused(name, folder, capsys):
          "{ro}/G.html"],
         ["excite", "--robot", "ur5", "--out", "{d}/N.json", "--csv", "{ro}/T.csv"],
         ["export-c", "--robot", "ur5", "--out", "{ro}/c"],
+        ["export-c", "--model", "{d}/M.json", "--out", "{ro}/mc"],
         ["demo", "--out", "{ro}"],
         ["info", "--robot", "ur5", "--json", "{ro}/F.json"],
     ],

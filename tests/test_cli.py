@@ -40,6 +40,42 @@ def test_export_c_command(tmp_path, capsys):
     assert (out / "libdynid_panda.so").is_file()
 
 
+def test_export_c_of_a_model(tmp_path, capsys):
+    """``--model``: the model's prediction as C, reload-checked, its robot functions only when asked for."""
+    import numpy as np
+
+    from dynid.identify.columns import column_set
+    from dynid.identify.model import identify, save_model
+    from dynid.sim.synthetic import random_fourier, synthetic_dataset, true_parameters
+    from dynid.symbolic import load_robot
+    from dynid.symbolic.export import CompiledLibrary
+
+    robot = load_robot("ur5")
+    rng = np.random.default_rng(2)
+    cols = column_set(robot)
+    data = synthetic_dataset(
+        cols, true_parameters(cols, rng), random_fourier(robot, rng), rate=50, rng=rng, noise=0.01
+    )
+    model = identify(robot, data, method="ols", friction="linear", gmm="off", rounds=0)
+    save_model(model, tmp_path / "M.json")
+    out = tmp_path / "ur5_model_c"
+    capsys.readouterr()
+    assert (
+        main(["export-c", "--model", str(tmp_path / "M.json"), "--out", str(out), "--functions", "fk"]) == 0
+    )
+    printed = capsys.readouterr().out
+    assert (
+        "predict(q, dq, ddq) -> tau carries: rigid body (36 base parameters); armature (layer 1)" in printed
+    )
+    assert "reload check passed" in printed and "not carried: nothing" in printed
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert [f["name"] for f in manifest["functions"]] == ["predict", "model_regressor", "fk"]
+    assert manifest["model"]["file"] == "M.json" and manifest["check"]["passed"] is True
+    q = rng.uniform(robot.q_min, robot.q_max, size=(20, 6))
+    dq, ddq = rng.normal(size=(2, 20, 6))
+    np.testing.assert_allclose(CompiledLibrary(out).predict(q, dq, ddq), model.predict(q, dq, ddq), rtol=1e-9)
+
+
 @pytest.mark.parametrize(
     ("argv", "message"),
     [

@@ -30,12 +30,15 @@ __all__ = [
 ]
 
 
-def add_robot_arguments(parser: argparse.ArgumentParser, *, default: str | None = None) -> None:
-    """``--robot`` and the joint-limit overrides."""
+def add_robot_arguments(
+    parser: argparse.ArgumentParser, *, default: str | None = None, required: bool = True
+) -> None:
+    """``--robot`` and the joint-limit overrides (``required=False``: ``--robot`` may be left out, as when a
+    command takes a model instead)."""
     parser.add_argument(
         "--robot",
         default=default,
-        required=default is None,
+        required=required and default is None,
         help="built-in name (ur5, ur10, panda), a URDF file or a modified-DH .toml table"
         + (f" (default {default})" if default else ""),
     )

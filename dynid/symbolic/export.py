@@ -22,9 +22,11 @@ import os
 import re
 import shutil
 import subprocess
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
+from typing import Any
 
 import casadi as ca
 
@@ -114,15 +116,15 @@ def _renamed(f: ca.Function, name: str) -> tuple[ca.Function, list[tuple[int, in
 
 
 def _write_sources(
-    folder: Path, robot: RobotModel, funcs: RobotFunctions, base: BaseParameters, names
+    folder: Path, robot: RobotModel, functions: list[tuple[str, ca.Function]]
 ) -> tuple[str, list[dict]]:
-    """Generate C for the functions into ``folder``; return the file stem and the manifest entries."""
+    """Generate C for the named functions into ``folder``; return the file stem and the manifest entries."""
     prefix = c_identifier(robot.name)
     stem = f"dynid_{prefix}"
     gen = ca.CodeGenerator(f"{stem}.c", {"with_header": True})
     entries = []
     wrappers = []
-    for name, f in zip(names, _functions_to_export(funcs, base, names), strict=True):
+    for name, f in functions:
         symbol = f"{prefix}_{name}"
         g, shapes = _renamed(f, symbol)
         gen.add(g)
@@ -132,7 +134,8 @@ def _write_sources(
                 "symbol": symbol,
                 "inputs": [{"name": g.name_in(i), "size": g.numel_in(i)} for i in range(g.n_in())],
                 "outputs": [
-                    {"name": g.name_out(i), "rows": rows, "cols": cols} for i, (rows, cols) in enumerate(shapes)
+                    {"name": g.name_out(i), "rows": rows, "cols": cols}
+                    for i, (rows, cols) in enumerate(shapes)
                 ],
             }
         )
@@ -188,10 +191,14 @@ def _compile(folder: Path, stem: str, progress: Progress | None) -> Path:
     return lib
 
 
-def _example(stem: str, prefix: str, robot: RobotModel, base: BaseParameters) -> tuple[str, str]:
+def _example(stem: str, prefix: str, robot: RobotModel, entry: dict, label: str) -> tuple[str, str]:
+    """example.c (evaluate the function of ``entry``, of inputs q, dq, ddq, at one state and print it) and
+    its Makefile."""
     n = robot.n
-    nb = base.n_base
-    example = f"""/* Evaluate the base regressor of {_c_text(robot.name)} at one state and print it.
+    name = entry["name"]
+    rows, cols = entry["outputs"][0]["rows"], entry["outputs"][0]["cols"]
+    var = re.sub(r"\W", "", label) or "out"
+    example = f"""/* Evaluate {name} of {_c_text(robot.name)} at one state and print it.
  * Build: make   (or: cc -O2 example.c {stem}.c -o example -lm)   Run: ./example */
 #include <stdio.h>
 
@@ -199,11 +206,11 @@ def _example(stem: str, prefix: str, robot: RobotModel, base: BaseParameters) ->
 
 int main(void) {{
   double q[{n}], dq[{n}], ddq[{n}];
-  double Yb[{n} * {nb}]; /* row-major (C order): {n} rows x {nb} columns */
-  const casadi_real* arg[{prefix}_base_regressor_SZ_ARG];
-  casadi_real* res[{prefix}_base_regressor_SZ_RES];
-  casadi_int iw[{prefix}_base_regressor_SZ_IW + 1];
-  casadi_real w[{prefix}_base_regressor_SZ_W + 1];
+  double {var}[{rows} * {cols}]; /* row-major (C order): {rows} rows x {cols} columns */
+  const casadi_real* arg[{prefix}_{name}_SZ_ARG];
+  casadi_real* res[{prefix}_{name}_SZ_RES];
+  casadi_int iw[{prefix}_{name}_SZ_IW + 1];
+  casadi_real w[{prefix}_{name}_SZ_W + 1];
   int i, j;
   for (i = 0; i < {n}; ++i) {{
     q[i] = 0.1 * (i + 1);
@@ -213,11 +220,11 @@ int main(void) {{
   arg[0] = q;
   arg[1] = dq;
   arg[2] = ddq;
-  res[0] = Yb;
-  if ({prefix}_base_regressor(arg, res, iw, w, 0)) return 1;
-  printf("Y_b of {_c_text(robot.name, literal=True)} ({n} x {nb}) at q_i = 0.1 i, dq = 0.2, ddq = -0.3:\\n");
-  for (i = 0; i < {n}; ++i) {{
-    for (j = 0; j < {nb}; ++j) printf("% .6e ", Yb[i * {nb} + j]);
+  res[0] = {var};
+  if ({prefix}_{name}(arg, res, iw, w, 0)) return 1;
+  printf("{label} of {_c_text(robot.name, literal=True)} ({rows} x {cols}) at q_i = 0.1 i, dq = 0.2, ddq = -0.3:\\n");
+  for (i = 0; i < {rows}; ++i) {{
+    for (j = 0; j < {cols}; ++j) printf("% .6e ", {var}[i * {cols} + j]);
     printf("\\n");
   }}
   return 0;
@@ -259,12 +266,38 @@ def export_c(
     out: str | Path,
     *,
     functions=DEFAULT_EXPORT,
+    extra: Sequence[ca.Function] = (),
+    manifest: dict[str, Any] | None = None,
+    example: str = "base_regressor",
+    check: Callable[[Path], dict[str, Any]] | None = None,
     progress: Progress | None = stderr_progress,
 ) -> ExportResult:
     """Write C source, header, shared library, example and loader for ``robot`` into ``out``.
 
     The folder is written in a temporary sibling and moved into place at the end, so a failure
-    leaves nothing half written.
+    (of the compiler, of ``check``) leaves nothing half written.
+
+    Parameters
+    ----------
+    robot : RobotModel
+        The robot.
+    out : str or Path
+        The folder to write (its parent must exist; an existing folder is replaced).
+    functions : sequence of str
+        Names of the robot's functions to export (:data:`DEFAULT_EXPORT`).
+    extra : sequence of casadi.Function
+        Further functions exported first, each under its CasADi name, with its named inputs and outputs
+        (an identified model's prediction: :func:`dynid.identify.export_c.export_model_c`).
+    manifest : dict, optional
+        Entries added to ``manifest.json``.
+    example : str
+        The function, of inputs ``(q, dq, ddq)``, that ``example.c`` evaluates and prints (no example when it
+        is not exported).
+    check : callable, optional
+        ``check(folder) -> dict``, called on the written and compiled folder before it is moved into place;
+        what it returns is stored as ``check`` in ``manifest.json``; an error it raises leaves nothing written.
+    progress : callable, optional
+        Receives progress messages.
     """
     out = Path(out)
     if out.exists() and not out.is_dir():
@@ -273,18 +306,31 @@ def export_c(
         raise GeneratorError(f"the folder '{out.parent}' does not exist; create it or choose another --out.")
     funcs = robot_functions(robot, progress=progress)
     base = base_parameters(funcs)
+    names = tuple(functions)
+    named = [(f.name(), f) for f in extra] + list(
+        zip(names, _functions_to_export(funcs, base, names), strict=True)
+    )
+    seen = [name for name, _ in named]
+    twice = sorted({name for name in seen if seen.count(name) > 1})
+    if twice:
+        raise UsageError(f"the functions {', '.join(twice)} are named twice; export each function once.")
     with atomic_dir(out) as work:
-        stem, entries = _write_sources(work, robot, funcs, base, tuple(functions))
+        stem, entries = _write_sources(work, robot, named)
         _compile(work, stem, progress)
-        if "base_regressor" in functions:
-            example, makefile = _example(stem, c_identifier(robot.name), robot, base)
-            (work / "example.c").write_text(example)
+        shown = next((e for e in entries if e["name"] == example), None)
+        if shown is not None and [i["name"] for i in shown["inputs"]] == ["q", "dq", "ddq"]:
+            label = "Y_b" if example == "base_regressor" else example
+            text, makefile = _example(stem, c_identifier(robot.name), robot, shown, label)
+            (work / "example.c").write_text(text)
             (work / "Makefile").write_text(makefile)
         shutil.copyfile(_HERE / "loader.py", work / "dynid_loader.py")
-        manifest = _manifest(robot, base, stem, entries)
+        document = {**_manifest(robot, base, stem, entries), **(manifest or {})}
         # every file of the folder, so that a later export replaces only what dynid wrote
-        manifest["files"] = sorted([*(p.name for p in work.iterdir()), "manifest.json"])
-        (work / "manifest.json").write_text(dumps_json(manifest))
+        document["files"] = sorted([*(p.name for p in work.iterdir()), "manifest.json"])
+        (work / "manifest.json").write_text(dumps_json(document))
+        if check is not None:
+            document["check"] = check(work)
+            (work / "manifest.json").write_text(dumps_json(document))
     return ExportResult(
         folder=out,
         source=out / f"{stem}.c",
