@@ -11,6 +11,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -154,6 +155,60 @@ def test_the_tested_parameters_are_friction_armature_and_what_a_tool_moves(fleet
     links = [name for name in tested if shifts[name] != 0]
     assert links and all(abs(shifts[name]) > 0 for name in links)
     assert "Izz1R" in tested  # a tool far from joint 1's axis adds inertia about it
+
+
+def _report(result, tmp_path) -> str:
+    from dynid.fleet.report import write_fleet_report
+
+    return write_fleet_report(result, tmp_path / "report.html").read_text(encoding="utf-8")
+
+
+def test_the_report_shows_the_flagged_robot_and_no_warning_with_three_recordings(fleet, tmp_path):
+    from dynid.fleet.report import few_recordings
+
+    result = fleet["serial"]
+    assert few_recordings(result) == {}
+    text = _report(result, tmp_path)
+    assert 'id="few-recordings"' not in text
+    table = text.split('id="flagged">Flagged robots</h2>', 1)[1].split("<h", 1)[0]
+    assert f'<td class="text">{CHANGED}</td>' in table and "<thead>" in table
+
+
+def test_two_recordings_per_robot_are_too_few_and_the_report_says_so(fleet, tmp_path):
+    """Two recordings: the inflation factor is measured on the same pairs, so the median robot sits at p = 0.5."""
+    from scipy import stats
+
+    from dynid.fleet.report import few_recordings
+
+    result = fleet["serial"]
+    pairs = [r for r in result.rows if r["order"] < 2]  # before the change: nothing to find
+    two = FleetResult(pairs, result.columns, result.parameters, result.settings, info=result.info)
+    two = replace(two, drift=detect_drift(two))
+    assert few_recordings(two) == {robot: 2 for robot in two.robots}
+    inflated = [name for name, factor in two.drift.inflation.items() if factor > 1]
+    # with pairs the factor is the median robot's own statistic over its median under no change
+    assert inflated
+    for name in inflated:
+        chi2 = sorted(t.chi2 for t in two.drift.tests if t.parameter == name)
+        assert chi2[len(chi2) // 2] == pytest.approx(stats.chi2.median(1), rel=1e-9)
+    text = _report(two, tmp_path)
+    warning = re.search(r'<p class="verdict" id="few-recordings"[^>]*>(.*?)</p>', text, flags=re.S).group(1)
+    robots = "all 3 robots (robot_00, robot_01, robot_02) have only 2 recordings"
+    assert f"Too few recordings for the drift test: {robots}" in warning
+    assert "p = 0.5" in warning and "Record at least 3 per robot" in warning
+    assert "0 robots flagged for drift: none (see the warning below)." in text
+    # no empty table: a sentence
+    flagged = text.split('id="flagged">Flagged robots</h2>', 1)[1].split("<h", 1)[0]
+    assert "<table" not in flagged
+    assert "None: no parameter of the 3 robots tested" in flagged and "family-wise error rate 0.05" in flagged
+    # three robots are too few for the comparison with the fleet: said so, not "none"
+    assert "Not tested: the fleet has 3 robots; the comparison with the fleet needs at least 5" in text
+    # a robot with one recording is not tested, and named
+    one = [r for r in pairs if not (r["robot"] == "robot_02" and r["order"] == 1)]
+    single = FleetResult(one, result.columns, result.parameters, result.settings, info=result.info)
+    single = replace(single, drift=detect_drift(single))
+    assert few_recordings(single) == {"robot_00": 2, "robot_01": 2, "robot_02": 1}
+    assert "robot_02 has 1 (not tested)" in _report(single, tmp_path)
 
 
 def test_holm_adjusts_step_down():

@@ -54,9 +54,12 @@ def test_panda_identified_model_beats_its_urdf_on_every_joint(panda):
 
 
 def test_panda_report_and_model_are_written(panda):
-    _, out = panda
+    from dynid.validation.report import gmm_changed
+
+    results, out = panda
     html = (out / "panda_report.html").read_text(encoding="utf-8")
-    assert html.count('<img src="data:image/png;base64,') == 4
+    # the GMM's before/after figure only where the mixture changed the prediction
+    assert html.count('<img src="data:image/png;base64,') == (4 if gmm_changed(results) is not None else 3)
     assert (out / "panda_model.json").is_file() and (out / "panda_model.npz").is_file()
     assert "Physically consistent link parameters" in html
 

@@ -20,11 +20,19 @@ from dynid.data.files import load_dataset
 from dynid.exceptions import UsageError
 from dynid.identify.model import load_model
 from dynid.validation import plots
-from dynid.validation.report import check_report_path, format_number, render_report
-from dynid.validation.validate import validate
+from dynid.validation.report import (
+    check_report_path,
+    format_number,
+    gmm_changed,
+    held_at_bound,
+    render_report,
+)
+from dynid.validation.validate import nominal_model, validate
 
 VOID = {"meta", "img", "br", "hr", "link", "input", "col", "source", "area", "base", "wbr"}
-FIGURES = ("methods", "torque", "residual", "friction")
+FIGURES = ("methods", "torque", "friction")
+"""The figures of every report; ``residual`` (before and after the GMM layer) only where the mixture changed the
+prediction."""
 
 
 class Document(HTMLParser):
@@ -125,14 +133,21 @@ def command_outputs(case, tmp_path_factory):
     return (out / "R.html").read_text(encoding="utf-8"), json.loads((out / "F.json").read_text()), out
 
 
-def test_report_is_valid_html_with_every_figure_embedded(command_outputs):
+def _figures_of(case) -> tuple[str, ...]:
+    """The figures a report of the case's full model has: ``residual`` only if its mixture changed something."""
+    full = validate(load_model(case.full), load_dataset(case.heldout))
+    return FIGURES + (("residual",) if gmm_changed([full]) is not None else ())
+
+
+def test_report_is_valid_html_with_every_figure_embedded(command_outputs, case):
     text, _, out = command_outputs
     doc = parse(text)
-    assert len(doc.images) == len(FIGURES)
+    expected = _figures_of(case)
+    assert len(doc.images) == len(expected)
     for uri in doc.images:
         width, height = png_size(uri)
         assert width >= 800 and height >= 300
-    assert {f"figure-{key}" for key in FIGURES} <= doc.ids
+    assert {f"figure-{key}" for key in expected} <= doc.ids
     for section in (
         "error",
         "methods",
@@ -200,7 +215,8 @@ def test_pdf_report(case, tmp_path):
     path = report.write(tmp_path / "R.pdf")
     data = path.read_bytes()
     assert data.startswith(b"%PDF") and data.rstrip().endswith(b"%%EOF")
-    assert len(re.findall(rb"/Type\s*/Page\b", data)) == 1 + len(FIGURES)  # a table page, then the figures
+    # a table page, then the figures
+    assert len(re.findall(rb"/Type\s*/Page\b", data)) == 1 + len(report.figures) == 1 + len(_figures_of(case))
 
 
 @pytest.mark.parametrize(
@@ -287,4 +303,125 @@ def test_report_figures_written_as_png_files(case, tmp_path):
     report = render_report([result])
     for fig in report.figures:
         (tmp_path / f"{fig.key}.png").write_bytes(fig.png)
-    assert sorted(p.stem for p in Path(tmp_path).glob("*.png")) == sorted(FIGURES)
+    assert sorted(p.stem for p in Path(tmp_path).glob("*.png")) == sorted(_figures_of(case))
+
+
+# ---------------------------------------------------------------------------- what the figures say
+@pytest.fixture(scope="module")
+def bump_case(ur5):
+    """A UR5 with a smooth position-dependent torque the physical layers cannot take: a mixture that helps."""
+    from dynid.identify.columns import column_set
+    from dynid.identify.model import identify
+    from dynid.sim.synthetic import random_fourier, synthetic_dataset, true_parameters
+
+    rng = np.random.default_rng(5)
+    cols = column_set(ur5)
+    x = true_parameters(cols, rng)
+
+    def bump(q, dq):
+        return 1.5 * np.sin(2.0 * q)
+
+    traj = random_fourier(
+        ur5, rng, periods=2
+    )  # held out: another record of the same motion (the mixture's range)
+    train, heldout = (
+        synthetic_dataset(cols, x, traj, rate=100, rng=rng, noise=0.02, extra=bump) for _ in range(2)
+    )
+    model = identify(ur5, train, method="ols", friction="linear", gmm=3, rounds=0)
+    assert model.gmr.active_.any(), "the mixture should take the sin(2 q) torque"
+    return model, train, heldout
+
+
+def test_a_residual_panel_sits_beside_every_torque_panel(no_show):
+    t = np.linspace(0, 2, 500)
+    tau = np.sin(t)
+    fig, pairs = plots.pair_grid(3)
+    assert len(pairs) == 3 and len(fig.axes) == 6
+    for j, (left, right) in enumerate(pairs):
+        plots.plot_torque(left, t, tau, {"a": tau + 0.1, "b": tau - 0.2}, joint=j + 1)
+        assert (
+            plots.plot_prediction_error(
+                right, t, tau, {"a": tau + 0.1, "b": tau - 0.2}, joint=j + 1, noise=0.05
+            )
+            is right
+        )
+        # the residual beside the torque: same row, to its right, the same time axis
+        assert right.get_position().y0 == pytest.approx(left.get_position().y0)
+        assert right.get_position().x0 > left.get_position().x1
+        assert right.get_shared_x_axes().joined(left, right)
+    ax = pairs[0][1]
+    lines = {
+        line.get_label(): line.get_ydata() for line in ax.get_lines() if not line.get_label().startswith("_")
+    }
+    np.testing.assert_allclose(lines["a"], -0.1)  # measured minus predicted
+    np.testing.assert_allclose(lines["b"], 0.2)
+    assert ax.get_ylabel() == "residual (N m)"
+    assert ax.get_title(loc="left") == "joint 1: measured - predicted (rms 0.1 N m, a)"
+
+
+def test_the_gmm_figure_only_where_the_mixture_changed_the_prediction(bump_case, case):
+    import copy
+    from dataclasses import replace
+
+    model, _, heldout = bump_case
+    changed = validate(model, heldout, label="with GMM")
+    report = render_report([changed])
+    assert [f.key for f in report.figures] == ["methods", "torque", "residual", "friction"]
+    assert "figure-residual" in parse(report.html).ids
+    # the same model with a mixture that corrects no joint: its residual after the layer is the one before
+    gmr = copy.deepcopy(model.gmr)
+    gmr.active_ = np.zeros_like(gmr.active_)
+    idle = validate(replace(model, gmr=gmr), heldout, label="idle GMM")
+    assert gmm_changed([idle]) is None and gmm_changed([idle, changed]) is changed
+    report = render_report([idle])
+    assert [f.key for f in report.figures] == list(FIGURES)
+    doc = parse(report.html)
+    assert "figure-residual" not in doc.ids and "section-residual" in doc.ids
+    assert "The GMM layer of &#x27;idle GMM&#x27; changed nothing on these data" in report.html
+
+
+def test_the_condition_caption_names_only_rows_that_are_there(bump_case, ur5):
+    model, train, heldout = bump_case
+    alone = render_report([validate(model, heldout, label="fit")]).html
+    caption = re.search(r'<h2 id="section-conditions">.*?<p class="note">(.*?)</p>', alone, flags=re.S).group(
+        1
+    )
+    assert "URDF" not in caption and "baseline" not in caption
+    baseline = validate(nominal_model(ur5, train), heldout, label="URDF")
+    both = render_report([validate(model, heldout, label="fit"), baseline]).html
+    caption = re.search(r'<h2 id="section-conditions">.*?<p class="note">(.*?)</p>', both, flags=re.S).group(
+        1
+    )
+    assert "&#x27;URDF&#x27; estimated no rigid-body parameter" in caption
+    table = re.search(r'<table id="conditions">(.*?)</table>', both, flags=re.S).group(1)
+    assert re.search(r'<td class="text">URDF</td><td>-</td>', table)
+
+
+def test_parameters_held_at_a_bound_are_shown_so(bump_case):
+    from dataclasses import replace
+
+    model, _, heldout = bump_case
+    names = list(model.columns.names)
+    k = names.index("fv3")
+    params = model.params.copy()
+    params[k] = 1e-6 * model.std[k]  # where an interior-point fit stops: just inside the bound 0
+    held = replace(model, params=params, info={**model.info, "bounds": {"physical": True, "active": ["fc2"]}})
+    # the fit's own: the bounded solve leaves armatures the data push below 0 at ~1e-11, not exactly at 0
+    before = {names[i] for i in np.flatnonzero(held_at_bound(model))}
+    assert before and all(model.params[names.index(b)] < 1e-9 for b in before)
+    assert not before & {"fc2", "fv3"}
+    at = held_at_bound(held)
+    assert {names[i] for i in np.flatnonzero(at)} == before | {"fc2", "fv3"}
+    near = params.copy()
+    near[k] = 0.01 * model.std[k]  # a hundredth of a standard deviation from it: the data's value
+    assert not held_at_bound(replace(held, params=near))[k]
+    text = render_report([validate(held, heldout, label="held")]).html
+    table = re.search(r'<table id="parameters">(.*?)</table>', text, flags=re.S).group(1)
+    for name in ("fc2", "fv3"):
+        row = re.search(rf'<tr><td class="text">{name}</td>.*?</tr>', table).group(0)
+        assert row.endswith('<td class="at-bound" style="white-space: nowrap">at bound</td></tr>')
+    assert re.search(r"Held at their lower bound \(0\) by the physical constraints: (ia\d, )*fc2, fv3;", text)
+    assert text.count(">at bound<") == len(before) + 2
+    # the model as fitted: the parameters its bounds hold are the ones shown so
+    text = render_report([validate(model, heldout, label="fit")]).html
+    assert text.count(">at bound<") == len(before)

@@ -1,12 +1,17 @@
 """Figures of a validation: each function draws one joint (or one table of bars) on an ``ax`` it is given.
 
 The functions never create windows nor call ``plt.show()``: the report (:mod:`dynid.validation.report`)
-lays them out one joint per panel with :func:`joint_grid` and embeds them as PNG.  Use them the same way
-in a notebook::
+lays them out one joint per panel with :func:`joint_grid` (the torque beside its residual, one joint per
+row, with :func:`pair_grid`) and embeds them as PNG.  Use them the same way in a notebook::
 
     fig, axes = joint_grid(6)
     for j, ax in enumerate(axes):
         plot_torque(ax, result.t, result.tau[:, j], {"full": result.tau_pred[:, j]}, joint=j + 1)
+
+    fig, pairs = pair_grid(6)             # the torque beside its residual, one joint per row
+    for j, (left, right) in enumerate(pairs):
+        plot_torque(left, result.t, result.tau[:, j], {"full": result.tau_pred[:, j]}, joint=j + 1)
+        plot_prediction_error(right, result.t, result.tau[:, j], {"full": result.tau_pred[:, j]}, joint=j + 1)
 
 Figures are plain :class:`matplotlib.figure.Figure` objects, never pyplot's: no window, no global state,
 no display needed, whatever backend is configured.
@@ -28,8 +33,10 @@ __all__ = [
     "MAX_POINTS",
     "figure_png",
     "joint_grid",
+    "pair_grid",
     "plot_friction",
     "plot_method_rms",
+    "plot_prediction_error",
     "plot_residuals",
     "plot_torque",
     "png_base64",
@@ -89,6 +96,35 @@ def joint_grid(
     for ax in flat[:n]:
         ax.grid(True, alpha=0.3, linewidth=0.6)
     return fig, flat[:n]
+
+
+def pair_grid(
+    n: int, *, height: float = 2.0, width: float = 11.0, width_ratios: tuple[float, float] = (3.0, 2.0)
+) -> tuple[Figure, list[tuple[Axes, Axes]]]:
+    """A figure with one row per joint and two panels in each: a signal and, beside it, its error.
+
+    Parameters
+    ----------
+    n : int
+        Joints.
+    height : float
+        Height of a row (inches).
+    width : float
+        Width of the figure (inches).
+    width_ratios : (float, float)
+        Widths of the left and right panels, relative.
+
+    Returns
+    -------
+    (Figure, list of (Axes, Axes))
+        The figure and each joint's (left, right) panels, joint 1 first; every panel shares the time axis.
+        Call :func:`tidy_grid` on the left and on the right panels (``ncols=1``) after drawing.
+    """
+    fig = Figure(figsize=(width, height * n + 0.6), layout="constrained")
+    axes = fig.subplots(n, 2, sharex=True, squeeze=False, gridspec_kw={"width_ratios": list(width_ratios)})
+    for ax in axes.ravel():
+        ax.grid(True, alpha=0.3, linewidth=0.6)
+    return fig, [(axes[j, 0], axes[j, 1]) for j in range(n)]
 
 
 def tidy_grid(axes: Sequence[Axes], ncols: int | None = None) -> None:
@@ -158,6 +194,73 @@ def plot_torque(
     return ax
 
 
+def plot_prediction_error(
+    ax: Axes,
+    t: ArrayLike,
+    tau: ArrayLike,
+    predictions: Mapping[str, ArrayLike],
+    *,
+    joint: int,
+    noise: float | None = None,
+    unit: str = "N m",
+) -> Axes:
+    """Measured minus predicted torque of one joint over time, model by model: what :func:`plot_torque`
+    cannot show when the lines lie on each other.
+
+    Parameters
+    ----------
+    ax : Axes
+        Where to draw.
+    t : array_like, shape (m,)
+        Time (s).
+    tau : array_like, shape (m,)
+        Measured torque as compared.
+    predictions : mapping of str to array_like, shape (m,)
+        Predicted torque of each model, by label (the colours of :func:`plot_torque`, in this order).
+    joint : int
+        Joint number (from 1), for the title.
+    noise : float, optional
+        Noise floor (standard deviation), drawn as a +-1 sigma band.
+    unit : str
+        Torque unit.
+
+    Returns
+    -------
+    Axes
+    """
+    t, tau = np.asarray(t, float), np.asarray(tau, float)
+    s = thin(t.size)
+    items = list(predictions.items())
+    rms = []
+    # the first model (the one validated) last, on top of the others
+    for k in reversed(range(len(items))):
+        label, pred = items[k]
+        error = tau - np.asarray(pred, float)
+        rms.append((k, label, float(np.sqrt(np.mean(error**2))) if error.size else float("nan")))
+        ax.plot(
+            t[s],
+            error[s],
+            color=COLORS[k % len(COLORS)],
+            linewidth=0.9 if k == 0 else 0.7,
+            alpha=0.95 if k == 0 else 0.75,
+            label=label,
+            zorder=3 if k == 0 else 2,
+        )
+    if noise is not None and np.isfinite(noise):
+        ax.axhspan(
+            -noise, noise, color="0.5", alpha=0.22, linewidth=0, label="noise floor (+-1 std)", zorder=1
+        )
+    ax.axhline(0.0, color="black", linewidth=0.5)
+    first = min(rms, key=lambda item: item[0]) if rms else None
+    title = f"joint {joint}: measured - predicted"
+    if first is not None:
+        title += f" (rms {first[2]:.3g} {unit}, {first[1]})"
+    ax.set_title(title, fontsize=9, loc="left")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel(f"residual ({unit})")
+    return ax
+
+
 def plot_residuals(
     ax: Axes,
     t: ArrayLike,
@@ -194,7 +297,7 @@ def plot_residuals(
     t, before = np.asarray(t, float), np.asarray(before, float)
     s = thin(t.size)
     rms_b = float(np.sqrt(np.mean(before**2)))
-    ax.plot(t[s], before[s], color="0.55", linewidth=0.8, label="before GMM")
+    ax.plot(t[s], before[s], color=COLORS[1], linewidth=0.8, alpha=0.7, label="before GMM")
     title = f"joint {joint}: rms {rms_b:.3g}"
     if after is not None:
         after = np.asarray(after, float)

@@ -8,10 +8,13 @@ What it shows, for the first model (the one validated) and the others (compared 
 
 * the held-out error per joint (RMS, normalised RMS, R^2, largest error) against the measured noise
   floor, and the methods side by side (table and bar chart);
-* measured against predicted torque, one joint per panel;
-* the residual before and after the GMM layer, against the noise floor;
+* measured against predicted torque, one joint per row, with the residual (measured minus predicted)
+  beside it against the noise floor;
+* the residual before and after the GMM layer, when the mixture changed the prediction (else a sentence
+  saying so);
 * friction torque against velocity with each model's friction law over the data (the paper's figure 6);
-* condition numbers, the base parameters with their relative standard deviation, and the physically
+* condition numbers, the base parameters with their relative standard deviation (``at bound`` for a
+  parameter the physical constraints hold at its bound), and the physically
   consistent link parameters (every physical fit, the default, and ``method="consistent"``; not an
   ``--unconstrained`` one).
 
@@ -48,10 +51,13 @@ from dynid.validation.html_page import (
 from dynid.validation.validate import ValidationResult
 
 __all__ = [
+    "AT_BOUND_STD",
     "Report",
     "ReportFigure",
     "check_report_path",
     "format_number",
+    "gmm_changed",
+    "held_at_bound",
     "html_table",
     "render_report",
 ]
@@ -137,12 +143,49 @@ def _friction_curves(results: Sequence[ValidationResult], j: int) -> dict[str, t
     return curves
 
 
+def gmm_changed(results: Sequence[ValidationResult]) -> ValidationResult | None:
+    """The first result whose GMM layer changed its prediction on the held-out data, or None.
+
+    Parameters
+    ----------
+    results : sequence of ValidationResult
+        The results of a report.
+    """
+    for r in results:
+        if not r.has_gmm or not r.residual.size:
+            continue
+        scale = float(np.max(np.abs(r.tau))) or 1.0
+        if np.max(np.abs(r.residual - r.residual_before_gmm)) > 1e-9 * scale:  # more than rounding
+            return r
+    return None
+
+
+def _gmm_sentence(results: Sequence[ValidationResult]) -> str:
+    """Why a report has no before/after GMM figure, as an HTML paragraph."""
+    with_gmm = [r for r in results if r.model.gmr is not None]
+    if not with_gmm:
+        text = (
+            "There is no before/after figure: no model here has a GMM layer. Each model's residual is beside its "
+            "measured and predicted torque above."
+        )
+    else:
+        r = with_gmm[0]
+        why = r.model.gmr.fallback_ if r.model.gmr.fallback_ else "no joint's correction is active"
+        text = (
+            f"The GMM layer of '{r.label}' changed nothing on these data ({why}), so its residual after the "
+            "layer is the one before it: shown once, beside the measured and predicted torque above."
+        )
+    return f'<p class="note">{html.escape(text)}</p>'
+
+
 def _render_figures(results: Sequence[ValidationResult], pdf_pages: Any | None) -> list[ReportFigure]:
     from dynid.validation.plots import (
         figure_png,
         joint_grid,
+        pair_grid,
         plot_friction,
         plot_method_rms,
+        plot_prediction_error,
         plot_residuals,
         plot_torque,
         tidy_grid,
@@ -175,41 +218,60 @@ def _render_figures(results: Sequence[ValidationResult], pdf_pages: Any | None) 
         fig,
     )
 
-    # measured vs predicted
-    fig, axes = joint_grid(n)
-    for j, ax in enumerate(axes):
-        plot_torque(ax, first.t, first.tau[:, j], {r.label: r.tau_pred[:, j] for r in results}, joint=j + 1)
-    tidy_grid(axes)
-    axes[0].legend(fontsize=7, loc="best")
+    # measured vs predicted, the residual beside
+    fig, pairs = pair_grid(n)
+    predictions = {r.label: r.tau_pred for r in results}
+    for j, (left, right) in enumerate(pairs):
+        plot_torque(left, first.t, first.tau[:, j], {k: v[:, j] for k, v in predictions.items()}, joint=j + 1)
+        plot_prediction_error(
+            right,
+            first.t,
+            first.tau[:, j],
+            {k: v[:, j] for k, v in predictions.items()},
+            joint=j + 1,
+            noise=float(first.noise.std[j]),
+        )
+    tidy_grid([a for a, _ in pairs], ncols=1)
+    tidy_grid([b for _, b in pairs], ncols=1)
+    # one legend for both columns, below the panels (inside one it hides the data)
+    handles, labels = pairs[0][0].get_legend_handles_labels()
+    for handle, label in zip(*pairs[0][1].get_legend_handles_labels(), strict=True):
+        if label not in labels:  # the noise band
+            handles.append(handle)
+            labels.append(label)
+    fig.legend(handles, labels, loc="outside lower center", ncols=len(labels), fontsize=8, frameon=False)
     emit(
         "torque",
         "Measured and predicted joint torque",
-        f"Held-out data ({first.data}); the measured torque is {first.reference}, as compared.",
+        f"Held-out data ({first.data}); the measured torque is {first.reference}, as compared. Left: measured "
+        "(grey) and each model's prediction; right: measured minus predicted, model by model, against the band "
+        "of +-1 noise standard deviation (the title gives the RMS of the first model).",
         fig,
     )
 
-    # residual before / after GMM
-    with_gmm = next((r for r in results if r.model.gmr is not None), first)
-    fig, axes = joint_grid(n)
-    after = with_gmm.residual if with_gmm.model.gmr is not None else None
-    for j, ax in enumerate(axes):
-        plot_residuals(
-            ax,
-            with_gmm.t,
-            with_gmm.residual_before_gmm[:, j],
-            None if after is None else after[:, j],
-            joint=j + 1,
-            noise=float(with_gmm.noise.std[j]),
+    # residual before / after GMM: only where the mixture changed the prediction
+    with_gmm = gmm_changed(results)
+    if with_gmm is not None:
+        fig, axes = joint_grid(n)
+        for j, ax in enumerate(axes):
+            plot_residuals(
+                ax,
+                with_gmm.t,
+                with_gmm.residual_before_gmm[:, j],
+                with_gmm.residual[:, j],
+                joint=j + 1,
+                noise=float(with_gmm.noise.std[j]),
+            )
+        handles, labels = axes[0].get_legend_handles_labels()
+        fig.legend(handles, labels, loc="outside lower center", ncols=len(labels), fontsize=8, frameon=False)
+        tidy_grid(axes)
+        emit(
+            "residual",
+            "Residual before and after the GMM layer",
+            f"Residual of '{with_gmm.label}' before (link and friction layers) and after the GMM layer; the band "
+            "is +-1 noise standard deviation.",
+            fig,
         )
-    axes[0].legend(fontsize=7, loc="upper right")
-    tidy_grid(axes)
-    caption = (
-        f"Residual of '{with_gmm.label}' before (link and friction layers) and after the GMM layer; the band is "
-        "+-1 noise standard deviation."
-        if after is not None
-        else f"Residual of '{with_gmm.label}'; no model here has a GMM layer, so there is no 'after'."
-    )
-    emit("residual", "Residual before and after the GMM layer", caption, fig)
 
     # friction against velocity
     fig, axes = joint_grid(n, sharex=False, height=2.6)
@@ -278,19 +340,61 @@ def _methods_table(results: Sequence[ValidationResult]) -> str:
     )
 
 
-def _parameter_table(result: ValidationResult) -> str:
+AT_BOUND_STD = 1e-3
+"""A bounded parameter closer to its bound than this many of its standard deviations is held at the bound."""
+
+
+def held_at_bound(model: Any) -> np.ndarray:
+    """Which layer-1 parameters the identification held at their bound: (p,) bool.
+
+    Those the model file lists as active (``info["bounds"]["active"]``), and, for a physically bounded fit
+    (armature, Coulomb and viscous friction ``>= 0``), those closer to the bound than :data:`AT_BOUND_STD` of
+    their standard deviation: an interior-point fit (the consistent projection's barrier) stops just inside
+    a bound, where the value is the bound's and not the data's.
+
+    Parameters
+    ----------
+    model : IdentifiedModel
+        The model.
+    """
+    from dynid.identify.estimators import physical_lower_bounds
+
+    cols = model.columns
+    bounds = model.info.get("bounds") or {}
+    active = set(bounds.get("active") or [])
+    held = np.array([name in active for name in cols.names], dtype=bool)
+    if bounds.get("physical"):
+        lower = physical_lower_bounds(cols)
+        finite = np.isfinite(lower)
+        gap = np.where(finite, np.asarray(model.params, float) - np.where(finite, lower, 0.0), np.inf)
+        held |= finite & (gap <= AT_BOUND_STD * model.std)
+    return held
+
+
+def _parameter_table(result: ValidationResult) -> tuple[str, list[str]]:
+    """The parameter table and the names of the parameters held at their bound."""
     m = result.model
+    held = held_at_bound(m)
     rows = []
-    for name, expr, kind, v, s, pct in zip(
-        m.columns.names, m.columns.expressions, m.columns.kinds, m.params, m.std, m.std_percent, strict=True
+    for name, expr, kind, v, s, pct, at in zip(
+        m.columns.names,
+        m.columns.expressions,
+        m.columns.kinds,
+        m.params,
+        m.std,
+        m.std_percent,
+        held,
+        strict=True,
     ):
-        rows.append([name, kind, expr, float(v), float(s), float(pct)])
-    return html_table(
+        shown = '<td class="at-bound" style="white-space: nowrap">at bound</td>' if at else float(pct)
+        rows.append([name, kind, expr, float(v), float(s), shown])
+    table = html_table(
         ["name", "kind", "expression", "value (SI)", "std", "std (%)"],
         rows,
         table_id="parameters",
         text_columns=3,
     )
+    return table, [name for name, at in zip(m.columns.names, held, strict=True) if at]
 
 
 def _consistent_section(results: Sequence[ValidationResult]) -> str:
@@ -354,6 +458,35 @@ def _consistent_section(results: Sequence[ValidationResult]) -> str:
         rows,
         table_id="consistent",
     )
+
+
+def _bound_note(held: Sequence[str]) -> str:
+    """A sentence naming the parameters held at their bound (empty when there are none)."""
+    if not held:
+        return ""
+    names = ", ".join(held)
+    return html.escape(
+        f" Held at their lower bound (0) by the physical constraints: {names}; the data would put "
+        f"{'it' if len(held) == 1 else 'them'} at or below it, so the value is the bound's and a relative "
+        "standard deviation means nothing there ('at bound')."
+    )
+
+
+def _conditions_note(
+    results: Sequence[ValidationResult], conditions: Sequence[tuple[str, float | None]]
+) -> str:
+    """The caption of the condition numbers: what they are, and why a row has none (only rows that are there)."""
+    text = "Of the noise-weighted regressor each model was identified from (lower is better conditioned)"
+    none = [r.label for r in results if not np.isfinite(r.model.cond)]
+    if none:
+        quoted = ", ".join(f"'{label}'" for label in none)
+        text += (
+            f"; {quoted} estimated no rigid-body parameter (the robot description's are used), so "
+            f"{'it has' if len(none) == 1 else 'they have'} none"
+        )
+    if conditions:
+        text += "; the rows after the models are the motion's own, as named"
+    return f'<p class="note">{html.escape(text)}.</p>'
 
 
 def _context_table(first: ValidationResult, figures: Mapping[str, Any], context: Mapping[str, Any]) -> str:
@@ -470,6 +603,7 @@ def render_report(
         if pdf_pages is not None:
             pdf_pages.close()
     by_key = {f.key: f for f in figs}
+    parameter_table, held = _parameter_table(first)
 
     cond_rows = [[r.label, r.model.cond if np.isfinite(r.model.cond) else None] for r in results]
     cond_rows += [[label, value] for label, value in conditions]
@@ -490,13 +624,12 @@ def render_report(
         _figure_html(by_key["methods"]),
         heading(by_key["torque"].title, "section-torque"),
         _figure_html(by_key["torque"]),
-        heading(by_key["residual"].title, "section-residual"),
-        _figure_html(by_key["residual"]),
+        heading("Residual before and after the GMM layer", "section-residual"),
+        _figure_html(by_key["residual"]) if "residual" in by_key else _gmm_sentence(results),
         heading(by_key["friction"].title, "section-friction"),
         _figure_html(by_key["friction"]),
         heading("Condition numbers", "section-conditions"),
-        '<p class="note">Of the noise-weighted regressor each model was identified from (lower is better '
-        "conditioned; the URDF baseline estimated no rigid-body parameter).</p>",
+        _conditions_note(results, conditions),
         html_table(["", "condition number"], cond_rows, table_id="conditions"),
     ]
     for section_title, fragment in sections:
@@ -506,8 +639,8 @@ def render_report(
         heading("Base parameters", "section-parameters"),
         f"<p class=\"note\">Model '{html.escape(first.label)}' ({html.escape(first.model.method)}): identified "
         "parameters with their standard deviation from the identification's covariance; std (%) relative to "
-        "|value| (large: poorly excited by the data).</p>",
-        _parameter_table(first),
+        f"|value| (large: poorly excited by the data).{_bound_note(held)}</p>",
+        parameter_table,
         heading("Physically consistent link parameters", "section-consistent"),
         _consistent_section(results),
     ]
