@@ -92,6 +92,7 @@ from dynid.identify.refine import refine
 from dynid.identify.registry import method_names
 
 __all__ = [
+    "AT_BOUND_STD",
     "MIXTURE_SHARE",
     "TAKEOVER",
     "TAKEOVER_GAIN",
@@ -102,6 +103,9 @@ __all__ = [
     "load_model",
     "save_model",
 ]
+
+AT_BOUND_STD = 1e-3
+"""A bounded parameter closer to its bound than this many of its standard deviations is held at it."""
 
 MIXTURE_SHARE = 0.25
 """Largest RMS of the mixture's correction on a joint, as a fraction of that joint's torque RMS.
@@ -729,7 +733,7 @@ class ThreeLayerModel:
         if lower is not None:
             x = np.asarray(x, dtype=np.float64).copy()
             x[_at_bound(x, lower)] = lower[_at_bound(x, lower)]
-        info["bounds"] = _bounds_info(cols, np.asarray(x), lower)
+        info["bounds"] = _bounds_info(cols, np.asarray(x), lower, np.sqrt(np.maximum(np.diag(cov), 0.0)))
         system.release()
         if isinstance(est, ConsistentLS):
             info["consistency"] = _consistency_figures(
@@ -1167,12 +1171,17 @@ def _consistency_figures(
 
 
 def _bounds_info(
-    cols: ColumnSet, x: NDArray[np.float64], lower: NDArray[np.float64] | None
+    cols: ColumnSet, x: NDArray[np.float64], lower: NDArray[np.float64] | None, std: NDArray[np.float64]
 ) -> dict[str, Any]:
-    """Whether the fit was bounded and which parameters sit at their bound (JSON-ready)."""
+    """Whether the fit was bounded and which parameters sit at their bound (JSON-ready): on it, or closer
+    to it than :data:`AT_BOUND_STD` of their standard deviation (an interior-point step stops just inside
+    a bound: the value there is the bound's, not the data's)."""
     if lower is None:
         return {"physical": False, "active": []}
-    return {"physical": True, "active": [cols.names[i] for i in np.flatnonzero(_at_bound(x, lower))]}
+    finite = np.isfinite(lower)
+    gap = np.where(finite, x - np.where(finite, lower, 0.0), np.inf)
+    held = _at_bound(x, lower) | (finite & (gap <= AT_BOUND_STD * std))
+    return {"physical": True, "active": [cols.names[i] for i in np.flatnonzero(held)]}
 
 
 def _at_bound(x: NDArray[np.float64], lower: NDArray[np.float64]) -> NDArray[np.bool_]:

@@ -38,6 +38,7 @@ import numpy as np
 
 from dynid._io import write_bytes
 from dynid.exceptions import UsageError
+from dynid.identify.model import AT_BOUND_STD
 from dynid.validation.html_page import (
     check_report_path,
     figure_html,
@@ -339,9 +340,6 @@ def _methods_table(results: Sequence[ValidationResult]) -> str:
         text_columns=2,
     )
 
-
-AT_BOUND_STD = 1e-3
-"""A bounded parameter closer to its bound than this many of its standard deviations is held at the bound."""
 
 
 def held_at_bound(model: Any) -> np.ndarray:
