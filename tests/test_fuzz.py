@@ -756,3 +756,17 @@ def test_garbage_casadi_file_is_regenerated_and_said(private_cache: Path) -> Non
     ):
         funcs = robot_functions(load_robot("ur5"), progress=None)
     assert funcs.regressor_numeric(np.zeros(6), np.zeros(6), np.zeros(6)).shape[-2:] == (6, 60)
+
+
+@pytest.mark.parametrize("version", [-1, 0, 3.5, True, "3"])
+def test_a_model_file_with_a_version_dynid_never_wrote_is_refused(tmp_path: Path, version) -> None:
+    """The fuzz's model files of version -1, 0 and 3.5 loaded (exit 0); they are refused in one sentence."""
+    import json
+
+    from dynid.exceptions import ModelFileError
+    from dynid.identify.model import load_model
+
+    doc = {"format": "dynid-model", "version": version, "robot": {"source": "ur5"}, "arrays": "M.npz"}
+    (tmp_path / "M.json").write_text(json.dumps(doc))
+    with pytest.raises(ModelFileError, match=r"says it is model file version .*; dynid writes whole versions 1 to"):
+        load_model(tmp_path / "M.json")

@@ -1385,9 +1385,15 @@ def load_model(path: str | os.PathLike[str], robot=None) -> IdentifiedModel:
         doc = json.loads(path.read_text(encoding="utf-8"))
         if not isinstance(doc, dict) or doc.get("format") != FORMAT:
             raise ValueError("no 'format: dynid-model' field")
-        if int(doc.get("version", 0)) > VERSION:
+        version = doc.get("version", 1)
+        if isinstance(version, bool) or not isinstance(version, int) or version < 1:
             raise ModelFileError(
-                f"{name} is a version-{doc['version']} model file; this dynid reads up to version {VERSION}: upgrade dynid"
+                f"{name} says it is model file version {version!r}; dynid writes whole versions 1 to {VERSION}: "
+                "write it again with 'dynid identify'"
+            )
+        if version > VERSION:
+            raise ModelFileError(
+                f"{name} is a version-{version} model file; this dynid reads up to version {VERSION}: upgrade dynid"
             )
         info_robot = doc["robot"]
         if not isinstance(info_robot, dict) or not isinstance(info_robot.get("source"), str):
