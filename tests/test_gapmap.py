@@ -14,6 +14,7 @@ joint's residual holds one thing the map must find:
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -179,3 +180,38 @@ def test_a_correlation_rising_to_the_window_edge_is_not_a_delay(ur5):
     assert abs(delay["lag_ms"]) == pytest.approx(max(np.abs(delay["curve"]["lag_ms"])))  # on the edge
     assert not delay["flag"]
     assert delay["at_edge"]
+
+
+@pytest.mark.parametrize("top", [3.0, 12.0, 30.0, 80.0, 300.0, 5000.0, 1e7])
+def test_gap_map_panel_text_is_legible_and_its_log_ticks_do_not_touch(top):
+    """Issue 38: every label at 8 pt or more (>= 11 px in the report); two to six numbered x ticks, apart."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.text import Text
+
+    from dynid.diagnosis.report import _gap_panel
+
+    excess = np.geomspace(1.0, top, 8)
+    rows = [
+        {"label": f"bin {k}", "count": 100, "excess": e, "low": e / 1.5, "high": e * 1.5}
+        for k, e in enumerate(excess)
+    ]
+    fig = Figure(figsize=(5.5, 4.0), dpi=110, layout="constrained")
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    _gap_panel(ax, {"speed": rows[:4], "frequency": rows[4:]})
+    fig.draw_without_rendering()
+    renderer = fig.canvas.get_renderer()
+    texts = [t for t in fig.findobj(Text) if t.get_visible() and t.get_text()]
+    assert texts
+    assert min(t.get_fontsize() for t in texts) >= 8.0
+    lo, hi = sorted(ax.get_xlim())
+    ticks = [
+        t
+        for t in ax.xaxis.get_major_ticks() + ax.xaxis.get_minor_ticks()
+        if t.label1.get_visible() and t.label1.get_text() and lo <= t.get_loc() <= hi
+    ]
+    assert 2 <= len(ticks) <= 6, [t.label1.get_text() for t in ticks]
+    boxes = sorted((t.label1.get_window_extent(renderer) for t in ticks), key=lambda b: b.x0)
+    for a, b in itertools.pairwise(boxes):
+        assert a.x1 < b.x0, "tick labels overlap"

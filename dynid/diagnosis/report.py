@@ -12,6 +12,7 @@ flags (whiteness, delay, cogging).
 from __future__ import annotations
 
 import html
+import math
 import os
 from pathlib import Path
 from typing import Any
@@ -28,6 +29,61 @@ def _table(headers: list[str], rows: list[list[Any]], text_columns: int = 1) -> 
     return html_table(headers, rows, text_columns=text_columns, digits=3)
 
 
+LABEL_PT = 8.0
+"""Smallest text in the figures (pt): at the 110 dpi of their PNG, scaled to a 1280 px page, about 11 px."""
+GAP_ROW_IN = 0.14
+"""Height of one gap-map bar (inches): a LABEL_PT label and some space."""
+_PALETTE = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
+
+
+def _gap_bars(joint_map: dict[str, list[dict[str, Any]]]) -> tuple[list[str], list, list, list, list[str]]:
+    """One joint's gap-map bars: ``(labels, excess, low, high, colors)``, bins without an estimate left out."""
+    labels, est, lo, hi, colors = [], [], [], [], []
+    for k, (kind, rows) in enumerate(joint_map.items()):
+        for r in rows:
+            if r.get("excess") is None:
+                continue
+            labels.append(f"{kind}: {r['label']}"[:38])
+            est.append(r["excess"])
+            lo.append(r["low"] if r.get("low") is not None else r["excess"])
+            hi.append(r["high"] if r.get("high") is not None else r["excess"])
+            colors.append(_PALETTE[k % len(_PALETTE)])
+    return labels, est, lo, hi, colors
+
+
+def _log_ticks(axis) -> None:
+    """Plain-numbered major ticks on a log axis, few enough that their labels never touch.
+
+    1, 2 and 5 per decade over up to 1.5 decades, 1 and 3 up to 2.5, one per decade (or per few decades)
+    beyond: at most about six.  Minor ticks stay unlabelled: matplotlib labels them in scientific notation on a
+    short range, and 1, 2, 5 per decade on a long one run into each other ("100200", "20005000").
+    """
+    from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
+
+    lo, hi = sorted(axis.get_view_interval())
+    decades = math.log10(hi / lo) if lo > 0 and hi > lo else 0.0
+    subs = (1.0, 2.0, 5.0) if decades <= 1.5 else (1.0, 3.0) if decades <= 2.5 else (1.0,)
+    axis.set_major_locator(LogLocator(base=10, subs=subs, numticks=6))
+    axis.set_major_formatter(FormatStrFormatter("%g"))
+    axis.set_minor_locator(LogLocator(base=10, subs=np.arange(2.0, 10.0), numticks=12))
+    axis.set_minor_formatter(NullFormatter())
+
+
+def _gap_panel(ax, joint_map: dict[str, list[dict[str, Any]]]) -> None:
+    """One joint's gap map on ``ax``: excess per bin (log scale) with its interval, labels at LABEL_PT."""
+    labels, est, lo, hi, colors = _gap_bars(joint_map)
+    y = np.arange(len(labels))
+    est_a = np.maximum(np.array(est, dtype=float), 1e-3)
+    err = np.vstack([est_a - np.minimum(lo, est_a), np.maximum(hi, est_a) - est_a])
+    ax.barh(y, est_a, xerr=err, color=colors, alpha=0.8, error_kw={"linewidth": 0.8})
+    ax.axvline(1.0, color="k", linewidth=1.0, linestyle="--")
+    ax.set_xscale("log")
+    _log_ticks(ax.xaxis)
+    ax.set_yticks(y, labels, fontsize=LABEL_PT)
+    ax.invert_yaxis()
+    ax.set_xlabel("excess: mean(r^2) / noise variance (-)")
+
+
 def diagnosis_figures(result) -> list[tuple[str, str, bytes]]:
     """The report's figures: ``(title, caption, png)`` each, one joint per panel.
 
@@ -37,7 +93,6 @@ def diagnosis_figures(result) -> list[tuple[str, str, bytes]]:
         What :func:`dynid.diagnosis.core.diagnose` returned.
     """
     from matplotlib.figure import Figure
-    from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
 
     from dynid.validation.plots import figure_png, joint_grid, thin, tidy_grid
 
@@ -45,34 +100,11 @@ def diagnosis_figures(result) -> list[tuple[str, str, bytes]]:
     names = result.joint_names
     n = len(names)
     gmap = result.gap_map
-    # 1. Gap map: excess per bin with its interval.
-    fig, axes = joint_grid(n, height=3.6, sharex=False)
+    # 1. Gap map: excess per bin with its interval; each row tall enough for its labels at LABEL_PT.
+    rows = max((len(_gap_bars(gmap["joints"][j])[0]) for j in range(n)), default=0)
+    fig, axes = joint_grid(n, height=max(3.6, GAP_ROW_IN * rows + 1.0), sharex=False)
     for j, ax in enumerate(axes):
-        labels, est, lo, hi, colors = [], [], [], [], []
-        palette = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
-        for k, (kind, rows) in enumerate(gmap["joints"][j].items()):
-            for r in rows:
-                if r.get("excess") is None:
-                    continue
-                labels.append(f"{kind}: {r['label']}"[:38])
-                est.append(r["excess"])
-                lo.append(r["low"] if r.get("low") is not None else r["excess"])
-                hi.append(r["high"] if r.get("high") is not None else r["excess"])
-                colors.append(palette[k % len(palette)])
-        y = np.arange(len(labels))
-        est_a = np.maximum(np.array(est), 1e-3)
-        err = np.vstack([est_a - np.minimum(lo, est_a), np.maximum(hi, est_a) - est_a])
-        ax.barh(y, est_a, xerr=err, color=colors, alpha=0.8, error_kw={"linewidth": 0.8})
-        ax.axvline(1.0, color="k", linewidth=1.0, linestyle="--")
-        ax.set_xscale("log")
-        # Ticks at 1, 2 and 5 per decade, plainly numbered: matplotlib's default labels the minor ticks of a
-        # range under a decade in scientific notation, and they run into each other.
-        ax.xaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0), numticks=8))
-        ax.xaxis.set_major_formatter(FormatStrFormatter("%g"))
-        ax.xaxis.set_minor_formatter(NullFormatter())
-        ax.set_yticks(y, labels, fontsize=5.5)
-        ax.invert_yaxis()
-        ax.set_xlabel("excess: mean(r^2) / noise variance (-)")
+        _gap_panel(ax, gmap["joints"][j])
         ax.set_title(f"joint {j + 1} ({names[j]})", fontsize=9)
     tidy_grid(axes)
     out.append(
@@ -96,7 +128,7 @@ def diagnosis_figures(result) -> list[tuple[str, str, bytes]]:
         )
         ax.set_ylabel("MSE (N^2 m^2)")
         ax.set_title(f"joint {j + 1} ({names[j]})", fontsize=9)
-        ax.tick_params(axis="x", labelsize=7)
+        ax.tick_params(axis="x", labelsize=LABEL_PT)
     out.append(
         (
             "Held-out error per joint",
@@ -119,7 +151,7 @@ def diagnosis_figures(result) -> list[tuple[str, str, bytes]]:
         ax.set_ylabel(f"r_{j + 1} (N m)")
         ax.set_xlabel("time (s)")
         ax.set_title(f"joint {j + 1} ({names[j]})", fontsize=9)
-    axes[0].legend(fontsize=7, loc="upper right")
+    axes[0].legend(fontsize=LABEL_PT, loc="upper right")
     tidy_grid(axes)
     out.append(
         (
@@ -148,7 +180,7 @@ def diagnosis_figures(result) -> list[tuple[str, str, bytes]]:
                 + (" (lead)" if lead else ""),
                 fontsize=9,
             )
-        axes[0].legend(fontsize=7, loc="upper right")
+        axes[0].legend(fontsize=LABEL_PT, loc="upper right")
         tidy_grid(axes)
         out.append(
             (
