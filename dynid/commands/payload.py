@@ -107,27 +107,15 @@ def run(args: argparse.Namespace) -> int:
         {"model": args.model, "data": args.data, "reference": args.reference},
     )
     model = load_model(args.model)
-    names = model.robot.joint_names
-    loaded = read_dataset(
-        args.data,
-        model.robot.n,
-        robot_name=model.robot.name,
-        degrees=args.degrees,
-        topic=args.topic,
-        joint_names=names,
-    )
-    check_data_fits_model(model, loaded, model_path=args.model, data_option="data")
-    reference = None
-    if args.reference is not None:
-        reference = read_dataset(
-            args.reference,
-            model.robot.n,
-            robot_name=model.robot.name,
-            degrees=args.degrees,
-            topic=args.topic,
-            joint_names=names,
-        )
-        check_data_fits_model(model, reference, model_path=args.model, data_option="reference")
+
+    def read(path: str, option: str):
+        data = read_dataset(path, model.robot.n, robot_name=model.robot.name, degrees=args.degrees,
+                            topic=args.topic, joint_names=model.robot.joint_names)  # fmt: skip
+        check_data_fits_model(model, data, model_path=args.model, data_option=option)
+        return data
+
+    loaded = read(args.data, "data")
+    reference = None if args.reference is None else read(args.reference, "reference")
     result = identify_payload(
         model,
         loaded,

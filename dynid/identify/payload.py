@@ -54,6 +54,7 @@ from scipy.optimize import least_squares
 from dynid._progress import say
 from dynid.data.dataset import Dataset
 from dynid.data.preparation import Prepared
+from dynid.data.preprocess import resample_uniform
 from dynid.exceptions import DataError, UsageError
 from dynid.identify.columns import CHUNK_SAMPLES, compiled_base_regressor
 from dynid.identify.consistent import pseudo_inertia
@@ -161,12 +162,8 @@ def _align(loaded: Prepared, ref: Prepared) -> float:
     from scipy.signal import correlate
 
     fs = loaded.fs
-
-    def uniform(t, q):
-        grid = np.arange(0.0, t[-1] + 0.5 / fs, 1.0 / fs)
-        return np.stack([np.interp(grid, t, q[:, j]) for j in range(q.shape[1])], axis=1)
-
-    ql, qr = uniform(tl, loaded.q), uniform(tr, ref.q)
+    ql = resample_uniform(tl, loaded.q, dt=1.0 / fs)[1]
+    qr = resample_uniform(tr, ref.q, dt=1.0 / fs)[1]
     span = np.maximum(np.ptp(ql, axis=0), 1e-9)
     a = (ql - ql.mean(axis=0)) / span
     b = (qr - qr.mean(axis=0)) / span

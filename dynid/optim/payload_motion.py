@@ -182,7 +182,9 @@ def design_payload_motion(
 
     start_time = time.perf_counter()
     if not (math.isfinite(duration) and 0 < duration <= MAX_DURATION):
-        raise UsageError(f"--duration is {duration}; give the payload motion's length in s, in (0, {MAX_DURATION:g}]")
+        raise UsageError(
+            f"--duration is {duration}; give the payload motion's length in s, in (0, {MAX_DURATION:g}]"
+        )
     if not (0 < speed_fraction <= 1):
         raise UsageError(f"--speed-fraction is {speed_fraction}; give a fraction in (0, 1]")
     n = robot.n
@@ -203,12 +205,11 @@ def design_payload_motion(
     grid = max(60, 16 * harmonics)
     t = np.arange(grid) * (duration / grid)
     lw = problem.wf * np.arange(1, harmonics + 1)
-    phase = np.outer(t, lw)
-    s, c = np.sin(phase), np.cos(phase)
+    Sq, Cq, C, S, dS, dC = problem.basis(t)
     # per joint, the series as linear maps of (y_a, y_b) (each (k,)): swing q - q0, dq, ddq
-    Mq_a, Mq_b = (s / lw) @ pa, (-(c / lw) + (1.0 / lw)[None, :]) @ pb  # q(t) - q0, since c = q0 + (1/lw) b
-    Md_a, Md_b = c @ pa, s @ pb
-    Mdd_a, Mdd_b = (-s * lw) @ pa, (c * lw) @ pb
+    Mq_a, Mq_b = Sq @ pa, ((1.0 / lw)[None, :] - Cq) @ pb  # q(t) - q0, since c = q0 + (1/lw) b
+    Md_a, Md_b = C @ pa, S @ pb
+    Mdd_a, Mdd_b = -dS @ pa, dC @ pb
 
     ya = ca.MX.sym("ya", k, n)
     yb = ca.MX.sym("yb", k, n)

@@ -86,6 +86,18 @@ def _time_figure(result: PayloadResult) -> bytes:
     return figure_png(fig)
 
 
+def _projected_ellipse(ax, centre, shape, plane: tuple[int, int], scale: float, **style) -> None:
+    """The ellipse ``scale`` x the (3, 3) ``shape`` (a covariance, or an ellipsoid's semi-axes squared)
+    projected on the plane of axes ``plane``, drawn at ``centre``."""
+    a, b = plane
+    w, v = np.linalg.eigh(shape[np.ix_([a, b], [a, b])])
+    angle = float(np.degrees(np.arctan2(v[1, 1], v[0, 1])))
+    ax.add_patch(
+        Ellipse((centre[a], centre[b]), 2 * scale * np.sqrt(max(w[1], 0)), 2 * scale * np.sqrt(max(w[0], 0)),
+                angle=angle, **style)
+    )  # fmt: skip
+
+
 def _flange_figure(result: PayloadResult, figures: dict[str, Any]) -> bytes:
     """Three views of frame F: axes, centre of mass (with its 2-sigma ellipse), equivalent ellipsoid."""
     mass, com_list = figures["mass"], figures["com"]
@@ -116,37 +128,11 @@ def _flange_figure(result: PayloadResult, figures: dict[str, Any]) -> bytes:
             if ellipsoid is not None:
                 semi, axes3 = ellipsoid
                 shape = (axes3 * semi**2) @ axes3.T  # the ellipsoid's "covariance": its projection's block
-                block = shape[np.ix_([a, b], [a, b])]
-                w, v = np.linalg.eigh(block)
-                angle = float(np.degrees(np.arctan2(v[1, 1], v[0, 1])))
-                ax.add_patch(
-                    Ellipse(
-                        (com[a], com[b]),
-                        2 * np.sqrt(max(w[1], 0)),
-                        2 * np.sqrt(max(w[0], 0)),
-                        angle=angle,
-                        facecolor="#1f77b4",
-                        alpha=0.25,
-                        edgecolor="#1f77b4",
-                        lw=1.2,
-                    )
-                )
+                _projected_ellipse(ax, com, shape, (a, b), 1.0, facecolor="#1f77b4", alpha=0.25,
+                                   edgecolor="#1f77b4", lw=1.2)  # fmt: skip
             # the centre of mass's 2-sigma ellipse, from the covariance of m c (first order, mass fixed)
             h_cov = cov[1:4, 1:4] / max(mass, 1e-9) ** 2
-            block = h_cov[np.ix_([a, b], [a, b])]
-            w, v = np.linalg.eigh(block)
-            angle = float(np.degrees(np.arctan2(v[1, 1], v[0, 1])))
-            ax.add_patch(
-                Ellipse(
-                    (com[a], com[b]),
-                    4 * np.sqrt(max(w[1], 0)),
-                    4 * np.sqrt(max(w[0], 0)),
-                    angle=angle,
-                    fill=False,
-                    edgecolor="k",
-                    lw=1.0,
-                )
-            )
+            _projected_ellipse(ax, com, h_cov, (a, b), 2.0, fill=False, edgecolor="k", lw=1.0)
             ax.plot([com[a]], [com[b]], "k+", markersize=10, mew=1.5)
         ax.set_xlim(-reach, reach)
         ax.set_ylim(-reach, reach)
