@@ -18,7 +18,7 @@ from dynid.identify.estimators import OLS
 from dynid.identify.friction import FrictionLayer, SeedFriction
 from dynid.identify.gmr import GMRCorrection
 from dynid.identify.linear_system import LinearSystem, WeightedSolution, build_system
-from dynid.sim.synthetic import random_fourier, synthetic_dataset
+from dynid.sim.synthetic import random_fourier, synthetic_dataset, true_parameters
 
 
 # ---------------------------------------------------------------------------- the column set
@@ -263,3 +263,37 @@ def test_q_factor_is_scipys_economic_q_to_the_bit(shape) -> None:
     A = np.random.default_rng(shape[1]).standard_normal(shape)
     ref = scipy.linalg.qr(A, mode="economic", check_finite=False)[0]
     assert np.array_equal(q_factor(np.asfortranarray(A)), ref)
+
+
+def test_shared_systems_are_built_once_and_change_no_result(ur5, monkeypatch):
+    """Inside ``sharing_systems`` every fit of one dataset takes the one system built for it, and a fit
+    after another one (sharing its derived arrays) is the same, bit for bit, as a fit on its own."""
+    from dynid.identify import linear_system
+    from dynid.identify.model import ThreeLayerModel
+
+    rng = np.random.default_rng(5)
+    cols = column_set(ur5)
+    run = synthetic_dataset(
+        cols, true_parameters(cols, rng), random_fourier(ur5, rng, periods=1), rate=100, rng=rng, noise=0.05
+    )
+    alone = ThreeLayerModel(robot=ur5, method="irls", friction="seed", gmm=2).fit(run).model_
+    builds = Counter()
+    real = linear_system._build
+
+    def counted(robot, data, *args):
+        builds[id(data)] += 1
+        return real(robot, data, *args)
+
+    monkeypatch.setattr(linear_system, "_build", counted)
+    with linear_system.sharing_systems():
+        ThreeLayerModel(robot=ur5, method="ols", friction="seed", gmm="off").fit(run)
+        shared = ThreeLayerModel(robot=ur5, method="irls", friction="seed", gmm=2).fit(run).model_
+        again = build_system(ur5, run, keep_samples=False)
+    assert builds == {id(run): 1}
+    assert again.Z is None and again.shared
+    np.testing.assert_array_equal(shared.params, alone.params)
+    np.testing.assert_array_equal(shared.cov, alone.cov)
+    np.testing.assert_array_equal(shared.rms, alone.rms)
+    np.testing.assert_array_equal(shared.predict(run), alone.predict(run))
+    build_system(ur5, run)  # outside the block: built again
+    assert builds[id(run)] == 2

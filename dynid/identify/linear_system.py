@@ -29,9 +29,11 @@ The preprocessing settings and the column set live in :mod:`dynid.data.preparati
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import contextlib
+import contextvars
+from collections.abc import Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.linalg
@@ -69,6 +71,7 @@ __all__ = [
     "describe_joints",
     "linear_torque",
     "prepare",
+    "sharing_systems",
     "still_joints",
 ]
 
@@ -136,6 +139,7 @@ class LinearSystem:
     z_param: NDArray[np.intp]
     Z: NDArray[np.float64] | None = field(default=None, repr=False)
     derived: dict = field(default_factory=dict, repr=False)
+    shared: bool = field(default=False, repr=False)
 
     @property
     def m(self) -> int:
@@ -155,7 +159,8 @@ class LinearSystem:
     def release(self) -> None:
         """Drop the full data matrix (the compressed factor stays; per-sample methods stop working)."""
         self.Z = None
-        self.derived.clear()
+        if not self.shared:  # a system handed out by :func:`sharing_systems` keeps them for the others
+            self.derived.clear()
 
     # -------------------------------------------------------------- weighted solves
     def stacked(self, whitener: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -355,6 +360,28 @@ def _qr_rows(Z: NDArray[np.float64], rows: NDArray[np.intp]) -> NDArray[np.float
     return R
 
 
+_SHARED: contextvars.ContextVar[dict | None] = contextvars.ContextVar("dynid_shared_systems", default=None)
+
+
+@contextlib.contextmanager
+def sharing_systems() -> Iterator[None]:
+    """Within this block, :func:`build_system` builds each system once and hands out copies.
+
+    The default identification fits several pipelines on the same data (its cross-validation fits
+    three candidates on each half of the recording, then the chosen one on the whole): they all take
+    the same system of the same dataset (the same robot, preprocessing, friction and armature
+    columns), so it is built once per dataset.  The copies share the data matrix, which nothing
+    writes after :func:`build_system`, and the arrays derived from it, which are keyed by what they
+    were computed from; the results are the same, bit for bit, as with a system built per fit.
+    Systems with effect columns are built every time.  Everything is let go when the block ends.
+    """
+    token = _SHARED.set({})
+    try:
+        yield
+    finally:
+        _SHARED.reset(token)
+
+
 def build_system(
     robot,
     data: Dataset,
@@ -397,6 +424,23 @@ def build_system(
     DataError
         Malformed data, wrong joint count, bad filter settings.
     """
+    shared = _SHARED.get()
+    if shared is not None and (effects is None or not len(effects.names)):
+        key: tuple = (id(data), id(robot), preprocessing, friction, armature)
+        try:
+            hash(key)
+        except TypeError:  # unhashable settings: compared by their text
+            key = (id(data), id(robot), repr(preprocessing), friction, armature)
+        hit = shared.get(key)
+        if hit is None or hit[0] is not data or hit[1] is not robot:
+            system = _build(robot, data, preprocessing, friction, armature, None, True)
+            hit = shared[key] = (data, robot, system)
+        system = hit[2]
+        return replace(system, Z=system.Z if keep_samples else None, shared=True)
+    return _build(robot, data, preprocessing, friction, armature, effects, keep_samples)
+
+
+def _build(robot, data, preprocessing, friction, armature, effects, keep_samples) -> LinearSystem:
     prepared = prepare(data, preprocessing, n_joints=robot.n)
     columns = column_set(robot, friction=friction, armature=armature)
     values = None

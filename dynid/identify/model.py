@@ -86,7 +86,7 @@ from dynid.identify.estimators import (
 )
 from dynid.identify.friction import FRICTION_MODELS, FrictionLayer
 from dynid.identify.gmr import GMRCorrection
-from dynid.identify.linear_system import build_system
+from dynid.identify.linear_system import build_system, sharing_systems
 from dynid.identify.prior import PriorChoice, choose_prior, link_report
 from dynid.identify.refine import refine
 from dynid.identify.registry import method_names
@@ -783,6 +783,10 @@ class ThreeLayerModel:
 
     def _fit_chosen(self, data: Dataset) -> ThreeLayerModel:
         """``method="auto"``: the pipeline blocked cross-validation prefers, then fitted on all the data."""
+        with sharing_systems():  # one system of the whole recording for the prior and the final fit
+            return self._fit_chosen_shared(data)
+
+    def _fit_chosen_shared(self, data: Dataset) -> ThreeLayerModel:
         from dynid.identify.pipeline import candidates, choose_pipeline
 
         weight = self.reference_weight

@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 
 from dynid._progress import advance, stage
 from dynid.exceptions import DynidError
+from dynid.identify.linear_system import sharing_systems
 
 __all__ = ["BASELINE", "JOINT_TOLERANCE", "PipelineChoice", "candidates", "choose_pipeline"]
 
@@ -134,7 +135,10 @@ def choose_pipeline(make, data, options: list[tuple[str, str, str | int]]) -> Pi
     halves = (data.select_rows(np.arange(half)), data.select_rows(np.arange(half, data.m)))
     mse = np.full((len(options), data.n), np.nan)
     done = 0
-    with stage("choosing the pipeline by cross-validation on two halves of the recording", total=2 * len(options)):
+    with (
+        sharing_systems(),  # each half's system built once for every candidate, let go after
+        stage("choosing the pipeline by cross-validation on two halves of the recording", total=2 * len(options)),
+    ):
         for i, (method, friction, gmm) in enumerate(options):
             total = np.zeros(data.n)
             try:
