@@ -47,3 +47,32 @@ def workers_cpu() -> float:
 def cpu_seconds() -> float:
     """CPU time (s) of this process and its live children (without psutil, the process only)."""
     return self_cpu() + workers_cpu()
+
+
+def run_measured(argv: list[str], cwd: str | None = None, env: dict | None = None) -> dict:
+    """Run a command to its end: wall time, CPU time and peak memory of it and its children, exit code.
+
+    The child's own resource usage (``os.wait4``), so that runs side by side in one script do not add
+    up: ``cpu`` (s, user + system, the command and the processes it waited for), ``rss_mib`` (the
+    peak resident memory of the largest of them), ``wall`` (s), ``code`` and the last lines of its
+    standard error (``tail``).
+    """
+    import subprocess
+    import tempfile
+    import time
+
+    with tempfile.TemporaryFile() as err:
+        t0 = time.perf_counter()
+        proc = subprocess.Popen(argv, cwd=cwd, env=env, stdout=subprocess.DEVNULL, stderr=err)
+        _, status, usage = os.wait4(proc.pid, 0)
+        wall = time.perf_counter() - t0
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        err.seek(0)
+        tail = err.read().decode(errors="replace").strip().splitlines()[-3:]
+    return {
+        "wall": wall,
+        "cpu": usage.ru_utime + usage.ru_stime,
+        "rss_mib": usage.ru_maxrss / 1024.0,
+        "code": proc.returncode,
+        "tail": tail,
+    }

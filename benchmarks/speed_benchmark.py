@@ -86,7 +86,7 @@ import warnings  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
-from _timing import children_cpu, load, self_cpu, workers_cpu  # noqa: E402
+from _timing import children_cpu, load, run_measured, self_cpu, workers_cpu  # noqa: E402
 
 ISSUE_BUILD_S = 221.0
 ISSUE_EXCITE_S = (80.0, 93.0, 156.0, 0.34)  # wall without / with baseline, CPU, cond ratio
@@ -285,10 +285,110 @@ def part_identify(repeat: int, stages: bool = False) -> None:
             print(f"    {label:<52s} {int(calls):4d} calls {seconds:6.2f} s")
 
 
+TX40_SPLIT = (
+    24750,
+    29250,
+)  # FIGAROH's split of the TX40 recording: rows [0, 24750) train, [29250, 45000) held out
+
+
+def part_cli(repeat: int, figaroh_example: str | None, figaroh_python: str) -> None:
+    """The commands as a user runs them on FIGAROH's TX40 split, whole processes, beside FIGAROH's own
+    TX40 example when a copy of it is given (``--figaroh-example``)."""
+    from dynid.data.adapters import load_recording, recording_model_path
+    from dynid.data.files import save_dataset
+
+    print("\n== the TX40 split from the shell: whole processes (imports and file reading included)")
+    warnings.simplefilter("ignore")
+    try:
+        data = load_recording("tx40")
+    except Exception as exc:  # the shared recordings are not everywhere
+        print(f"  skipped: {exc}")
+        return
+    urdf = str(recording_model_path("tx40"))
+    train_end, held_start = TX40_SPLIT
+    with tempfile.TemporaryDirectory() as tmp:
+        train, held = Path(tmp, "train.csv"), Path(tmp, "heldout.csv")
+        save_dataset(data.select_rows(np.arange(train_end)), train)
+        save_dataset(data.select_rows(np.arange(held_start, data.m)), held)
+
+        def dynid(*args: str) -> list[str]:
+            return [sys.executable, "-m", "dynid", *args, "--quiet"]
+
+        ols = ("--method", "ols", "--friction", "linear", "--gmm", "off")
+        runs = {
+            "dynid identify (defaults)": dynid(
+                "identify", "--robot", urdf, "--data", str(train), "--out", "d.json"
+            ),
+            "dynid validate (defaults' model, HTML report)": dynid(
+                "validate", "--model", "d.json", "--data", str(held), "--report", "d.html"
+            ),
+            "dynid identify --method ols --friction linear --gmm off": dynid(
+                "identify", "--robot", urdf, "--data", str(train), "--out", "o.json", *ols
+            ),
+            "dynid validate (OLS model, HTML report)": dynid(
+                "validate", "--model", "o.json", "--data", str(held), "--report", "o.html"
+            ),
+        }
+        figaroh = None
+        if figaroh_example:
+            script = Path(figaroh_example, "identification.py")
+            if script.is_file():
+                figaroh = [figaroh_python, str(script)]
+                runs["FIGAROH's TX40 example (identification.py, its report and checks)"] = figaroh
+            else:
+                print(f"  FIGAROH: no identification.py in {figaroh_example}; its run is skipped")
+        else:
+            print(
+                "  FIGAROH: not run (give --figaroh-example DIR, a checkout of figaroh-examples' Staubli TX40 "
+                "example, and --figaroh-python for the Python that has figaroh installed)"
+            )
+        sums: dict[str, list[dict]] = {label: [] for label in runs}
+        for k in range(repeat):  # the commands interleaved round by round, so a load change hits them alike
+            for label, argv in runs.items():
+                cwd = figaroh_example if argv is figaroh else tmp
+                result = run_measured(argv, cwd=cwd)
+                sums[label].append(result)
+                if result["code"] != 0:
+                    print(f"  {label}: exit {result['code']}: {' / '.join(result['tail'])}")
+            print(f"  round {k + 1} done  [{load()}]")
+        print(f"  {'':64s} {'wall s':>8s} {'CPU s':>8s} {'peak MiB':>9s}   (the median of {repeat} rounds)")
+        med = {}
+        for label, results in sums.items():
+            med[label] = {
+                key: float(np.median([r[key] for r in results])) for key in ("wall", "cpu", "rss_mib")
+            }
+            m = med[label]
+            print(f"  {label:64s} {m['wall']:8.2f} {m['cpu']:8.2f} {m['rss_mib']:9.0f}")
+        keys = list(runs)
+        default_cpu = med[keys[0]]["cpu"] + med[keys[1]]["cpu"]
+        ols_cpu = med[keys[2]]["cpu"] + med[keys[3]]["cpu"]
+        print(f"  identify + validate: defaults {default_cpu:.2f} s CPU, OLS {ols_cpu:.2f} s CPU (ratio "
+              f"{default_cpu / ols_cpu:.2f})")  # fmt: skip
+        if figaroh is not None:
+            peer = med[keys[-1]]
+            print(
+                f"  against FIGAROH's example ({peer['cpu']:.2f} s CPU, {peer['rss_mib']:.0f} MiB): defaults "
+                f"{default_cpu / peer['cpu']:.2f}x its CPU time, OLS {ols_cpu / peer['cpu']:.2f}x; peak memory "
+                f"{max(med[keys[0]]['rss_mib'], med[keys[1]]['rss_mib']) / peer['rss_mib']:.2f}x"
+            )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
     parser.add_argument(
-        "--part", nargs="+", choices=("build", "excite", "identify"), default=["build", "excite", "identify"]
+        "--part",
+        nargs="+",
+        choices=("build", "excite", "identify", "cli"),
+        default=["build", "excite", "identify", "cli"],
+    )
+    parser.add_argument(
+        "--figaroh-example",
+        help="folder of FIGAROH's Staubli TX40 example (identification.py) to run beside dynid",
+    )
+    parser.add_argument(
+        "--figaroh-python",
+        default=sys.executable,
+        help="the Python that has figaroh installed (default this one)",
     )
     parser.add_argument("--repeat", type=int, default=1, help="runs of each part (default 1)")
     parser.add_argument(
@@ -297,9 +397,14 @@ def main() -> None:
     parser.add_argument(
         "--stages", action="store_true", help="also the CPU time of each stage of one default identification"
     )
-    parser.add_argument("--excite-seeds", help="seeds of the excitation designs, e.g. 0,1,2 (default: 0, --repeat times)")
     parser.add_argument(
-        "--screen-iter", type=int, default=40, help="screening iterations of the design (0: every try to the end)"
+        "--excite-seeds", help="seeds of the excitation designs, e.g. 0,1,2 (default: 0, --repeat times)"
+    )
+    parser.add_argument(
+        "--screen-iter",
+        type=int,
+        default=40,
+        help="screening iterations of the design (0: every try to the end)",
     )
     args = parser.parse_args()
     print(
@@ -312,6 +417,8 @@ def main() -> None:
         part_excite(args.repeat, seeds, args.screen_iter)
     if "identify" in args.part:
         part_identify(args.repeat, args.stages)
+    if "cli" in args.part:
+        part_cli(max(args.repeat, 1), args.figaroh_example, args.figaroh_python)
 
 
 if __name__ == "__main__":

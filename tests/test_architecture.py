@@ -47,7 +47,7 @@ LAYERS = (
 BOTTOM = -1  # dynid._io, dynid.exceptions, other top-level helpers
 TOP = len(LAYERS)  # dynid.cli and the package's face
 # Top-level modules that are not helpers: their layer.
-TOP_LEVEL = {"cli": TOP, "demo": LAYERS.index("commands")}
+TOP_LEVEL = {"cli": TOP, "__main__": TOP, "demo": LAYERS.index("commands")}
 
 
 def _module_files() -> dict[str, Path]:
@@ -171,7 +171,7 @@ def _violations(module: str, path: Path) -> dict[str, list[str]]:
         targets += [f"{imp.target}.{n}" for n in imp.names if f"{imp.target}.{n}" in MODULES]
         for target in targets:
             if target == "dynid.cli" or target.startswith("dynid.cli."):
-                if module != "dynid.cli":
+                if module not in ("dynid.cli", "dynid.__main__"):  # ``python -m dynid`` runs the cli
                     out["cli"].append(f"{here}:{imp.line} imports dynid.cli")
             elif layer(target) > layer(module) and target != "dynid":
                 out["layers"].append(
