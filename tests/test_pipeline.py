@@ -75,3 +75,46 @@ def test_nonlinear_friction_makes_the_papers_pipeline_the_choice(ur5):
     cv = np.asarray(pipe["cv_rms"])
     chosen = [tuple(c) for c in pipe["candidates"]].index((pipe["method"], pipe["friction"], pipe["gmm"]))
     assert np.mean(cv[chosen] / cv[0]) < 0.9
+
+
+@pytest.fixture(scope="module")
+def fast_run(ur5):
+    """Ten seconds of a UR5 at 1 kHz, angles and torque only (no dq, ddq logged): a 20 Hz cut-off keeps
+    one sample in five for the cross-validation."""
+    rng = np.random.default_rng(4)
+    cols = column_set(ur5)
+    x = true_parameters(cols, rng)
+    return synthetic_dataset(
+        cols, x, random_fourier(ur5, rng, periods=1), rate=1000, rng=rng, noise=0.2, with_derivatives=False
+    )
+
+
+def test_the_coarse_recording_keeps_the_band_below_the_cut_off(fast_run):
+    from dynid.data.preprocess import lowpass
+    from dynid.identify.pipeline import RATE_FACTOR, coarse_recording
+
+    assert coarse_recording(fast_run, None) is fast_run  # no filter: nothing to decimate to
+    assert coarse_recording(fast_run, 1000 / (1.5 * RATE_FACTOR)) is fast_run  # D = 1
+    coarse = coarse_recording(fast_run, 20.0)
+    D = coarse.meta["coarse"]["decimate"]
+    assert D == 5 and coarse.dt == pytest.approx(5 * fast_run.dt) and coarse.m == -(-fast_run.m // 5)
+    assert coarse.dq is None and coarse.ddq is None
+    np.testing.assert_array_equal(coarse.t, fast_run.t[::5])
+    # below the cut-off the two recordings are one signal (away from the ends, which the preprocessing
+    # trims): the angles to 1e-6 rad, the torque to its noise
+    np.testing.assert_allclose(coarse.q[20:-20], fast_run.q[::5][20:-20], atol=1e-6)
+    band = lowpass(fast_run.tau, fs=1000.0, cutoff=20.0)[::5]
+    err = lowpass(coarse.tau, fs=200.0, cutoff=20.0) - band
+    assert np.sqrt(np.mean(err[100:-100] ** 2)) < 0.02  # the noise of 0.2 N m, filtered at 20 Hz: about 0.04
+
+
+def test_the_default_scores_a_fast_recording_at_ten_times_its_cut_off(ur5, fast_run):
+    """The candidates are scored on the coarse recording; the chosen one is fitted on the recording as it
+    came (its kept samples are the full rate's)."""
+    from dynid.data.preparation import Preprocessing
+
+    model = identify(ur5, fast_run, preprocessing=Preprocessing(cutoff=20.0))
+    pipe = model.info["pipeline"]
+    assert pipe["rate_hz"] == pytest.approx(200.0) and "scored at 200 Hz" in pipe["reason"]
+    assert model.preprocessing["decimate"] == 1 and model.preprocessing["cutoff_hz"] == 20.0
+    assert np.all(np.isfinite(pipe["cv_rms"])) and np.all(np.asarray(pipe["cv_rms"]) < 2.0)

@@ -787,7 +787,7 @@ class ThreeLayerModel:
             return self._fit_chosen_shared(data)
 
     def _fit_chosen_shared(self, data: Dataset) -> ThreeLayerModel:
-        from dynid.identify.pipeline import candidates, choose_pipeline
+        from dynid.identify.pipeline import candidates, choose_pipeline, coarse_recording
 
         weight = self.reference_weight
         if weight == "auto" and self.physical and not self.effects and self.friction != "none":
@@ -800,9 +800,20 @@ class ThreeLayerModel:
             weight = choose_prior(self.robot, system)
             system.release()
         half = replace(weight, weight=0.5 * weight.weight) if isinstance(weight, PriorChoice) else weight
+        cv_data, cv_pre = data, self.preprocessing
+        pre = self.preprocessing or Preprocessing()
+        if pre.decimate == 1:  # scored at a rate of RATE_FACTOR times the cut-off, at the whole one's cut-off
+            settings = pre.resolve(data)
+            cv_data = coarse_recording(data, settings["cutoff_hz"])
+            if cv_data is not data:
+                cv_pre = replace(
+                    pre, cutoff=settings["cutoff_hz"], state_cutoff=settings["state_cutoff_hz"], trim=settings["trim_s"]
+                )
+                if isinstance(half, PriorChoice):  # the same information in D times fewer, less correlated samples
+                    half = replace(half, kappa=max(1.0, half.kappa / cv_data.meta["coarse"]["decimate"]))
         choice = choose_pipeline(
-            lambda m, f, g: self._with(method=m, friction=f, gmm=g, reference_weight=half),
-            data,
+            lambda m, f, g: self._with(method=m, friction=f, gmm=g, reference_weight=half, preprocessing=cv_pre),
+            cv_data,
             candidates(self.friction, self.gmm),
         )
         say(f"pipeline: {choice.reason}")

@@ -15,7 +15,7 @@ pipeline on that score beyond the resolution of two halves.  Training data only;
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -25,7 +25,15 @@ from dynid._progress import advance, stage
 from dynid.exceptions import DynidError
 from dynid.identify.linear_system import sharing_systems
 
-__all__ = ["BASELINE", "JOINT_TOLERANCE", "PipelineChoice", "candidates", "choose_pipeline"]
+__all__ = [
+    "BASELINE",
+    "JOINT_TOLERANCE",
+    "RATE_FACTOR",
+    "PipelineChoice",
+    "candidates",
+    "choose_pipeline",
+    "coarse_recording",
+]
 
 BASELINE = ("ols", "linear", "off")
 """Ordinary least squares, linear friction, no correction: the pipeline every choice must match."""
@@ -38,6 +46,16 @@ baseline on two joints and predicted the held-out part better on all six; on the
 on one joint and lost on three held out.  A tighter veto follows the noise of the halves."""
 
 _MIN_HALF_SECONDS = 2.0  # halves shorter than this cannot score a motion: the full pipeline is kept
+
+RATE_FACTOR = 10.0
+"""The cross-validation fits the candidates at a rate of at least this many times the torque's cut-off.
+
+A recording sampled far above its cut-off (the TX40 at 5 kHz for a 52 Hz cut-off, the Panda at 1 kHz for
+15 Hz) carries nothing below the cut-off that one sample in ``D`` does not: after the low-pass the
+torque's noise is correlated over about ``fs / (2 cutoff)`` samples, so ``D`` times fewer of them hold
+the same information.  The candidates are scored on the recording low-passed at 0.8 of the lower rate's
+Nyquist frequency and decimated (:func:`coarse_recording`), all of them alike; the chosen pipeline is
+then fitted on the recording as it came."""
 
 
 @dataclass(frozen=True)
@@ -54,6 +72,9 @@ class PipelineChoice:
         Cross-validated RMS per joint (N m).
     reason : str
         One sentence a person reads.
+    rate_hz : float or None
+        The sampling rate the candidates were scored at (None: the recording's own; see
+        :data:`RATE_FACTOR`).
     """
 
     method: str
@@ -62,6 +83,7 @@ class PipelineChoice:
     candidates: list[tuple[str, str, str | int]]
     cv_rms: NDArray[np.float64]
     reason: str
+    rate_hz: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready record (the model file keeps it)."""
@@ -72,6 +94,7 @@ class PipelineChoice:
             "candidates": [list(c) for c in self.candidates],
             "cv_rms": np.round(self.cv_rms, 6).tolist(),
             "reason": self.reason,
+            "rate_hz": None if self.rate_hz is None else float(self.rate_hz),
         }
 
 
@@ -100,6 +123,45 @@ def candidates(friction: str = "auto", gmm: str | int = "auto") -> list[tuple[st
         ("irls", full_friction, gmm),
     ]
     return list(dict.fromkeys(out))
+
+
+def coarse_recording(data, cutoff: float | None):
+    """The recording at a rate of about :data:`RATE_FACTOR` times ``cutoff``, or itself.
+
+    Every signal (angles, torques, measured velocities and accelerations) is low-passed (zero-phase
+    Butterworth, order 5, run by run) at 0.8 of the lower rate's Nyquist frequency, then one sample in
+    ``D`` is kept.  Unchanged when ``D`` would be 1, without a cut-off, or on irregular time stamps.
+
+    Parameters
+    ----------
+    data : Dataset
+        The training recording.
+    cutoff : float or None
+        The torque's cut-off (Hz) the pipelines will use.
+
+    Returns
+    -------
+    Dataset
+    """
+    from dynid.data.preprocess import lowpass
+
+    if cutoff is None or not data.is_uniform:
+        return data
+    fs = 1.0 / data.dt
+    D = int(fs / (RATE_FACTOR * cutoff) + 1e-6)  # 999.99... Hz for 1 kHz stamps: still 5 at 20 Hz
+    if D < 2:
+        return data
+    runs = data.runs
+    keep = np.concatenate([np.arange(r.start, r.stop, D) for r in runs])
+
+    def low(x):
+        return None if x is None else lowpass(x, fs=fs, cutoff=0.8 * fs / (2 * D), order=5, runs=runs)[keep]
+
+    sub = data.select_rows(keep)  # the runs' bounds kept
+    meta = {**sub.meta, "coarse": {"decimate": D, "rate_hz": fs / D}}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return replace(sub, q=low(data.q), tau=low(data.tau), dq=low(data.dq), ddq=low(data.ddq), meta=meta)
 
 
 def _score(model, ds) -> NDArray[np.float64]:
@@ -185,4 +247,7 @@ def choose_pipeline(make, data, options: list[tuple[str, str, str | int]]) -> Pi
             f"{name}: on two halves of the recording, each predicting the other, {100 * (1 - score[pick]):.0f} % "
             f"lower mean relative error than ols + linear friction, and no joint {100 * JOINT_TOLERANCE:.0f} % worse"
         )
-    return PipelineChoice(m, f, g, list(options), cv, reason)
+    rate = data.meta.get("coarse", {}).get("rate_hz")
+    if rate is not None:
+        reason += f" (scored at {rate:.4g} Hz, {RATE_FACTOR:g} times the cut-off or more)"
+    return PipelineChoice(m, f, g, list(options), cv, reason, rate)
