@@ -368,3 +368,31 @@ def test_a_prediction_far_outside_the_training_torque_says_so_in_one_sentence(ur
     assert again.info["torque_range"] == model.info["torque_range"] and "prior" in again.info
     with pytest.warns(IdentificationWarning, match="leaves the training torque's range by far"):
         again.predict(q, 30 * dq, 300 * ddq)
+
+
+def test_a_model_identified_from_a_relative_urdf_path_loads_from_another_folder(ur5, tmp_path, monkeypatch):
+    """The model file names its description as given, and as found from the model's own folder: a
+    command run elsewhere (export, validate) finds the same file."""
+    import shutil
+
+    from dynid.symbolic.robot import example_robot_data_dir, load_robot
+
+    (tmp_path / "x").mkdir()
+    (tmp_path / "other").mkdir()
+    shutil.copy(example_robot_data_dir() / "ur_description" / "urdf" / "ur5_robot.urdf", tmp_path / "x" / "ur5.urdf")
+    monkeypatch.chdir(tmp_path)
+    robot = load_robot("x/ur5.urdf")
+    rng = np.random.default_rng(3)
+    cols = column_set(robot)
+    data = synthetic_dataset(cols, true_parameters(cols, rng), random_fourier(robot, rng), rate=100, rng=rng)
+    model = identify(robot, data, method="ols", friction="linear", gmm="off", physical=False)
+    save_model(model, tmp_path / "M.json")
+    doc = json.loads((tmp_path / "M.json").read_text())
+    assert doc["robot"]["source"] == "x/ur5.urdf" and doc["robot"]["source_from_model"] == "x/ur5.urdf"
+    monkeypatch.chdir(tmp_path / "other")
+    again = load_model("../M.json")
+    np.testing.assert_array_equal(again.params, model.params)
+    assert again.robot.key == robot.key
+    (tmp_path / "x" / "ur5.urdf").unlink()  # gone everywhere: one sentence naming what to give
+    with pytest.raises(ModelFileError, match=r"cannot be loaded here .*give the robot it was identified for"):
+        load_model("../M.json")

@@ -1283,6 +1283,30 @@ def identify(
 
 
 # ---------------------------------------------------------------------------- files
+def _recorded_robot(info_robot: dict[str, Any], path: Path, name: str, load_robot) -> Any:
+    """The robot a model file names: its source as given (a built-in name, or a path from the folder
+    it was identified in), else the same file found from the model's folder, else where it was."""
+    tried = [info_robot["source"]]
+    relative = info_robot.get("source_from_model")
+    if isinstance(relative, str):
+        tried.append(str(path.parent / relative))
+    if isinstance(info_robot.get("source_path"), str):
+        tried.append(info_robot["source_path"])
+    first: DynidError | None = None
+    for source in dict.fromkeys(tried):
+        if source != tried[0] and not Path(source).is_file():
+            continue
+        try:
+            return load_robot(source)
+        except DynidError as err:
+            first = first or err
+    raise ModelFileError(
+        f"{name} was identified for the robot '{info_robot.get('name')}' from '{info_robot.get('source')}', "
+        f"which cannot be loaded here ({first}); give the robot it was identified for (--robot, where the "
+        "command has it), or run the command from the folder the model was identified in"
+    ) from None
+
+
 def save_model(model: IdentifiedModel, path: str | os.PathLike[str]) -> tuple[Path, Path]:
     """Write a model to ``path`` (JSON) and the arrays beside it (same name, ``.npz``), all or nothing.
 
@@ -1314,10 +1338,15 @@ def save_model(model: IdentifiedModel, path: str | os.PathLike[str]) -> tuple[Pa
     buf = io.BytesIO()
     np.savez(buf, **arrays)
     blob = buf.getvalue()
+    figures = model.figures()
+    source = Path(str(model.robot.source))
+    if source.is_file():  # found again from another folder: beside the model, or where it was
+        figures["robot"]["source_path"] = str(source.resolve())
+        figures["robot"]["source_from_model"] = os.path.relpath(source.resolve(), path.parent.resolve())
     doc = {
         "format": FORMAT,
         "version": VERSION,
-        **model.figures(),
+        **figures,
         "arrays": arrays_path.name,
         "arrays_sha256": hashlib.sha256(blob).hexdigest(),
     }
@@ -1423,14 +1452,7 @@ def load_model(path: str | os.PathLike[str], robot=None) -> IdentifiedModel:
     if robot is None:
         from dynid.symbolic.robot import load_robot
 
-        try:
-            robot = load_robot(info_robot["source"])
-        except DynidError as err:
-            raise ModelFileError(
-                f"{name} was identified for the robot '{info_robot.get('name')}' from '{info_robot.get('source')}', "
-                f"which cannot be loaded here ({err}); give the robot it was identified for (on the command line: "
-                "--robot, a built-in name, URDF or table)"
-            ) from None
+        robot = _recorded_robot(info_robot, path, name, load_robot)
     if info_robot.get("transmission") is not None:
         try:
             robot = robot.with_transmission(info_robot["transmission"])
