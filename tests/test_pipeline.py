@@ -110,11 +110,14 @@ def test_the_coarse_recording_keeps_the_band_below_the_cut_off(fast_run):
 
 def test_the_default_scores_a_fast_recording_at_ten_times_its_cut_off(ur5, fast_run):
     """The candidates are scored on the coarse recording; the chosen one is fitted on the recording as it
-    came (its kept samples are the full rate's)."""
+    came (every one of its samples: a Coulomb step filtered at the full rate is not the coarse one's)."""
     from dynid.data.preparation import Preprocessing
+    from dynid.identify.model import data_fingerprint
 
     model = identify(ur5, fast_run, preprocessing=Preprocessing(cutoff=20.0))
     pipe = model.info["pipeline"]
     assert pipe["rate_hz"] == pytest.approx(200.0) and "scored at 200 Hz" in pipe["reason"]
     assert model.preprocessing["decimate"] == 1 and model.preprocessing["cutoff_hz"] == 20.0
+    assert model.info["n_samples"] > 0.9 * fast_run.m
     assert np.all(np.isfinite(pipe["cv_rms"])) and np.all(np.asarray(pipe["cv_rms"]) < 2.0)
+    assert model.info["data_sha256"] == data_fingerprint(fast_run)

@@ -99,6 +99,7 @@ __all__ = [
     "TAKEOVER_SHARE",
     "IdentifiedModel",
     "ThreeLayerModel",
+    "data_fingerprint",
     "identify",
     "load_model",
     "save_model",
@@ -664,6 +665,13 @@ class ThreeLayerModel:
         self
         """
         self._check()
+        fitted = self._fit(data)
+        info = dict(fitted.model_.info)
+        info["data_sha256"] = data_fingerprint(data)
+        fitted.model_ = replace(fitted.model_, info=info)
+        return fitted
+
+    def _fit(self, data: Dataset) -> ThreeLayerModel:
         if self.method == "auto":
             return self._fit_chosen(data)
         if self.friction == "auto":  # an explicit method: the paper's friction model
@@ -1119,6 +1127,15 @@ class ThreeLayerModel:
         return self.model_.predict(q, dq, ddq)
 
 
+def data_fingerprint(data: Dataset) -> str:
+    """The sha256 of a recording's time stamps, angles and torques (what a model file records of its
+    training data, so that scoring a model on them is recognised)."""
+    digest = hashlib.sha256()
+    for a in (data.t, data.q, data.tau):
+        digest.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
+    return digest.hexdigest()
+
+
 def _cap_mixture(gmr: GMRCorrection, prep, rms_layers: dict[str, list[float]], info: dict[str, Any]):
     """Switch off the mixture on joints where it carries more than :data:`MIXTURE_SHARE` of the torque.
 
@@ -1546,6 +1563,7 @@ def load_model(path: str | os.PathLike[str], robot=None) -> IdentifiedModel:
                 "pipeline",
                 "torque_range",
                 "payload",
+                "data_sha256",
             )
         }
         if doc.get("gmm") is not None:
