@@ -132,7 +132,8 @@ def coarse_recording(data, cutoff: float | None):
 
     Every signal (angles, torques, measured velocities and accelerations) is low-passed (zero-phase
     Butterworth, order 5, run by run) at 0.8 of the lower rate's Nyquist frequency, then one sample in
-    ``D`` is kept.  Unchanged when ``D`` would be 1, without a cut-off, or on irregular time stamps.
+    ``D`` is kept (irregular time stamps are first resampled to their median step, as the preprocessing
+    would).  Unchanged when ``D`` would be 1 or without a cut-off.
 
     Parameters
     ----------
@@ -145,14 +146,16 @@ def coarse_recording(data, cutoff: float | None):
     -------
     Dataset
     """
-    from dynid.data.preprocess import lowpass
+    from dynid.data.preprocess import lowpass, resample
 
-    if cutoff is None or not data.is_uniform:
+    if cutoff is None:
         return data
     fs = 1.0 / data.dt
     D = int(fs / (RATE_FACTOR * cutoff) + 1e-6)  # 999.99... Hz for 1 kHz stamps: still 5 at 20 Hz
     if D < 2:
         return data
+    if not data.is_uniform:  # on the uniform grid the preprocessing would resample it to
+        data = resample(data)
     runs = data.runs
     keep = np.concatenate([np.arange(r.start, r.stop, D) for r in runs])
 
