@@ -125,3 +125,33 @@ def test_linear_part_round_trips_through_basis_and_set_linear(rng) -> None:
         np.testing.assert_allclose(mdl.basis(dq) @ mdl.linear_coef(), mdl.predict(dq), atol=1e-12)
         mdl.set_linear(-np.ones(len(mdl.linear_coef())))  # below the bounds: kept at them
         assert np.all(mdl.linear_coef() >= mdl.linear_bounds)
+
+
+def test_seed_model_holds_an_implausible_static_level_at_the_coulomb_level(rng) -> None:
+    """Coulomb + viscous friction whose reversals carry a timing error (a short burst of torque on one
+    side of each zero crossing, as a differentiated angle gives): free, the fit puts a static level of
+    many Coulomb levels on the few samples below a tiny threshold; held, the static level is the Coulomb
+    level and the model predicts a motion with slow reversals as the truth does."""
+    dq = velocities(rng)
+    kc, kv = 1.0, 0.5
+    burst = np.where((np.abs(dq) < 0.004) & (dq < 0), -6.0, 0.0)  # the reversals' timing error
+    F = kc * np.sign(dq) + kv * dq + burst + 0.02 * rng.normal(size=dq.size)
+    free = SeedFriction()
+    free.static_ratio = np.inf
+    free.fit(dq, F)
+    assert free.coef_[6] > 3 * free.coef_[1]  # the burst taken for stiction
+    fit = SeedFriction().fit(dq, F)
+    assert fit.tied_ == (False, True)
+    assert fit.coef_[6] == fit.coef_[1] and fit.coef_[5] <= 3 * fit.coef_[0]
+    fast = np.abs(dq) > 0.1  # away from the reversals the fit is Coulomb + viscous
+    assert np.sqrt(np.mean((fit.predict(dq[fast]) - kc * np.sign(dq[fast]) - kv * dq[fast]) ** 2)) < 0.1 * kc
+    assert len(fit.basis(dq[:5]).T) == len(fit.linear_coef()) == 6  # one Coulomb column on the held side
+    slow = np.linspace(-0.05, 0.05, 201)  # a motion that lingers near zero speed
+    truth = kc * np.sign(slow) + kv * slow
+    assert np.max(np.abs(fit.predict(slow) - truth)) < 1.1 * kc  # free: several Coulomb levels off
+    assert np.max(np.abs(free.predict(slow) - truth)) > 3 * kc
+    before = fit.coef_.copy()
+    fit.set_linear(fit.linear_coef() * 1.5)  # a joint refit keeps the two levels together
+    assert fit.coef_[6] == fit.coef_[1] == 1.5 * before[1]
+    again = FrictionLayer.from_dict(FrictionLayer(model="seed").fit(dq[:, None], F[:, None]).to_dict())
+    assert again.models_[0].tied_ == (False, True)  # read back from a file, still held
