@@ -88,3 +88,19 @@ def test_without_the_snap_the_rounded_arm_is_another_arm(urdfs, exact, runs, mon
     reference, _, _ = _fit_and_predict(exact, train, heldout)
     # the extra direction, seen through 3.7e-6 rad of rounding, is all but unseen: an estimate with no digit
     assert np.nanmax(model.std) > 1000 * np.nanmax(reference.std)
+
+
+def test_a_model_of_the_cad_description_exports_onto_it(urdfs, runs, tmp_path):
+    """The export takes the rounded file itself as its template (the same robot) and writes its angles as
+    they are; reloaded by Pinocchio the torque differs from dynid's by the order of the snap, allowed."""
+    from dynid.simmodel import export_model
+
+    train, _ = runs
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RobotModelWarning)
+        cad = load_robot(urdfs[1])
+        model = identify(cad, train, method="ols", friction="linear", gmm="off")
+        result = export_model(model, "urdf", tmp_path / "out.urdf")
+    check = next(c for c in result.checks if c["check"].startswith("URDF in Pinocchio"))
+    assert check["passed"] and 1e-8 < check["tolerance"] <= 10 * robot_module.SNAP_RAD
+    assert "right angles as written" in check["check"] and check["relative_error"] > 1e-12

@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 
 from dynid.exceptions import UsageError
 from dynid.identify.consistent import is_consistent
+from dynid.symbolic.robot import SNAP_RAD
 
 __all__ = ["TemplateMatch", "match_template", "read_template", "robot_urdf", "write_urdf"]
 
@@ -148,11 +149,16 @@ def match_template(root: ET.Element, path: str | Path, robot) -> TemplateMatch:
         )
     for i, joint in enumerate(robot.joints):
         M = reduced.jointPlacements[i + 1]
-        off = max(
-            float(np.abs(np.asarray(M.rotation) - joint.rotation).max()),
-            float(np.abs(np.asarray(M.translation) - joint.translation).max()),
-        )
-        if off > _KINEMATIC_TOL or int(reduced.parents[i + 1]) != joint.parent:
+        turned = float(np.abs(np.asarray(M.rotation) - joint.rotation).max())
+        moved = float(np.abs(np.asarray(M.translation) - joint.translation).max())
+        off = max(turned, moved)
+        # the loader snaps a CAD export's rounded right angles (SNAP_RAD): its own template, read raw, differs
+        # by that much in rotation and is the same robot
+        if (
+            moved > _KINEMATIC_TOL
+            or turned > max(_KINEMATIC_TOL, 1.01 * SNAP_RAD)
+            or int(reduced.parents[i + 1]) != joint.parent
+        ):
             raise UsageError(
                 f"the joint '{joint.name}' sits elsewhere in the template '{path}' than in the model (placement "
                 f"differs by {off:.3g}): the template describes another robot; give the URDF the model was "
