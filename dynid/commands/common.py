@@ -20,6 +20,8 @@ __all__ = [
     "add_topic_argument",
     "check_data_fits_model",
     "check_outputs",
+    "check_period_option",
+    "is_training_data",
     "model_files",
     "output",
     "read_dataset",
@@ -71,8 +73,16 @@ def add_topic_argument(parser: argparse.ArgumentParser) -> None:
 
 
 def read_dataset(path: str | os.PathLike[str], n_joints: int | None = None, *, robot_name: str | None = None,
-                 degrees: bool = False, topic: str | None = None, joint_names: Sequence[str] | None = None):
+                 degrees: bool = False, topic: str | None = None, joint_names: Sequence[str] | None = None,
+                 robot: Any = None, model_path: str | os.PathLike[str] | None = None, option: str = "data"):
     """Read a dataset file for a command, with ``--degrees`` and ``--topic`` passed to the reader.
+
+    Given the robot the data come from, the data are checked against it as
+    :func:`dynid.data.files.load_dataset` checks them with ``robot=``: torques beyond the robot's scale
+    (mN m, motor current) are refused; with ``model_path`` (the data are to be scored by a model of that
+    robot), angles more than half a joint's range outside its limits are refused as
+    :func:`check_data_fits_model` does; angles beyond :data:`dynid.data.files.RANGE_WARN` of the range are
+    warned about.  Data of another joint count are left to the command, which names both counts.
 
     Parameters
     ----------
@@ -87,7 +97,14 @@ def read_dataset(path: str | os.PathLike[str], n_joints: int | None = None, *, r
     topic : str, optional
         The JointState topic of a ROS 2 recording.
     joint_names : sequence of str, optional
-        The robot's joint names in its order, which map a ROS 2 recording's joints to columns.
+        The robot's joint names in its order, which map a ROS 2 recording's joints to columns (default
+        ``robot.joint_names``).
+    robot : RobotModel, optional
+        The robot the data come from.
+    model_path : str or path-like, optional
+        The model file the data are to be scored with (for the half-range refusal and its message).
+    option : str
+        The option that named the data (``data``, ``heldout``), for the messages.
 
     Returns
     -------
@@ -95,9 +112,11 @@ def read_dataset(path: str | os.PathLike[str], n_joints: int | None = None, *, r
     """
     import inspect
 
-    from dynid.data.files import load_dataset
+    from dynid.data.files import check_joint_range, check_torque_scale, load_dataset
 
     kwargs: dict[str, Any] = {}
+    if robot is not None and joint_names is None:
+        joint_names = robot.joint_names
     if robot_name is not None:
         kwargs["robot_name"] = robot_name
     if "degrees" in inspect.signature(load_dataset).parameters:
@@ -111,7 +130,14 @@ def read_dataset(path: str | os.PathLike[str], n_joints: int | None = None, *, r
     from dynid._progress import stage
 
     with stage(f"reading {path}"):
-        return load_dataset(path, n_joints, **kwargs)
+        data = load_dataset(path, n_joints, **kwargs)
+    if robot is not None and data.n == robot.n:
+        source = Path(path).name
+        check_torque_scale(data, robot, source=source)
+        if model_path is not None:
+            _check_fits_robot(robot, data, model_path=model_path, data_option=option)
+        check_joint_range(data, robot, source=source)
+    return data
 
 
 def check_data_fits_model(model: Any, data: Any, *, model_path: Any, data_option: str) -> None:
@@ -138,9 +164,13 @@ def check_data_fits_model(model: Any, data: Any, *, model_path: Any, data_option
     UsageError
         One sentence naming the joint, the range found and the limits.
     """
+    _check_fits_robot(model.robot, data, model_path=model_path, data_option=data_option)
+
+
+def _check_fits_robot(robot: Any, data: Any, *, model_path: Any, data_option: str) -> None:
+    """:func:`check_data_fits_model` on the model's robot."""
     import numpy as np
 
-    robot = model.robot
     q = np.asarray(data.q, dtype=float)
     if q.ndim != 2 or q.shape[1] != robot.n or q.shape[0] == 0:
         return  # another joint count: the evaluation itself refuses it, naming both counts
@@ -157,6 +187,59 @@ def check_data_fits_model(model: Any, data: Any, *, model_path: Any, data_option
                 "was identified for; give data recorded on that robot with angles in rad (--degrees converts "
                 "degrees), or the model identified on the robot that recorded them."
             )
+
+
+def check_period_option(period: float | None, option: str = "--period") -> None:
+    """Refuse a ``--period`` that is not a positive, finite number of seconds (None: not given)."""
+    import math
+
+    if period is not None and not (period > 0 and math.isfinite(period)):
+        raise UsageError(f"{option} is {period}; give the period of the motion in seconds (> 0).")
+
+
+def is_training_data(model: Any, data: Any) -> bool:
+    """Whether ``data`` are, sample for sample, the data ``model`` was identified on.
+
+    A model file records the sha256 of its training recording's time stamps, angles and torques
+    (``data_sha256``, :func:`dynid.identify.model.data_fingerprint`).  Files written before it: what the fit
+    saw, the samples kept (``n_samples``) and the range of the torque as fitted (``torque_range``, per
+    joint); the data, prepared as the model prepares them, give both again (to 1e-9) in practice only when
+    they are the training data (a payload identified later widens the range, and such a model is not
+    matched).
+
+    Parameters
+    ----------
+    model : IdentifiedModel
+        The model (a simulator's description, which was not fitted, never matches).
+    data : Dataset
+        The data to score it on.
+
+    Returns
+    -------
+    bool
+    """
+    import numpy as np
+
+    from dynid.exceptions import DynidError
+
+    info = getattr(model, "info", None) or {}
+    if isinstance(info.get("data_sha256"), str):
+        from dynid.identify.model import data_fingerprint
+
+        return info["data_sha256"] == data_fingerprint(data)
+    seen, count = info.get("torque_range"), info.get("n_samples")
+    if seen is None or count is None or data.n != model.robot.n:
+        return False
+    try:
+        prep = model.prepare(data)
+    except DynidError:
+        return False
+    if len(prep.rows) != int(count):
+        return False
+    tau = prep.tau_reference
+    now = np.stack([tau.min(axis=0), tau.max(axis=0)], axis=1)
+    seen = np.asarray(seen, dtype=float)
+    return now.shape == seen.shape and bool(np.allclose(now, seen, rtol=1e-9, atol=1e-12))
 
 
 def robot_file(args: argparse.Namespace) -> str | None:

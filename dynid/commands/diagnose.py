@@ -12,10 +12,13 @@ from dynid.commands.common import (
     add_topic_argument,
     check_data_fits_model,
     check_outputs,
+    check_period_option,
+    is_training_data,
     model_files,
     output,
     read_dataset,
     robot_file,
+    same_file,
     write_figures,
 )
 
@@ -110,6 +113,9 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(
             f"--max-effects is {args.max_effects}; give a whole number of at least 0 (default 3)."
         )
+    check_period_option(args.period)
+    if same_file(args.heldout, args.data):
+        raise UsageError(_NOT_HELD_OUT.format(heldout=args.heldout, what="the same file as --data"))
     robot = None
     if args.robot is not None:
         if described:
@@ -119,20 +125,35 @@ def run(args: argparse.Namespace) -> int:
         from dynid.symbolic.robot import load_robot
 
         robot = load_robot(args.robot)
+    read = {"degrees": args.degrees, "topic": args.topic, "model_path": args.model}
     if described:
         from dynid.symbolic.robot import load_robot
 
-        names = load_robot(args.model).joint_names
-        train = read_dataset(args.data, degrees=args.degrees, topic=args.topic, joint_names=names)
+        robot = load_robot(args.model)
+        train = read_dataset(args.data, robot=robot, **read)
         # nothing identified: the file as the simulator reads it, seen through the training data's filter
         model = description_model(args.model, train)
     else:
         model = load_model(args.model, robot=robot)
-        names = model.robot.joint_names
-        train = read_dataset(args.data, degrees=args.degrees, topic=args.topic, joint_names=names)
-    heldout = read_dataset(args.heldout, degrees=args.degrees, topic=args.topic, joint_names=names)
+        robot = model.robot
+        train = read_dataset(args.data, robot=robot, **read)
+    heldout = read_dataset(args.heldout, robot=robot, option="heldout", **read)
     check_data_fits_model(model, train, model_path=args.model, data_option="data")
     check_data_fits_model(model, heldout, model_path=args.model, data_option="heldout")
+    # data of another joint count are refused by the diagnosis itself, naming both counts
+    if train.n == heldout.n == robot.n:
+        if _same_data(train, heldout):
+            raise UsageError(_NOT_HELD_OUT.format(heldout=args.heldout, what="the same data as --data"))
+        if not described and is_training_data(model, heldout):
+            raise UsageError(
+                _NOT_HELD_OUT.format(heldout=args.heldout, what=f"the data {args.model} was identified on")
+            )
+    if args.period is not None:
+        from pathlib import Path
+
+        from dynid.data.periodic import check_period
+
+        check_period(heldout.t, heldout.q, args.period, source=Path(args.heldout).name)
     result = diagnose(
         model,
         train,
@@ -187,6 +208,20 @@ def run(args: argparse.Namespace) -> int:
         )
         print(f"report written to {report}")
     return 0
+
+
+_NOT_HELD_OUT = (
+    "--heldout {heldout} is {what}, but the diagnosis measures the gap on data the model was not fitted to "
+    "(on its training data the error is fitted away and the gap looks smaller than it is); give another "
+    "recording of the robot (another run, or 'dynid simulate' with another --seed)"
+)
+
+
+def _same_data(a, b) -> bool:
+    """Whether two datasets hold the same samples (time, angles and torque)."""
+    import numpy as np
+
+    return all(np.array_equal(getattr(a, k), getattr(b, k)) for k in ("t", "q", "tau"))
 
 
 def _description_suffixes(path: str) -> tuple[str, ...]:

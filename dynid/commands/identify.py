@@ -227,7 +227,7 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     data = read_dataset(
         args.data, robot.n, robot_name=robot.name, degrees=args.degrees, topic=args.topic,
-        joint_names=robot.joint_names,
+        joint_names=robot.joint_names, robot=robot,
     )
     model = identify(
         robot,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import warnings
 from pathlib import Path
 
 from dynid.commands.common import (
@@ -11,12 +12,14 @@ from dynid.commands.common import (
     add_topic_argument,
     check_data_fits_model,
     check_outputs,
+    check_period_option,
+    is_training_data,
     output,
     read_dataset,
     robot_file,
     write_figures,
 )
-from dynid.exceptions import UsageError
+from dynid.exceptions import DataWarning
 
 __all__ = ["HELP", "add_arguments", "run"]
 
@@ -78,6 +81,7 @@ def _row(values, fmt: str = "{:>10.4g}") -> str:
 def run(args: argparse.Namespace) -> int:
     from dynid._io import to_jsonable
     from dynid._progress import say
+    from dynid.data.periodic import check_period
     from dynid.data.preparation import Preprocessing
     from dynid.identify.model import load_model
     from dynid.simmodel.nominal import description_model, is_description
@@ -97,8 +101,7 @@ def run(args: argparse.Namespace) -> int:
     )
     predictions_path = None if args.predictions is None else Path(args.predictions)
     json_path = None if args.json is None else Path(args.json)
-    if args.period is not None and not args.period > 0:
-        raise UsageError(f"--period is {args.period}; give the period of the motion in seconds (> 0).")
+    check_period_option(args.period)
 
     robot = None
     if args.robot is not None:
@@ -108,8 +111,10 @@ def run(args: argparse.Namespace) -> int:
     loaded = [None if is_description(path) else load_model(path, robot=robot) for path in files]
     first_robot = loaded[0].robot if loaded[0] is not None else load_robot(args.model)
     data = read_dataset(
-        args.data, degrees=args.degrees, topic=args.topic, joint_names=first_robot.joint_names
+        args.data, degrees=args.degrees, topic=args.topic, robot=first_robot, model_path=args.model
     )
+    if args.period is not None:
+        check_period(data.t, data.q, args.period, source=Path(args.data).name)
     # compared with identified models, a description is seen through their preprocessing
     settings = next((model.preprocessing for model in loaded if model is not None), None)
     prep = None if settings is None else Preprocessing.from_settings(settings)
@@ -119,6 +124,15 @@ def run(args: argparse.Namespace) -> int:
     ]
     for path, model in zip(files, models, strict=True):
         check_data_fits_model(model, data, model_path=path, data_option="data")
+    for path, model in zip(files, loaded, strict=True):
+        if model is not None and is_training_data(model, data):
+            warnings.warn(
+                f"--data {args.data} is the data {path} was identified on (the same {model.info['n_samples']} "
+                "samples and torque range), so its scores are optimistic, not held-out figures; validate on "
+                "a recording the model was not fitted to",
+                DataWarning,
+                stacklevel=2,
+            )
     stems = [Path(f).stem for f in files]
     labels = [s if stems.count(s) == 1 else str(f) for s, f in zip(stems, files, strict=True)]
     results = []

@@ -21,7 +21,11 @@ refused, naming the rows.  In detail:
   unless ``degrees=True`` converts ``q``, ``dq`` and ``ddq`` to radians; ``|tau|``, ``|dq|``, ``|ddq|``
   above :data:`MAX_MAGNITUDE` (no robot arm reaches them) are refused as wrong units or corrupt cells;
   given the robot (``robot=``), a torque above :data:`TORQUE_RATIO` times what the robot's own model
-  can produce within its limits is refused too (:func:`check_torque_scale`).
+  can produce within its limits is refused too (:func:`check_torque_scale`), and angles that leave the
+  robot's joint limits by more than :data:`RANGE_WARN` of a joint's range are warned about
+  (:func:`check_joint_range`);
+* dead sensors: a torque column that never changes is refused; one stuck at a value over
+  :data:`STUCK_FRACTION` of the rows while the arm moves is warned about, naming the joint.
 """
 
 from __future__ import annotations
@@ -46,7 +50,10 @@ from dynid.exceptions import DataError, DataWarning
 __all__ = [
     "MAX_MAGNITUDE",
     "MAX_TIME_STEP",
+    "RANGE_WARN",
+    "STUCK_FRACTION",
     "TORQUE_RATIO",
+    "check_joint_range",
     "check_torque_scale",
     "load_dataset",
     "save_dataset",
@@ -62,6 +69,14 @@ MAX_MAGNITUDE: dict[str, float] = {"tau": 1e6, "dq": 1e3, "ddq": 1e6}
 #: A measured torque above this many times the robot's own torque scale (see :func:`check_torque_scale`)
 #: is refused as a unit error (mN m, raw motor current) or a dataset of another robot.
 TORQUE_RATIO = 20.0
+
+#: Angles beyond a joint's limits by more than this fraction of the joint's range (q_max - q_min) are
+#: warned about (:func:`check_joint_range`): a joint offset, a calibration or another robot's data.
+RANGE_WARN = 0.2
+
+#: A torque column holding one value, unchanged, over at least this fraction of the rows while the arm
+#: moves is warned about as a sensor that stuck (one that never changes at all is refused).
+STUCK_FRACTION = 0.2
 
 _EXTENSIONS = (".csv", ".npz")
 
@@ -293,7 +308,33 @@ def _check_units(ds: Dataset, source: str, degrees: bool) -> Dataset:
                 "working torque sensor reads on a moving arm; check that the sensor was logged (a dead or "
                 "unplugged channel) and record again"
             )
+        _warn_stuck(ds, source)
     return ds
+
+
+def _warn_stuck(ds: Dataset, source: str) -> None:
+    """Warn about a torque column stuck at one value over :data:`STUCK_FRACTION` of the rows while the arm moves.
+
+    A resting arm holds its torque (a noise-free simulation even exactly): only a stretch during which
+    some joint moves by more than a milliradian counts.
+    """
+    need = max(MIN_ROWS_DEAD_SENSOR, int(np.ceil(STUCK_FRACTION * ds.m)))
+    for j in range(ds.n):
+        column = ds.tau[:, j]
+        change = np.flatnonzero(column[1:] != column[:-1]) + 1
+        starts = np.concatenate([[0], change])
+        stops = np.concatenate([change, [ds.m]])
+        k = int(np.argmax(stops - starts))
+        a, b = int(starts[k]), int(stops[k])
+        if b - a < need or float(np.ptp(ds.q[a:b], axis=0).max()) <= 1e-3:
+            continue
+        warnings.warn(
+            f"{source}: tau_{j + 1} holds {column[a]:g} N m unchanged over rows {a}..{b - 1} ({100 * (b - a) / ds.m:.0f} % "
+            "of the recording) while the arm moves, as a torque sensor that stuck does; check joint "
+            f"{j + 1}'s channel, and cut those rows out or record again",
+            DataWarning,
+            stacklevel=4,
+        )
 
 
 MIN_ROWS_DEAD_SENSOR = 20
@@ -313,6 +354,11 @@ def _torque_scale(robot: Any, samples: int = 256) -> NDArray[np.float64]:
     ddq = rng.uniform(-1.0, 1.0, size=(samples, n)) * robot.ddq_max
     tau = np.array([pin.rnea(model, data, q[k], dq[k], ddq[k]) for k in range(samples)])
     return np.abs(tau).max(axis=0) + np.abs(np.asarray(robot.armature) * robot.ddq_max)
+
+
+def _check_robot(ds: Dataset, robot: Any, source: str) -> Dataset:
+    """The checks of data against the robot they come from: torque scale (refused), joint range (warned)."""
+    return check_joint_range(check_torque_scale(ds, robot, source=source), robot, source=source)
 
 
 def check_torque_scale(ds: Dataset, robot: Any, *, source: str = "the data") -> Dataset:
@@ -346,6 +392,7 @@ def check_torque_scale(ds: Dataset, robot: Any, *, source: str = "the data") -> 
     """
     if not np.any(np.asarray(robot.params)):
         return ds
+    ds.check_joints(robot.n, robot.name)
     scale = _torque_scale(robot)
     bound = TORQUE_RATIO * np.maximum(scale, 0.1 * scale.max())
     over = np.abs(ds.tau) > bound
@@ -357,6 +404,57 @@ def check_torque_scale(ds: Dataset, robot: Any, *, source: str = "the data") -> 
         f"{scale[j]:.3g} N m the model of '{robot.name}' gives within its limits; give torques in N m "
         "(not mN m or motor current) recorded on that robot"
     )
+
+
+def check_joint_range(ds: Dataset, robot: Any, *, source: str = "the data") -> Dataset:
+    """Warn when angles leave the robot's joint limits by more than :data:`RANGE_WARN` of a joint's range.
+
+    A recording strays a little past the limits a description states (its limits are a controller's, set
+    inside the mechanical ones); far beyond them the angles carry an offset, a calibration error or come
+    from another robot, and the identified model is extrapolated there.  Joints whose limits are not finite
+    are not checked.
+
+    Parameters
+    ----------
+    ds : Dataset
+        The data.
+    robot : RobotModel
+        The robot the data should come from.
+    source : str
+        What the data came from (a file name), used in the message.
+
+    Returns
+    -------
+    Dataset
+        ``ds``, so that calls chain.
+
+    Warns
+    -----
+    DataWarning
+        One sentence naming the joint that strays furthest, its range, the limits and the other joints.
+    """
+    if ds.n != robot.n:
+        return ds
+    q_min, q_max = np.asarray(robot.q_min, dtype=float), np.asarray(robot.q_max, dtype=float)
+    span = q_max - q_min
+    low, high = ds.q.min(axis=0), ds.q.max(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        beyond = np.maximum(q_min - low, high - q_max) / span
+    beyond[~(np.isfinite(span) & (span > 0))] = 0.0
+    far = np.flatnonzero(beyond > RANGE_WARN)
+    if far.size == 0:
+        return ds
+    j = int(far[np.argmax(beyond[far])])
+    others = [f"q_{k + 1}" for k in far if k != j]
+    more = f" (so do {', '.join(others)})" if others else ""
+    warnings.warn(
+        f"{source}: q_{j + 1} moves over [{low[j]:.4g}, {high[j]:.4g}], {100 * beyond[j]:.0f} % of its range beyond "
+        f"the limits [{q_min[j]:.4g}, {q_max[j]:.4g}] of '{robot.name}'{more}; check the joint's offset and "
+        "units (rad, m) and that the data were recorded on that robot",
+        DataWarning,
+        stacklevel=3,
+    )
+    return ds
 
 
 def load_dataset(
@@ -387,8 +485,9 @@ def load_dataset(
         (every joint; ``meta["converted_from_degrees"]`` records it).  Without it, angles above
         :data:`DEGREES_THRESHOLD` are refused as degrees.
     robot : RobotModel, optional
-        The robot the data come from: sets ``n_joints`` and ``robot_name`` when they are not given, and
-        refuses torques beyond :func:`check_torque_scale`.
+        The robot the data come from: sets ``n_joints`` and ``robot_name`` when they are not given,
+        refuses torques beyond :func:`check_torque_scale` and warns about angles beyond
+        :func:`check_joint_range`.
     topic : str, optional
         For a ROS 2 recording (an ``.mcap`` or ``.db3`` file, or a rosbag2 folder with ``metadata.yaml``),
         the ``sensor_msgs/msg/JointState`` topic to read; needed when the bag holds more than one.  Ignored
@@ -416,7 +515,9 @@ def load_dataset(
     Warns
     -----
     DataWarning
-        When rows identical to the row before (a sample logged twice) were dropped.
+        When rows identical to the row before (a sample logged twice) were dropped, a torque column
+        stuck at one value over :data:`STUCK_FRACTION` of the rows while the arm moves, angles beyond
+        :func:`check_joint_range`.
     """
     path = Path(path)
     if is_rosbag(path):
@@ -431,7 +532,7 @@ def load_dataset(
         if n_joints is not None:
             ds.check_joints(n_joints, name)
         ds = _check_units(ds, path.name, degrees)
-        return ds if robot is None else check_torque_scale(ds, robot, source=path.name)
+        return ds if robot is None else _check_robot(ds, robot, path.name)
     suffix = _check_extension(path)
     if robot is not None:
         n_joints = robot.n if n_joints is None else n_joints
@@ -466,7 +567,7 @@ def load_dataset(
             columns, n_joints=n_joints, robot_name=robot_name, source=path.name, meta=meta
         )
     ds = _check_units(ds, path.name, degrees)
-    return ds if robot is None else check_torque_scale(ds, robot, source=path.name)
+    return ds if robot is None else _check_robot(ds, robot, path.name)
 
 
 def _write_csv(ds: Dataset, f: Any) -> None:

@@ -6,12 +6,24 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from dynid.diagnosis.candidates import EFFECT_NAMES
 from dynid.exceptions import UsageError
 
 __all__ = ["DiagnosisSettings"]
+
+
+def _positive(value: object) -> bool:
+    """Whether ``value`` is a positive, finite number (not a string or a bool)."""
+    if isinstance(value, str | bytes | bool):
+        return False
+    try:
+        number = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return False
+    return number > 0 and math.isfinite(number)
 
 
 @dataclass(frozen=True)
@@ -62,7 +74,7 @@ class DiagnosisSettings:
     Raises
     ------
     UsageError
-        Unknown effect names.
+        Unknown effect names, a period that is not a positive number of seconds.
     """
 
     effects: tuple[str, ...] = EFFECT_NAMES
@@ -87,6 +99,11 @@ class DiagnosisSettings:
             raise UsageError(
                 f"unknown effect {', '.join(repr(u) for u in unknown)}; the catalogue is "
                 f"{', '.join(EFFECT_NAMES)}: use those names."
+            )
+        if self.period is not None and not _positive(self.period):
+            raise UsageError(
+                f"period is {self.period}; give the period of the held-out motion in seconds (> 0), or None to "
+                "detect it."
             )
         if int(self.screen_top) != self.screen_top or self.screen_top < 0:
             raise UsageError(

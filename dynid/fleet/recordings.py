@@ -15,7 +15,9 @@ Robot and time come from one of two places:
   ``rec_12`` uses its trailing number).
 
 Times are compared within a robot only: each robot's recordings are put in time order and numbered
-from 0 (``order``); two recordings of one robot at the same time are refused.
+from 0 (``order``); two recordings of one robot at the same time are refused, and so are a robot's
+recordings timed partly by date and partly by index (the two do not order).  A manifest that names a
+recording twice, or a file that does not exist, is refused, naming its line.
 """
 
 from __future__ import annotations
@@ -106,7 +108,13 @@ def _expand(pattern: str) -> list[Path]:
     return [p for p in found if not any(b in p.parents for b in bags)]
 
 
-def _read_manifest(manifest: str | os.PathLike[str]) -> dict[str, tuple[str, str]]:
+def _time_kind(text: str) -> str:
+    """``"date"`` for a time holding an ISO date, else ``"index"``."""
+    return "date" if _ISO.search(text.strip()) else "index"
+
+
+def _read_manifest(manifest: str | os.PathLike[str]) -> dict[str, tuple[str, str, int]]:
+    """Real path -> (robot, time, line) of each row of a manifest, its rows checked."""
     path = Path(manifest)
     if not path.is_file():
         raise UsageError(f"the manifest '{path}' does not exist; give a CSV file with the columns path, robot, time.")
@@ -125,7 +133,7 @@ def _read_manifest(manifest: str | os.PathLike[str]) -> dict[str, tuple[str, str
             f"the manifest '{path}' has {'no rows' if not rows else 'no column ' + ', '.join(missing)}; it needs "
             "one row per recording with the columns path, robot, time."
         )
-    out: dict[str, tuple[str, str]] = {}
+    out: dict[str, tuple[str, str, int]] = {}
     for k, row in enumerate(rows, start=2):
         name, robot, time = (str(row.get(c) or "").strip() for c in ("path", "robot", "time"))
         if not name or not robot or not time:
@@ -133,7 +141,18 @@ def _read_manifest(manifest: str | os.PathLike[str]) -> dict[str, tuple[str, str
                 f"line {k} of the manifest '{path}' leaves path, robot or time empty; fill in all three."
             )
         target = Path(name) if Path(name).is_absolute() else path.parent / name
-        out[os.path.realpath(target)] = (robot, time)
+        if not target.exists():
+            raise UsageError(
+                f"line {k} of the manifest '{path}' names the recording '{name}', but there is no such file "
+                f"(looked for '{target}'); correct its path (relative to the manifest's folder) or drop the row."
+            )
+        key = os.path.realpath(target)
+        if key in out:
+            raise UsageError(
+                f"line {k} of the manifest '{path}' names the recording '{name}' again (line {out[key][2]} names it "
+                "already); give each recording one row."
+            )
+        out[key] = (robot, time, k)
     return out
 
 
@@ -155,8 +174,9 @@ def find_recordings(pattern: str, manifest: str | os.PathLike[str] | None = None
     Raises
     ------
     UsageError
-        Nothing matches; a recording missing from the manifest; a path or time that does not follow the
-        rule; two recordings of a robot at the same time.
+        Nothing matches; a recording missing from the manifest; a manifest row naming a file that does not
+        exist or a recording named by a row before; a path or time that does not follow the rule; two
+        recordings of a robot at the same time; a robot's recordings timed partly by date, partly by index.
     """
     paths = _expand(str(pattern))
     if manifest is not None:  # a manifest beside its recordings is no recording
@@ -176,7 +196,7 @@ def find_recordings(pattern: str, manifest: str | os.PathLike[str] | None = None
                     f"the recording '{path}' is not in the manifest '{manifest}'; add a row for it (path, robot, "
                     "time) or narrow the pattern."
                 )
-            robot, time = entry
+            robot, time, _line = entry
         else:
             robot = path.resolve().parent.name
             time = path.name if path.is_dir() else path.stem
@@ -188,6 +208,7 @@ def find_recordings(pattern: str, manifest: str | os.PathLike[str] | None = None
                 "name recordings <robot>/<YYYY-MM-DD or number>.<ext>, or give --manifest with a time column."
             )
         found.append(Recording(str(path), robot, time, key))
+    _check_one_kind_of_time(found, table, manifest)
     found.sort(key=lambda r: (r.robot, r.key, r.path))
     out: list[Recording] = []
     for rec in found:
@@ -200,3 +221,28 @@ def find_recordings(pattern: str, manifest: str | os.PathLike[str] | None = None
         order = 0 if previous is None else previous.order + 1
         out.append(Recording(rec.path, rec.robot, rec.time, rec.key, order))
     return out
+
+
+def _check_one_kind_of_time(
+    found: list[Recording], table: dict[str, tuple[str, str, int]] | None, manifest: str | os.PathLike[str] | None
+) -> None:
+    """Refuse a robot whose recordings are timed partly by ISO date and partly by index: the two do not order."""
+    first: dict[tuple[str, str], Recording] = {}
+    for rec in found:
+        kind = _time_kind(rec.time)
+        first.setdefault((rec.robot, kind), rec)
+        other = first.get((rec.robot, "index" if kind == "date" else "date"))
+        if other is None:
+            continue
+
+        def where(r: Recording) -> str:
+            if table is None:
+                return f"'{r.path}'"
+            return f"line {table[os.path.realpath(r.path)][2]} of the manifest '{manifest}'"
+
+        date, index = (rec, other) if kind == "date" else (other, rec)
+        raise UsageError(
+            f"the robot '{rec.robot}' has recordings timed by ISO date ({where(date)}: '{date.time}') and by index "
+            f"({where(index)}: '{index.time}'), which do not order; time all of one robot's recordings by date, or "
+            "all by index."
+        )

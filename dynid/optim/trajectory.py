@@ -16,6 +16,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol
@@ -145,19 +146,62 @@ class FourierTrajectory:
         }
 
     @classmethod
-    def from_dict(cls, data: dict) -> FourierTrajectory:
+    def from_dict(cls, data: dict, *, source: str = "the Fourier trajectory") -> FourierTrajectory:
+        """The trajectory a dict of :meth:`to_dict` (a trajectory file) describes, its fields checked.
+
+        Parameters
+        ----------
+        data : dict
+            ``a``, ``b``, ``c``, ``base_freq`` and optionally ``periods``, ``meta``, and ``harmonics`` and
+            ``n_joints``, which must agree with the coefficient arrays when present.
+        source : str
+            What the dict came from (``the trajectory file 'T.json'``), for the messages.
+
+        Raises
+        ------
+        ModelFileError
+            A missing field, coefficients that are not tables of numbers, or ``harmonics`` / ``n_joints``
+            that contradict them.
+        """
+        missing = [key for key in ("a", "b", "c", "base_freq") if key not in data]
+        if missing:
+            raise ModelFileError(f"{source} has no field '{missing[0]}'; it needs a, b, c and base_freq.")
+        arrays = {}
+        for key in ("a", "b", "c"):
+            try:
+                arrays[key] = np.asarray(data[key], dtype=float)
+            except (TypeError, ValueError):
+                raise ModelFileError(
+                    f"the field '{key}' of {source} is not a table of numbers (rows of equal length); write the "
+                    "file again with dynid excite."
+                ) from None
+        a, c = np.atleast_2d(arrays["a"]), arrays["c"].ravel()
+        stated = {"harmonics": (a.shape[0], "rows of a and b (one per harmonic)"),
+                  "n_joints": (c.size, "values of c (one per joint)")}  # fmt: skip
+        for key, (count, what) in stated.items():
+            if key not in data:
+                continue
+            value = data[key]
+            if isinstance(value, bool) or not isinstance(value, int | float) or value != count:
+                raise ModelFileError(
+                    f"{source} states {key} = {value!r}, but its coefficients hold {count} {what}; correct "
+                    f"{key} to {count} or write the file again with dynid excite."
+                )
         try:
             return cls(
-                a=np.asarray(data["a"], dtype=float),
-                b=np.asarray(data["b"], dtype=float),
-                c=np.asarray(data["c"], dtype=float),
+                a=arrays["a"],
+                b=arrays["b"],
+                c=arrays["c"],
                 base_freq=float(data["base_freq"]),
                 periods=int(data.get("periods", 1)),
                 meta=dict(data.get("meta", {})),
             )
-        except KeyError as exc:
+        except (TypeError, ValueError) as exc:
+            if isinstance(exc, ShapeError):
+                raise ModelFileError(f"{source}: {exc}") from None
             raise ModelFileError(
-                f"the Fourier trajectory has no field {exc}; it needs a, b, c and base_freq."
+                f"{source} holds a base_freq, periods or meta that is not of its kind ({exc}); base_freq is a "
+                "number (Hz), periods a whole number and meta a table: write the file again with dynid excite."
             ) from None
 
     def save(self, path: str | Path) -> None:
@@ -256,7 +300,7 @@ def load_trajectory(path: str | Path) -> FourierTrajectory | SampledTrajectory:
                 f'the trajectory file \'{path}\' is not a dynid Fourier trajectory (no "type": "fourier"); '
                 "give a file written by dynid excite."
             )
-        return FourierTrajectory.from_dict(data)
+        return FourierTrajectory.from_dict(data, source=f"the trajectory file '{path}'")
     if path.suffix.lower() == ".csv":
         with open(path, newline="") as handle:
             reader = csv.reader(handle)
@@ -269,7 +313,24 @@ def load_trajectory(path: str | Path) -> FourierTrajectory | SampledTrajectory:
                 f"the trajectory file '{path}' lacks the columns {', '.join(missing) or 'q_1..q_n'}; a sampled "
                 "trajectory needs t, q_i, dq_i and ddq_i."
             )
-        data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", UserWarning)  # numpy warns on an empty body; refused below
+                data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+        except ValueError as exc:
+            raise ModelFileError(
+                f"the trajectory file '{path}' could not be read as numbers ({exc}); every line after the header "
+                f"needs {len(header)} comma-separated numbers."
+            ) from None
+        if data.size == 0:
+            raise ModelFileError(
+                f"the trajectory file '{path}' has a header but no rows; write it again with dynid excite --csv."
+            )
+        if data.shape[1] != len(header):
+            raise ModelFileError(
+                f"the trajectory file '{path}' has {len(header)} names in its header but {data.shape[1]} values a "
+                "row; make the header and the rows agree."
+            )
         idx = {h: i for i, h in enumerate(header)}
 
         def cols(prefix: str) -> np.ndarray:

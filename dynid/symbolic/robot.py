@@ -1041,6 +1041,42 @@ def _check_table_sizes(path: Path, columns: dict[str, np.ndarray]) -> None:
         )
 
 
+def _check_table_physics(
+    path: Path, kinds: list[str], *, armature: np.ndarray, q_min: np.ndarray, q_max: np.ndarray, gravity: np.ndarray
+) -> None:
+    """Refuse a table's armature, joint limits and gravity that no arm has (units mixed up, signs lost).
+
+    Armature is a rotor inertia, 0 or more; a revolute limit lies within two turns either way (4 pi rad,
+    beyond it the limits are degrees), a prismatic one within 20 m (beyond it, millimetres); gravity's
+    magnitude is 0 to 100 m/s^2 (the Earth's is 9.81).
+    """
+    bad = np.flatnonzero(armature < 0)
+    if bad.size:
+        j = int(bad[0])
+        raise RobotModelError(
+            f"column 'links.armature' of the table '{path}' holds {armature[j]:g} for joint {j + 1}, but an "
+            "armature is a rotor inertia reflected to the joint, 0 or more (kg m^2); give its magnitude, or 0."
+        )
+    for label, values in (("q_min", q_min), ("q_max", q_max)):
+        for j, (kind, value) in enumerate(zip(kinds, values, strict=True)):
+            revolute = kind == "R"
+            limit, unit = (4 * math.pi, "rad (two turns)") if revolute else (20.0, "m")
+            if abs(value) > limit:
+                fix = "give radians (it looks like degrees)" if revolute else "give metres (it looks like mm)"
+                raise RobotModelError(
+                    f"column 'joints.{label}' of the table '{path}' holds {value:g} for joint {j + 1}, a "
+                    f"{'revolute' if revolute else 'prismatic'} joint, beyond the {limit:.4g} {unit} of any arm; "
+                    f"{fix}."
+                )
+    size = float(np.linalg.norm(gravity))
+    if size > 100.0:
+        raise RobotModelError(
+            f"'gravity' in the table '{path}' is [{', '.join(f'{g:g}' for g in gravity)}], of magnitude {size:.4g} "
+            "m/s^2, outside the 0 to 100 m/s^2 an arm is used in; give it in m/s^2 (the Earth's is "
+            "[0, 0, -9.81] in a base frame with z up)."
+        )
+
+
 def _joint_count(table: dict) -> int:
     """Joint count of a modified-DH table: the length most of its required columns share.
 
@@ -1107,6 +1143,7 @@ def _load_mdh(path: Path, *, name: str) -> RobotModel:
     dq_max = _column(table, "joints", "dq_max", n, path, default=math.pi)
     ddq_max = _column(table, "joints", "ddq_max", n, path, default=DEFAULT_DDQ_MAX)
     gravity = _table_floats(path, "gravity", table.get("gravity", [0.0, 0.0, -9.81]), 3)
+    _check_table_physics(path, kinds, armature=armature, q_min=q_min, q_max=q_max, gravity=gravity)
     transmission = (
         _transmission_table(table["transmission"], n, f"the table '{path}'")
         if "transmission" in table

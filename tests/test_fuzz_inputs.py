@@ -1,0 +1,592 @@
+"""Bad inputs that exited 0 silently, held: each is now one sentence and exit 2, or a one-line warning.
+
+The contract is that of ``tests/test_bad_inputs.py``: a refusal is exit code 2, one line on stderr naming
+what was expected, what came and the fix, no traceback, every file of the folder byte-identical and
+nothing added.  Where the data cannot tell (a period the recording is too short to confirm, a torque
+channel stuck over part of a run, angles somewhat past the limits, a model scored on its own training
+data), the command finishes (exit 0) and warns in one :class:`~dynid.exceptions.DataWarning`.
+
+The cases: torques in mN m read with the robot at hand (validate, diagnose, fleet, ROS 2 bags); DH
+tables with a prismatic limit in mm, a negative armature, gravity of 1e6 m/s^2; trajectory files whose
+``harmonics`` / ``n_joints`` contradict their coefficients; a ``--period`` the recording does not have;
+the training data given as held-out data; fleet manifests with a repeated row, a missing file, dates and
+indices mixed for one robot; dead torque sensors and angles far beyond the joint limits.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import re
+import shutil
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dynid.cli import main
+from dynid.exceptions import DataError, DataWarning, ModelFileError, RobotModelError, UsageError
+from dynid.symbolic.robot import load_robot
+
+ROWS = 1100  # training run: 1.1 s at 1 kHz, enough for identify's trimming
+HELD_SECONDS = 4.2  # held-out run: two periods of the 2 s excitation (base frequency 0.5 Hz)
+
+DH_TABLE = """\
+name = "arm"
+[joints]
+type  = ["R", "R", "P"]
+alpha = [0.0, -1.5708, 1.5708]
+a     = [0.0, 0.05, 0.3]
+d     = [0.35, 0.0, 0.1]
+theta = [0.0, -0.3, 0.0]
+q_min = [-2.8, -1.9, 0.0]
+q_max = [2.8, 1.9, 0.3]
+[links]
+m   = [5.0, 3.5, 2.0]
+cx  = [0.0, 0.12, 0.0]
+cy  = [-0.02, 0.0, 0.03]
+cz  = [-0.08, 0.01, -0.05]
+Ixx = [0.06, 0.02, 0.015]
+Iyy = [0.05, 0.07, 0.012]
+Izz = [0.03, 0.06, 0.006]
+Ixy = [0.0, 0.0, 0.0]
+Ixz = [0.0, 0.0, 0.0]
+Iyz = [0.0, 0.0, 0.0]
+armature = [0.1, 0.08, 0.0]
+"""
+
+
+# ---------------------------------------------------------------------- fixtures
+@pytest.fixture(scope="module")
+def base(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A UR5 trajectory (period 2 s), a short training run, a model fitted to it, a held-out run of two periods."""
+    from dynid.data.files import load_dataset
+    from dynid.identify.model import identify, save_model
+    from dynid.optim.excitation import ExcitationProblem
+    from dynid.sim.simulator import build_truth, simulate, write_simulation
+
+    folder = tmp_path_factory.mktemp("fuzz-inputs")
+    robot = load_robot("ur5")
+    trajectory = ExcitationProblem(robot=robot, harmonics=2, base_freq=0.5).random_trajectory(
+        np.random.default_rng(0)
+    )
+    trajectory.save(folder / "T.json")
+    truth = build_truth(robot, friction="linear", truth_seed=0)
+    for name, seed, seconds in (("D.csv", 1, (ROWS - 1) / 1000.0), ("V.csv", 2, HELD_SECONDS)):
+        write_simulation(simulate(robot, trajectory, truth=truth, seed=seed, duration=seconds), folder / name)
+        (folder / f"{name}.truth.json").unlink()  # the period comes from the data, not a sidecar
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = identify(robot, load_dataset(folder / "D.csv", 6), method="ols", friction="linear", gmm="off")
+    save_model(model, folder / "M.json")
+    (folder / "arm.toml").write_text(DH_TABLE)
+    return folder
+
+
+@pytest.fixture
+def work(base: Path, tmp_path: Path) -> Path:
+    """Copies of the good inputs and a pre-existing output (a copy of an input)."""
+    for p in base.iterdir():
+        (shutil.copytree if p.is_dir() else shutil.copy2)(p, tmp_path / p.name)
+    shutil.copy2(base / "V.csv", tmp_path / "OUT.csv")
+    return tmp_path
+
+
+def snapshot(folder: Path) -> dict[str, bytes]:
+    """Every file of a folder (recursively) with its bytes."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def assert_refused(argv: list[str], folder: Path, pattern: str, capsys: pytest.CaptureFixture[str]) -> str:
+    """Run the command; assert exit 2, one line matching ``pattern``, no traceback, the folder untouched."""
+    before = snapshot(folder)
+    capsys.readouterr()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        code = main(argv)
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert "Traceback" not in err, err
+    assert code == 2, err
+    assert len(lines) == 1, err
+    assert re.search(pattern, lines[0]), lines[0]
+    after = snapshot(folder)
+    assert sorted(after) == sorted(before), f"files added or lost: {set(after) ^ set(before)}"
+    assert [k for k in before if after[k] != before[k]] == []
+    return lines[0]
+
+
+def assert_warned(argv: list[str], pattern: str, capsys: pytest.CaptureFixture[str]) -> str:
+    """Run the command; assert exit 0 and exactly one DataWarning, matching ``pattern``."""
+    capsys.readouterr()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        code = main(argv)
+    err = capsys.readouterr().err
+    assert code == 0, err
+    texts = list(dict.fromkeys(str(w.message) for w in caught if issubclass(w.category, DataWarning)))
+    assert len(texts) == 1, texts
+    assert re.search(pattern, texts[0]), texts[0]
+    assert "\n" not in texts[0]
+    return texts[0]
+
+
+def quiet_warnings(argv: list[str], capsys: pytest.CaptureFixture[str]) -> list[str]:
+    """Run the command; assert exit 0; the DataWarnings it gave."""
+    capsys.readouterr()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        code = main(argv)
+    assert code == 0, capsys.readouterr().err
+    return [str(w.message) for w in caught if issubclass(w.category, DataWarning)]
+
+
+# ---------------------------------------------------------------------- helpers making bad inputs
+def _table(folder: Path, name: str) -> tuple[list[str], np.ndarray]:
+    header = (folder / name).read_text().splitlines()[0].split(",")
+    return header, np.loadtxt(folder / name, delimiter=",", skiprows=1)
+
+
+def _edited(folder: Path, source: str, target: str, edit: Callable[[list[str], np.ndarray], None]) -> str:
+    """``target``: the dataset ``source`` with ``edit(header, table)`` applied to its numbers."""
+    header, table = _table(folder, source)
+    edit(header, table)
+    np.savetxt(folder / target, table, delimiter=",", header=",".join(header), comments="", fmt="%.17g")
+    return str(folder / target)
+
+
+def _millinewton(folder: Path, source: str = "V.csv", target: str = "mNm.csv") -> str:
+    def edit(header: list[str], table: np.ndarray) -> None:
+        table[:, [k for k, h in enumerate(header) if h.startswith("tau_")]] *= 1e3
+
+    return _edited(folder, source, target, edit)
+
+
+def _column(header: list[str], name: str) -> int:
+    return header.index(name)
+
+
+def _dead(folder: Path) -> str:
+    def edit(header: list[str], table: np.ndarray) -> None:
+        table[:, _column(header, "tau_3")] = 1.5
+
+    return _edited(folder, "V.csv", "dead.csv", edit)
+
+
+def _stuck(folder: Path) -> str:
+    def edit(header: list[str], table: np.ndarray) -> None:
+        k, row = _column(header, "tau_3"), int(0.6 * len(table))
+        table[row:, k] = table[row, k]  # the sensor stops updating for the last 40 % of the run
+
+    return _edited(folder, "V.csv", "stuck.csv", edit)
+
+
+def _beyond_limits(folder: Path) -> str:
+    """q_1 of the UR5 (limits +-2 pi, a vertical axis: its offset changes no torque) raised to end at 9.3 rad,
+    24 % of its range beyond its upper limit (but under 10 rad, where angles are taken for degrees)."""
+
+    def edit(header: list[str], table: np.ndarray) -> None:
+        k = _column(header, "q_1")
+        table[:, k] += 9.3 - table[:, k].max()
+
+    return _edited(folder, "V.csv", "beyond.csv", edit)
+
+
+def _toml(folder: Path, name: str, old: str, new: str) -> str:
+    text = DH_TABLE.replace(old, new)
+    assert text != DH_TABLE
+    (folder / name).write_text(text)
+    return str(folder / name)
+
+
+def _trajectory(folder: Path, name: str, **changes) -> str:
+    data = json.loads((folder / "T.json").read_text())
+    data.update(changes)
+    (folder / name).write_text(json.dumps(data))
+    return str(folder / name)
+
+
+def _validate(f: Path, data: str, *extra: str) -> list[str]:
+    return ["validate", "--model", str(f / "M.json"), "--data", data, "--json", str(f / "OUT.csv.json"), *extra]
+
+
+def _diagnose(f: Path, data: str, heldout: str, *extra: str) -> list[str]:
+    return ["diagnose", "--model", str(f / "M.json"), "--data", data, "--heldout", heldout,
+            "--report", str(f / "R.html"), *extra]  # fmt: skip
+
+
+def _simulate(f: Path, trajectory: str) -> list[str]:
+    return ["simulate", "--robot", "ur5", "--trajectory", trajectory, "--out", str(f / "OUT.csv")]
+
+
+def _manifest(f: Path, rows: str) -> list[str]:
+    (f / "rec" / "r1").mkdir(parents=True, exist_ok=True)
+    for date in ("2024-01-01", "2024-02-01"):
+        shutil.copy2(f / "D.csv", f / "rec" / "r1" / f"{date}.csv")
+    (f / "fleet.csv").write_text("path,robot,time\n" + rows)
+    return ["fleet", "--robot", "ur5", "--data", str(f / "rec" / "**" / "*.csv"), "--manifest", str(f / "fleet.csv"),
+            "--serial", "--out", str(f / "fleet")]  # fmt: skip
+
+
+_TWO_ROWS = "rec/r1/2024-01-01.csv,r1,2024-01-01\nrec/r1/2024-02-01.csv,r1,2024-02-01\n"
+
+MN_M = r"tau_\d is -?[\d.e+]+ N m at row \d+, more than 20 times the [\d.]+ N m the model of 'ur5' gives within " \
+    r"its limits; give torques in N m \(not mN m or motor current\)"  # fmt: skip
+
+CASES: list[tuple[str, Callable[[Path], list[str]], str]] = [
+    # -- 1. torques in mN m, read with the robot at hand
+    ("validate_mNm", lambda f: _validate(f, _millinewton(f)), rf"mNm\.csv: {MN_M}"),
+    ("diagnose_data_mNm", lambda f: _diagnose(f, _millinewton(f, "D.csv"), str(f / "V.csv")), rf"mNm\.csv: {MN_M}"),
+    ("diagnose_heldout_mNm", lambda f: _diagnose(f, str(f / "D.csv"), _millinewton(f)), rf"mNm\.csv: {MN_M}"),
+    # -- 2. DH tables
+    (
+        "dh_prismatic_limit_in_mm",
+        lambda f: ["info", "--robot", _toml(f, "mm.toml", "q_max = [2.8, 1.9, 0.3]", "q_max = [2.8, 1.9, 300.0]")],
+        r"column 'joints\.q_max' of the table '.*mm\.toml' holds 300 for joint 3, a prismatic joint, beyond the "
+        r"20 m of any arm; give metres \(it looks like mm\)",
+    ),
+    (
+        "dh_revolute_limit_in_degrees",
+        lambda f: ["info", "--robot", _toml(f, "deg.toml", "q_min = [-2.8,", "q_min = [-160.0,")],
+        r"column 'joints\.q_min' of the table '.*deg\.toml' holds -160 for joint 1, a revolute joint, beyond the "
+        r"12\.57 rad \(two turns\) of any arm; give radians",
+    ),
+    (
+        "dh_negative_armature",
+        lambda f: ["info", "--robot", _toml(f, "arm2.toml", "armature = [0.1, 0.08", "armature = [0.1, -0.08")],
+        r"column 'links\.armature' of the table '.*arm2\.toml' holds -0\.08 for joint 2, but an armature is a rotor "
+        r"inertia .*0 or more \(kg m\^2\)",
+    ),
+    (
+        "dh_gravity_1e6",
+        lambda f: ["info", "--robot", _toml(f, "g.toml", 'name = "arm"', 'name = "arm"\ngravity = [0, 0, -9.81e6]')],
+        r"'gravity' in the table '.*g\.toml' is \[0, 0, -9\.81e\+06\], of magnitude 9\.81e\+06 m/s\^2, outside the 0 "
+        r"to 100 m/s\^2 an arm is used in; give it in m/s\^2",
+    ),
+    # -- 3. trajectory files whose fields contradict their coefficients
+    (
+        "trajectory_harmonics_5",
+        lambda f: _simulate(f, _trajectory(f, "H.json", harmonics=5)),
+        r"the trajectory file '.*H\.json' states harmonics = 5, but its coefficients hold 2 rows of a and b \(one "
+        r"per harmonic\); correct harmonics to 2",
+    ),
+    (
+        "trajectory_n_joints_7",
+        lambda f: _simulate(f, _trajectory(f, "N.json", n_joints=7)),
+        r"states n_joints = 7, but its coefficients hold 6 values of c \(one per joint\); correct n_joints to 6",
+    ),
+    (
+        "trajectory_harmonics_text",
+        lambda f: _simulate(f, _trajectory(f, "S.json", harmonics="two")),
+        r"states harmonics = 'two', but its coefficients hold 2 rows",
+    ),
+    (
+        "trajectory_ragged_rows",
+        lambda f: _simulate(f, _trajectory(f, "R.json", a=[[0.1, 0.2], [0.3]])),
+        r"the field 'a' of the trajectory file '.*R\.json' is not a table of numbers \(rows of equal length\)",
+    ),
+    # -- 4. a period the recording does not have
+    (
+        "validate_period_one_sample",
+        lambda f: _validate(f, str(f / "V.csv"), "--period", "0.001"),
+        r"--period 0\.001 s is 1 sample of V\.csv, over which its angles hardly move \(they first move apart by a "
+        r"tenth of their spread after [\d.]+ s\), so it cannot be the motion's period",
+    ),
+    (
+        "validate_period_other",
+        lambda f: _validate(f, str(f / "V.csv"), "--period", "1.37"),
+        r"--period 1\.37 s does not fit V\.csv: its angles repeat every 2 s, and 1\.37 s is 0\.685 of those periods, "
+        r"not a whole number; give --period 2 \(or a whole multiple of it\)",
+    ),
+    ("validate_period_inf", lambda f: _validate(f, str(f / "V.csv"), "--period", "inf"), r"--period is inf; give"),
+    (
+        "diagnose_period_0",
+        lambda f: _diagnose(f, str(f / "D.csv"), str(f / "V.csv"), "--period", "0"),
+        r"^dynid diagnose: error: --period is 0\.0; give the period of the motion in seconds \(> 0\)\.$",
+    ),
+    (
+        "diagnose_period_one_sample",
+        lambda f: _diagnose(f, str(f / "D.csv"), str(f / "V.csv"), "--period", "0.001"),
+        r"--period 0\.001 s is 1 sample of V\.csv, over which its angles hardly move",
+    ),
+    # -- 5. the training data as held-out data
+    (
+        "diagnose_heldout_is_data",
+        lambda f: _diagnose(f, str(f / "D.csv"), str(f / "D.csv")),
+        r"--heldout .*D\.csv is the same file as --data, but the diagnosis measures the gap on data the model was "
+        r"not fitted to .*; give another recording of the robot",
+    ),
+    (
+        "diagnose_heldout_is_training_copy",
+        lambda f: _diagnose(f, str(f / "V.csv"), str(shutil.copy2(f / "D.csv", f / "D2.csv"))),
+        r"--heldout .*D2\.csv is the data .*M\.json was identified on, but the diagnosis measures the gap on data",
+    ),
+    # -- 6. fleet manifests
+    (
+        "manifest_repeated_row",
+        lambda f: _manifest(f, _TWO_ROWS + "rec/r1/2024-01-01.csv,r1,2024-01-01\n"),
+        r"line 4 of the manifest '.*fleet\.csv' names the recording 'rec/r1/2024-01-01\.csv' again \(line 2 names it "
+        r"already\); give each recording one row",
+    ),
+    (
+        "manifest_missing_file",
+        lambda f: _manifest(f, _TWO_ROWS + "rec/r1/2024-03-01.csv,r1,2024-03-01\n"),
+        r"line 4 of the manifest '.*fleet\.csv' names the recording 'rec/r1/2024-03-01\.csv', but there is no such "
+        r"file .*; correct its path .* or drop the row",
+    ),
+    (
+        "manifest_dates_and_indices",
+        lambda f: _manifest(f, "rec/r1/2024-01-01.csv,r1,2024-01-01\nrec/r1/2024-02-01.csv,r1,7\n"),
+        r"the robot 'r1' has recordings timed by ISO date \(line 2 of the manifest '.*fleet\.csv': '2024-01-01'\) "
+        r"and by index \(line 3 of the manifest '.*': '7'\), which do not order",
+    ),
+    # -- 7. a dead torque sensor
+    (
+        "validate_dead_channel",
+        lambda f: _validate(f, _dead(f)),
+        r"dead\.csv: tau_3 holds 1\.5 N m in every one of its \d+ rows.*dead or unplugged",
+    ),
+]
+
+
+@pytest.mark.parametrize(("case", "make", "pattern"), CASES, ids=[c[0] for c in CASES])
+def test_bad_input_is_refused_in_one_sentence(
+    work: Path, capsys: pytest.CaptureFixture[str], case: str, make, pattern: str
+) -> None:
+    assert_refused(make(work), work, pattern, capsys)
+
+
+# ---------------------------------------------------------------------- 1. torque units, every reader
+def test_the_api_reader_with_the_robot_refuses_torques_in_mn_m(base: Path, tmp_path: Path) -> None:
+    from dynid.commands.common import read_dataset
+    from dynid.data.files import load_dataset
+
+    shutil.copy2(base / "V.csv", tmp_path / "V.csv")
+    path = _millinewton(tmp_path)
+    robot = load_robot("ur5")
+    assert load_dataset(path, 6).n == 6  # without the robot nothing tells the units
+    with pytest.raises(DataError, match=rf"^mNm\.csv: {MN_M}"):
+        load_dataset(path, robot=robot)
+    with pytest.raises(DataError, match=rf"^mNm\.csv: {MN_M}"):
+        read_dataset(path, robot=robot)
+
+
+def test_identify_refuses_torques_in_mn_m(work: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    argv = ["identify", "--robot", "ur5", "--data", _millinewton(work, "D.csv"), "--method", "ols", "--gmm", "off",
+            "--out", str(work / "OUT.json")]  # fmt: skip
+    assert_refused(argv, work, rf"mNm\.csv: {MN_M}", capsys)
+
+
+def test_the_fleet_refuses_a_recording_in_mn_m_in_its_row(base: Path, tmp_path: Path) -> None:
+    """One bad recording does not stop a fleet: its row carries the sentence (and no parameters)."""
+    from dynid.fleet.core import FleetSettings, identify_recording
+    from dynid.fleet.recordings import find_recordings
+
+    shutil.copy2(base / "D.csv", tmp_path / "D.csv")
+    (tmp_path / "r1").mkdir()
+    _millinewton(tmp_path, "D.csv", "r1/0.csv")
+    recording = find_recordings(str(tmp_path / "r1" / "0.csv"))[0]
+    out = identify_recording(load_robot("ur5"), recording, FleetSettings(gmm="off", holdout=0.0))
+    assert out["parameters"] is None
+    assert re.search(rf"^0\.csv: {MN_M}", out["row"]["error"]), out["row"]["error"]
+
+
+def test_a_ros2_bag_in_mn_m_is_refused_by_validate(work: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A bag's joints are mapped by name, then checked like a file: validate reads it with the model's robot."""
+    pytest.importorskip("rosbags.rosbag2", reason="ROS 2 recordings are read with rosbags")
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    from dynid.data.files import load_dataset
+
+    store = get_typestore(Stores.LATEST)
+    types, kind = store.types, "sensor_msgs/msg/JointState"
+    ds = load_dataset(work / "V.csv", 6).slice_time(0.0, 1.0)
+    names = load_robot("ur5").joint_names
+    with Writer(work / "bag", version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conn = writer.add_connection("/joint_states", kind, typestore=store)
+        for k in range(ds.m):
+            stamp_ns = 1_700_000_000_000_000_000 + round(ds.t[k] * 1e9)
+            msg = types[kind](
+                header=types["std_msgs/msg/Header"](
+                    stamp=types["builtin_interfaces/msg/Time"](sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9),
+                    frame_id="",
+                ),
+                name=list(names),
+                position=ds.q[k].copy(),
+                velocity=np.zeros(0),
+                effort=1e3 * ds.tau[k],
+            )
+            writer.write(conn, stamp_ns, store.serialize_cdr(msg, kind))
+    assert_refused(_validate(work, str(work / "bag")), work, rf"bag: {MN_M}", capsys)
+
+
+# ---------------------------------------------------------------------- 2. DH tables that hold
+@pytest.mark.parametrize("gravity", ["[0, 0, 0]", "[0, 0, -1.62]", "[0, 9.81, 0]", "[0, 0, -99]"])
+def test_a_table_with_gravity_within_range_loads(tmp_path: Path, gravity: str) -> None:
+    path = _toml(tmp_path, "g.toml", 'name = "arm"', f'name = "arm"\ngravity = {gravity}')
+    np.testing.assert_allclose(load_robot(path).gravity, json.loads(gravity), rtol=0, atol=0)
+
+
+def test_table_limits_at_the_bounds_load_and_beyond_are_refused(tmp_path: Path) -> None:
+    ok = _toml(tmp_path, "ok.toml", "q_max = [2.8, 1.9, 0.3]", "q_max = [12.5, 1.9, 19.9]")
+    robot = load_robot(ok)
+    np.testing.assert_allclose(robot.q_max, [12.5, 1.9, 19.9], rtol=0, atol=0)
+    bad = _toml(tmp_path, "bad.toml", "q_max = [2.8, 1.9, 0.3]", "q_max = [2.8, 1.9, 20.5]")
+    with pytest.raises(RobotModelError, match=r"holds 20\.5 for joint 3, a prismatic joint, beyond the 20 m"):
+        load_robot(bad)
+
+
+# ---------------------------------------------------------------------- 3. trajectory files
+def test_a_trajectory_whose_fields_agree_loads(base: Path, tmp_path: Path) -> None:
+    from dynid.optim.trajectory import load_trajectory
+
+    shutil.copy2(base / "T.json", tmp_path / "T.json")
+    good = load_trajectory(_trajectory(tmp_path, "G.json", harmonics=2.0, n_joints=6))
+    assert (good.harmonics, good.n) == (2, 6)
+    with pytest.raises(ModelFileError, match=r"states n_joints = True, but its coefficients hold 6 values"):
+        load_trajectory(_trajectory(tmp_path, "B.json", n_joints=True))
+
+
+# ---------------------------------------------------------------------- 4. --period against the recording
+def test_a_period_that_fits_is_used_silently(work: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert quiet_warnings(_validate(work, str(work / "V.csv"), "--period", "2"), capsys) == []
+    figures = json.loads((work / "OUT.csv.json").read_text())
+    assert figures["noise_floor_method"] == "periods", figures["noise_floor_detail"]
+
+
+def test_check_period_warns_where_the_data_cannot_tell() -> None:
+    """An aperiodic run: the period is warned about (the noise floor does not use it); a run shorter than two
+    periods cannot confirm one; a periodic stretch between rests confirms it without a word."""
+    from dynid.data.periodic import check_period
+
+    t = np.arange(8000) / 1000.0
+    aperiodic = np.column_stack([np.sin(0.7 * t) + 0.3 * np.sin(2.3 * t), np.cos(1.13 * t)])
+    with pytest.warns(DataWarning, match=r"the angles of A\.csv do not repeat after --period 3 s \(one period "
+                                         r"apart they differ by [\d.]+ % of their spread"):  # fmt: skip
+        check_period(t, aperiodic, 3.0, source="A.csv")
+    with pytest.warns(DataWarning, match=r"A\.csv lasts 7\.999 s, less than two periods of --period 5 s"):
+        check_period(t, aperiodic, 5.0, source="A.csv")
+    played = np.outer(np.sin(2 * np.pi * t / 1.5), [1.0, 0.5])
+    played[:1000] = 0.0  # a rest before, a rest after
+    played[-1000:] = played[-1001]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_period(t, played, 1.5, source="P.csv")
+        check_period(t, played, 3.0, source="P.csv")  # two periods at a time repeat too
+    with pytest.raises(UsageError, match=r"--period 0\.02 s is 20 samples of P\.csv"):
+        check_period(t, played, 0.02, source="P.csv")
+
+
+def test_diagnosis_settings_refuse_a_period_that_is_not_positive() -> None:
+    from dynid.diagnosis.settings import DiagnosisSettings
+
+    for bad in (0.0, -2.0, float("nan"), float("inf"), "2"):
+        with pytest.raises(UsageError, match=r"period is .*; give the period of the held-out motion in seconds"):
+            DiagnosisSettings(period=bad)  # type: ignore[arg-type]
+    assert DiagnosisSettings(period=np.float64(2.0)).period == 2.0
+
+
+# ---------------------------------------------------------------------- 5. training data as held-out data
+def test_validate_on_the_training_data_warns_that_the_score_is_optimistic(
+    work: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert_warned(
+        _validate(work, str(work / "D.csv")),
+        r"--data .*D\.csv is the data .*M\.json was identified on \(the same \d+ samples and torque range\), so its "
+        r"scores are optimistic, not held-out figures",
+        capsys,
+    )
+    assert quiet_warnings(_validate(work, str(work / "V.csv")), capsys) == []
+
+
+def test_only_the_training_data_match_the_model(base: Path) -> None:
+    from dynid.commands.common import is_training_data
+    from dynid.data.files import load_dataset
+    from dynid.identify.model import load_model
+
+    model = load_model(base / "M.json")
+    train = load_dataset(base / "D.csv", 6)
+    assert is_training_data(model, train)
+    assert not is_training_data(model, load_dataset(base / "V.csv", 6))
+    assert not is_training_data(model, train.select_rows(np.arange(1, train.m)))  # one sample fewer
+    assert not is_training_data(model, train._derive(tau=1.001 * train.tau))  # a gain 0.1 % off
+    assert "data_sha256" in model.info
+    older = dataclasses.replace(model, info={k: v for k, v in model.info.items() if k != "data_sha256"})
+    assert is_training_data(older, train)  # a file written before the checksum: the samples and range
+    assert not is_training_data(older, load_dataset(base / "V.csv", 6))
+
+
+# ---------------------------------------------------------------------- 6. fleet manifests (API)
+def test_find_recordings_refuses_dates_and_indices_mixed_by_path(tmp_path: Path) -> None:
+    from dynid.fleet.recordings import find_recordings
+
+    (tmp_path / "arm").mkdir()
+    for name in ("2024-01-01.csv", "3.csv"):
+        (tmp_path / "arm" / name).write_text("t\n")
+    with pytest.raises(UsageError, match=r"the robot 'arm' has recordings timed by ISO date \('.*2024-01-01\.csv': "
+                                         r"'2024-01-01'\) and by index \('.*3\.csv': '3'\)"):  # fmt: skip
+        find_recordings(str(tmp_path / "arm" / "*.csv"))
+    found = find_recordings(str(tmp_path / "arm" / "3.csv"))  # one kind per robot: fine
+    assert [(r.robot, r.time) for r in found] == [("arm", "3")]
+
+
+def test_a_manifest_may_name_recordings_the_pattern_leaves_out(tmp_path: Path) -> None:
+    from dynid.fleet.recordings import find_recordings
+
+    (tmp_path / "arm").mkdir()
+    for name in ("a.csv", "b.csv"):
+        (tmp_path / "arm" / name).write_text("t\n")
+    (tmp_path / "m.csv").write_text("path,robot,time\narm/a.csv,x,0\narm/b.csv,x,1\n")
+    found = find_recordings(str(tmp_path / "arm" / "b.csv"), tmp_path / "m.csv")
+    assert [(os.path.basename(r.path), r.order) for r in found] == [("b.csv", 0)]
+
+
+# ---------------------------------------------------------------------- 7. dead sensors and joint limits
+def test_a_torque_channel_stuck_over_part_of_the_run_is_warned_about(
+    work: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from dynid.data.files import load_dataset
+
+    path = _stuck(work)
+    pattern = (
+        r"stuck\.csv: tau_3 holds -?[\d.e+-]+ N m unchanged over rows \d+\.\.\d+ \(40 % of the recording\) while the "
+        r"arm moves, as a torque sensor that stuck does; check joint 3's channel"
+    )
+    with pytest.warns(DataWarning, match=pattern):
+        load_dataset(path, 6)
+    assert_warned(_validate(work, path), pattern, capsys)
+
+
+def test_a_resting_arm_may_hold_its_torque(base: Path, tmp_path: Path) -> None:
+    """A noise-free rest holds one torque exactly: not a stuck sensor, since nothing moves."""
+    from dynid.data.dataset import Dataset
+    from dynid.data.files import load_dataset, save_dataset
+
+    ds = load_dataset(base / "V.csv", 6)
+    rest = 0.5 * ds.m
+    q = np.where(np.arange(ds.m)[:, None] < rest, ds.q, ds.q[int(rest)])
+    tau = np.where(np.arange(ds.m)[:, None] < rest, ds.tau, ds.tau[int(rest)])
+    save_dataset(Dataset(ds.t, q, tau), tmp_path / "rest.csv")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DataWarning)
+        load_dataset(tmp_path / "rest.csv", 6)
+
+
+def test_angles_far_beyond_the_limits_are_warned_about(work: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from dynid.data.files import load_dataset
+
+    path = _beyond_limits(work)
+    pattern = (
+        r"beyond\.csv: q_1 moves over \[[\d.-]+, 9\.3\], 24 % of its range beyond the limits \[-6\.283, 6\.283\] of "
+        r"'ur5'; check the joint's offset and units"
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DataWarning)
+        load_dataset(path, 6)  # without the robot the limits are unknown
+    with pytest.warns(DataWarning, match=pattern):
+        load_dataset(path, robot=load_robot("ur5"))
+    assert_warned(_validate(work, path), pattern, capsys)
