@@ -5,7 +5,9 @@ A case simulates one truth robot (closed-loop tracking, quantised encoders, colo
 and one held out (:func:`dynid.sim.cases.case_excitation`), with effects injected at a size
 calibrated in multiples of the torque noise (:func:`dynid.sim.cases.calibrate_value`); identifies a
 model that lacks those effects; and diagnoses it.  The benchmark
-(``benchmarks/diagnosis_benchmark.py``) and the tests share these functions.
+(``benchmarks/diagnosis_benchmark.py``) and the tests share these functions; :func:`simulate_runs` (the
+two runs) and :func:`truth_labels` (what was injected, as :func:`classify` reads it) are the field
+cases' (:mod:`dynid.diagnosis.field_cases`) too.
 
 >>> case = run_case(load_robot("ur5"), ["stribeck@3"], level=1.0, seed=1)
 >>> case["verdict"], case["correct"]
@@ -14,15 +16,16 @@ model that lacks those effects; and diagnoses it.  The benchmark
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from dynid.sim.cases import calibrate_value, case_excitation
 from dynid.sim.effects import EFFECT_NAMES, parse_effects
-from dynid.sim.simulator import simulate
+from dynid.sim.simulator import SimulationResult, simulate
 
-__all__ = ["classify", "run_case"]
+__all__ = ["CaseRuns", "classify", "run_case", "simulate_runs", "truth_labels"]
 
 
 def classify(diagnosis, injected: Sequence[tuple[str, int | None]]) -> dict[str, Any]:
@@ -72,6 +75,121 @@ def classify(diagnosis, injected: Sequence[tuple[str, int | None]]) -> dict[str,
     if found:
         closure = float(np.mean([a.closure for a in diagnosis.accepted]))
     return {"label": label, "parametric": par, "correct": bool(correct), "closure": closure, "found": found}
+
+
+@dataclass(frozen=True, eq=False)
+class CaseRuns:
+    """The two simulated runs of a case, with the effects injected into both.
+
+    Attributes
+    ----------
+    train, heldout : SimulationResult
+        The training and held-out runs (one truth robot: the held-out run's truth seed is the case's).
+    specs : list of str
+        The injected effects with their values (``NAME@J:VALUE`` or ``NAME:VALUE``).
+    values : list of float
+        Their values (calibrated, or as given).
+    achieved : list of float
+        The level each calibrated value reached on the training excitation, in the units of the
+        calibration's ``level`` (NaN for a value given).
+    """
+
+    train: SimulationResult
+    heldout: SimulationResult
+    specs: list[str]
+    values: list[float]
+    achieved: list[float]
+
+
+def simulate_runs(
+    robot,
+    injected: Sequence[str],
+    train_traj,
+    held_traj,
+    *,
+    level: float,
+    seed: int,
+    calibration_seconds: float,
+    train_seconds: float,
+    heldout_seconds: float,
+    friction: str,
+    armature: bool,
+    noise=None,
+) -> CaseRuns:
+    """Calibrate the injected effects on the training excitation and simulate both runs with them.
+
+    Parameters
+    ----------
+    robot : RobotModel
+    injected : sequence of str
+        Effects as ``NAME`` or ``NAME@J`` (VALUE calibrated to ``level``), or with ``:VALUE`` (used as given).
+    train_traj, held_traj : Trajectory
+        The training and held-out motions.
+    level : float
+        RMS contribution of each calibrated effect, in the lab noise's standard deviations
+        (:func:`dynid.sim.cases.calibrate_value`).
+    seed : int
+        Seed of the truth and the training run's noise (the held-out run's: ``seed + 100_000``).
+    calibration_seconds : float
+        Length (s) of the noise-free training run the calibration measures.
+    train_seconds, heldout_seconds : float
+        Lengths (s) of the two runs.
+    friction : str
+        Truth friction.
+    armature : bool
+        Whether the model will identify an armature (the calibration leaves the motor inertia out then).
+    noise : NoiseModel, optional
+        The sensor model of both runs; the simulator's default when None.
+
+    Returns
+    -------
+    CaseRuns
+    """
+    specs, values, achieved = [], [], []
+    for item, req in zip(injected, parse_effects(list(injected)), strict=True):
+        joint = req.joints[0] if req.joints else None
+        if ":" in item:  # a VALUE given: no calibration
+            value, got = req.value, float("nan")
+        else:
+            value, got = calibrate_value(
+                robot,
+                train_traj,
+                req.name,
+                joint,
+                level,
+                duration=calibration_seconds,
+                seed=seed,
+                friction=friction,
+                armature=armature,
+            )
+        specs.append(f"{req.name}@{joint}:{value:.6g}" if joint else f"{req.name}:{value:.6g}")
+        values.append(value)
+        achieved.append(got)
+    effects = ",".join(specs) or None
+    tr = simulate(
+        robot, train_traj, duration=train_seconds, friction=friction, effects=effects, seed=seed, noise=noise
+    )
+    ho = simulate(
+        robot,
+        held_traj,
+        duration=heldout_seconds,
+        friction=friction,
+        effects=effects,
+        seed=seed + 100_000,
+        truth_seed=seed,
+        noise=noise,
+    )
+    return CaseRuns(train=tr, heldout=ho, specs=specs, values=values, achieved=achieved)
+
+
+def truth_labels(injected: Sequence[str], catalogue: Sequence[str]) -> list[tuple[str, int | None]]:
+    """What was injected, as :func:`classify` takes it: ``(effect, joint or None)`` per effect (joint
+    1-based), an effect outside ``catalogue`` named ``"unknown:" + name``."""
+    labels = []
+    for req in parse_effects(list(injected)):
+        joint = req.joints[0] if req.joints else None
+        labels.append((req.name if req.name in catalogue else f"unknown:{req.name}", joint))
+    return labels
 
 
 def run_case(
@@ -125,42 +243,21 @@ def run_case(
     from dynid.diagnosis.core import diagnose
     from dynid.identify.model import identify
 
-    train_traj = case_excitation(robot, 2 * seed, base_freq=base_freq)
-    held_traj = case_excitation(robot, 2 * seed + 1, base_freq=base_freq)
-    specs, values, achieved, truth_injected = [], [], [], []
-    for item, req in zip(injected, parse_effects(list(injected)), strict=True):
-        joint = req.joints[0] if req.joints else None
-        if ":" in item:  # a VALUE given: no calibration
-            value, got = req.value, float("nan")
-        else:
-            value, got = calibrate_value(
-                robot,
-                train_traj,
-                req.name,
-                joint,
-                level,
-                duration=min(train_seconds, 10.0),
-                seed=seed,
-                friction=friction,
-                armature=armature,
-            )
-        specs.append(f"{req.name}@{joint}:{value:.6g}" if joint else f"{req.name}:{value:.6g}")
-        values.append(value)
-        achieved.append(got)
-        name = req.name if req.name in catalogue else f"unknown:{req.name}"
-        truth_injected.append((name, joint))
-    effects = ",".join(specs) or None
-    tr = simulate(robot, train_traj, duration=train_seconds, friction=friction, effects=effects, seed=seed)
-    ho = simulate(
+    runs = simulate_runs(
         robot,
-        held_traj,
-        duration=heldout_seconds,
+        injected,
+        case_excitation(robot, 2 * seed, base_freq=base_freq),
+        case_excitation(robot, 2 * seed + 1, base_freq=base_freq),
+        level=level,
+        seed=seed,
+        calibration_seconds=min(train_seconds, 10.0),
+        train_seconds=train_seconds,
+        heldout_seconds=heldout_seconds,
         friction=friction,
-        effects=effects,
-        seed=seed + 100_000,
-        truth_seed=seed,
+        armature=armature,
     )
-    train, held = tr.to_dataset(), ho.to_dataset()
+    truth_injected = truth_labels(injected, catalogue)
+    train, held = runs.train.to_dataset(), runs.heldout.to_dataset()
     model = identify(robot, train, method="ols", friction=model_friction, gmm="off", armature=armature)
     d = diagnose(model, train, held, effects=tuple(catalogue), **(diagnose_options or {}))
     cls = classify(d, truth_injected)
@@ -169,11 +266,11 @@ def run_case(
         "truth": [f"{e}@{j}" if j else e for e, j in truth_injected],
         "level": level,
         "seed": seed,
-        "values": values,
-        "achieved_level": achieved,
+        "values": runs.values,
+        "achieved_level": runs.achieved,
         "verdict": list(d.verdict),
         "excess": [float(v) for v in d.excess["ratio"]],
-        "realised": [e.to_dict() for e in tr.truth.effects],
+        "realised": [e.to_dict() for e in runs.train.truth.effects],
         "diagnosis": d,
         **cls,
     }

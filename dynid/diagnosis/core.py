@@ -440,7 +440,7 @@ def _undecided(
         ):
             continue
         if r.candidate.effect == "delay":
-            d = fitted_delay(ctx, base.fit, (None, r, ctx.tr.columns(r.candidate), None))
+            d = fitted_delay(ctx, base.fit, r, ctx.tr.columns(r.candidate))
             if abs(d) < ctx.min_delay:
                 continue
         out.append(r)

@@ -31,11 +31,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynid.data.dataset import Dataset
-from dynid.diagnosis.cases import classify
-from dynid.sim.cases import NOISE_STD, calibrate_value, case_centre, case_excitation
-from dynid.sim.effects import EFFECT_NAMES, parse_effects
+from dynid.diagnosis.cases import classify, simulate_runs, truth_labels
+from dynid.sim.cases import NOISE_STD, case_centre, case_excitation
+from dynid.sim.effects import EFFECT_NAMES
 from dynid.sim.sensors import NoiseModel, torque_noise
-from dynid.sim.simulator import CONTROL_RATE, SimulationResult, simulate
+from dynid.sim.simulator import CONTROL_RATE, SimulationResult
 
 __all__ = [
     "FIELD_ENCODER_BITS",
@@ -249,47 +249,21 @@ def field_case(
     held_traj = min_jerk_motion(robot, np.random.default_rng([seed, 13]), heldout_seconds)
     # calibrate_value measures in units of the lab noise std: rescale to the field noise's.
     scale = math.hypot(noise.torque, noise.coloured) / NOISE_STD
-    specs, values, achieved = [], [], []
-    for item, req in zip(injected, parse_effects(list(injected)), strict=True):
-        joint = req.joints[0] if req.joints else None
-        if ":" in item:
-            value, got = req.value, float("nan")
-        else:
-            value, got = calibrate_value(
-                robot,
-                train_traj,
-                req.name,
-                joint,
-                level * scale,
-                duration=min(TRAIN_PERIODS * period, 10.0),
-                seed=seed,
-                friction=friction,
-                armature=armature,
-            )
-            got /= scale
-        specs.append(f"{req.name}@{joint}:{value:.6g}" if joint else f"{req.name}:{value:.6g}")
-        values.append(float(value))
-        achieved.append(float(got))
-    effects = ",".join(specs) or None
-    tr = simulate(
+    runs = simulate_runs(
         robot,
+        injected,
         train_traj,
-        duration=train_periods * period,
-        friction=friction,
-        effects=effects,
-        seed=seed,
-        noise=noise,
-    )
-    ho = simulate(
-        robot,
         held_traj,
-        duration=heldout_seconds,
+        level=level * scale,
+        seed=seed,
+        calibration_seconds=min(TRAIN_PERIODS * period, 10.0),
+        train_seconds=train_periods * period,
+        heldout_seconds=heldout_seconds,
         friction=friction,
-        effects=effects,
-        seed=seed + 100_000,
-        truth_seed=seed,
+        armature=armature,
         noise=noise,
     )
+    tr, ho = runs.train, runs.heldout
     return FieldCase(
         train=_measured_only(tr),
         heldout=_measured_only(ho),
@@ -297,9 +271,9 @@ def field_case(
         heldout_run=ho,
         heldout_noise=injected_noise(ho),
         period=period,
-        specs=specs,
-        values=values,
-        achieved=achieved,
+        specs=runs.specs,
+        values=[float(v) for v in runs.values],
+        achieved=[float(got / scale) for got in runs.achieved],  # NaN for a value given
     )
 
 
@@ -380,10 +354,7 @@ def run_field_case(
         robot, injected, level=level, seed=seed, heldout_seconds=heldout_seconds, friction=friction,
         armature=armature, noise=noise, train_periods=train_periods,
     )  # fmt: skip
-    truth_injected = []
-    for req in parse_effects(list(case.specs)):
-        joint = req.joints[0] if req.joints else None
-        truth_injected.append((req.name if req.name in catalogue else f"unknown:{req.name}", joint))
+    truth_injected = truth_labels(case.specs, catalogue)
     model = identify(robot, case.train, method="ols", friction="linear", gmm="off", armature=armature)
     d = diagnose(model, case.train, case.heldout, effects=tuple(catalogue), **(diagnose_options or {}))
     true_std = true_noise_std(model, case)

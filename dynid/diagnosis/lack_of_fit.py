@@ -65,7 +65,6 @@ quantised angles repeats too, in the torque, with motion below the encoder's ste
 cannot show.)"""
 CURVE_POINTS = 400
 """Points per joint of the periodic mean kept for the report."""
-_CHUNK = 25  # draws per matrix product
 
 
 @dataclass(frozen=True, eq=False)
@@ -260,14 +259,15 @@ def training_lack_of_fit(
     curve = _curve(periodic[:, :, 0], within[:, 0], k, stride / prep.fs)
     ar = [st.ar_model(noise[:, j], order) for j in range(n)]
     rng = np.random.default_rng(seed)
-    null = []
-    for start in range(0, draws, _CHUNK):
-        d = min(_CHUNK, draws - start)
+
+    def drawn_ratios(d: int) -> NDArray[np.float64]:
+        """The statistic (n, d) of ``d`` draws of the noise through the refit's projection."""
         e = st.ar_noise(ar, m, d, rng).transpose(1, 2, 0)  # (m, n, d)
         ew = (e * fit.w[:, :, None]).reshape(m * n, d)
         rw = ew - fit.Q @ (fit.Q.T @ ew)
-        null.append(_ratio(rw.reshape(m, n, d) / w[:, :, None], moving, period, phase, K, B)[0])
-    null_ = np.concatenate(null, axis=1)
+        return _ratio(rw.reshape(m, n, d) / w[:, :, None], moving, period, phase, K, B)[0]
+
+    null_ = st.bootstrap_null(drawn_ratios, draws)  # (n, draws)
     mean = null_.mean(axis=1)
     p = st.gamma_tail(observed, null_)
     return LackOfFit(

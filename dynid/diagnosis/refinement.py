@@ -21,7 +21,8 @@ from scipy import optimize
 
 from dynid.diagnosis.candidates import Candidate
 from dynid.diagnosis.fitting import WeightedFit
-from dynid.diagnosis.screening import Context, on_training, score
+from dynid.diagnosis.result import RankedCandidate
+from dynid.diagnosis.screening import Context, Current, Scored, on_training, score
 
 __all__ = ["KEPT", "fitted_delay", "refine", "refine_leaders"]
 
@@ -32,41 +33,45 @@ _NONLINEAR = ("elasticity", "backlash", "delay")
 _LEADERS = 4
 
 
-def fitted_delay(ctx: Context, fit: WeightedFit, s) -> float:
-    """The delay (s) of a scored delay candidate: its refit's, else the first-order estimate.
+def fitted_delay(ctx: Context, fit: WeightedFit, rc: RankedCandidate, C_tr: NDArray[np.float64]) -> float:
+    """The delay (s) of a scored delay candidate ``rc`` with training columns ``C_tr``: its refit's, else
+    the first-order estimate.
 
     A delay shorter than one sample of the recording is not told apart from the state estimation's own
     errors: central differences and the zero-order hold of a sampled drive already shift torque against
     states by about half a sample (effect-free simulated UR5s gave 'delays' of 0.3-0.7 ms at 1 kHz,
     closing 55-60 % of a gap below the significance level).
     """
-    rc, C_tr = s[1], s[2]
     d = (rc.refit.get("effective") or {}).get("d")
     return _first_order_delay(ctx, fit, rc.candidate, C_tr) if d is None else float(d)
 
 
-def refine_leaders(ctx, fit, acc_tr, acc_ho, scored, r_cur, mse_cur, rnd, cross=None):
+def refine_leaders(ctx: Context, current: Current, scored: list[Scored]) -> list[Scored]:
     """Refit the leading not-LIP candidates (elasticity, backlash, delay) before the choice.
 
     Their first-order columns recover only part of what they cause, so they are compared with the
     others on their nonlinear refit (on training data; held-out data only score it, on the footings of
-    :func:`~dynid.diagnosis.screening.score`).  ``scored`` holds ``(group, RankedCandidate, C_tr, C_ho,
-    losses)`` entries; the refit is kept when it gains more on the training footing (the one candidates
-    are compared on, :func:`~dynid.diagnosis.screening.on_training`).
+    :func:`~dynid.diagnosis.screening.score`).  The list keeps its order; the refit is kept when it
+    gains more on the training footing (the one candidates are compared on,
+    :func:`~dynid.diagnosis.screening.on_training`).
     """
-    order = sorted(range(len(scored)), key=lambda i: -scored[i][1].gain)
-    leaders = [i for i in order if scored[i][1].candidate.effect in _NONLINEAR][:_LEADERS]
+    order = sorted(range(len(scored)), key=lambda i: -scored[i].ranked.gain)
+    leaders = [i for i in order if scored[i].ranked.candidate.effect in _NONLINEAR][:_LEADERS]
     out = list(scored)
     for i in leaders:
-        gi, rc, C_tr, C_ho, feet = scored[i]
-        cand, C_tr2, C_ho2, info = refine(ctx, fit, rc.candidate, C_tr)
-        feet2: dict = {}
-        rc2 = score(ctx, fit, acc_tr, acc_ho, C_tr2, C_ho2, cand, r_cur, mse_cur, rnd, cross, feet2)
-        if on_training(rc2, "gain") > on_training(rc, "gain"):
-            out[i] = (gi, replace(rc2, refit={**rc2.refit, **info}), C_tr2, C_ho2, feet2)
-        else:
-            out[i] = (gi, replace(rc, refit={**rc.refit, **info, "kept": KEPT}), C_tr, C_ho, feet)
+        out[i] = _refined_leader(ctx, current, scored[i])
     return out
+
+
+def _refined_leader(ctx: Context, current: Current, s: Scored) -> Scored:
+    """A leader scored on its refit when that gains more on the training footing, else on the screen's
+    columns; either way with the refit's account in ``refit``."""
+    rc = s.ranked
+    cand, C_tr2, C_ho2, info = refine(ctx, current.fit, rc.candidate, s.C_tr)
+    s2 = score(ctx, current, cand, C_tr2, C_ho2)
+    if on_training(s2.ranked, "gain") > on_training(rc, "gain"):
+        return replace(s2, ranked=replace(s2.ranked, refit={**s2.ranked.refit, **info}))
+    return replace(s, ranked=replace(rc, refit={**rc.refit, **info, "kept": KEPT}))
 
 
 def refine(ctx: Context, fit: WeightedFit, cand: Candidate, C_tr):

@@ -9,7 +9,8 @@
   parameter error allows) and *cross-fitted* (:func:`cross_fitted`: both refitted on the training data
   and the other held-out folds, as the excess test judges the baseline).  A candidate passes on either:
   the smaller p-value, doubled (Bonferroni over the two footings), and the gain, closure and losses of
-  the footing that gave it, which ``refit["footing"]`` records.
+  the footing that gave it, which ``refit["footing"]`` records.  The current model a round scores on
+  is a :class:`Current`; a scored candidate, with its columns and each footing's losses, a :class:`Scored`.
 * :func:`parsimonious`: among acceptable candidates on the same joints, the simplest one the best does
   not beat significantly; candidates are compared with one another on the training footing
   (:func:`on_training`).
@@ -39,6 +40,8 @@ __all__ = [
     "TRAINING",
     "Context",
     "CrossFitted",
+    "Current",
+    "Scored",
     "confound_note",
     "confounding",
     "cross_fitted",
@@ -153,6 +156,60 @@ def cross_fitted(ctx: Context, fit: WeightedFit, X_tr, X_ho, folds: int) -> Cros
 
 
 @dataclass(frozen=True, eq=False)
+class Current:
+    """The model a round's candidates are scored on top of: the baseline and the effects accepted so far.
+
+    Attributes
+    ----------
+    fit : WeightedFit
+        Its training fit (the accepted effects' columns in its baseline).
+    acc_tr, acc_ho : ndarray, shape (m_tr, n, a) and (m, n, a)
+        The accepted effects' columns on the training and the held-out rows (``a = 0`` before any).
+    residual : ndarray, shape (m, n)
+        Its held-out residual (N m).
+    loss : ndarray, shape (m,)
+        Its per-sample held-out loss (noise variances).
+    mse : ndarray, shape (n,)
+        Its held-out mean square per joint (N^2 m^2).
+    round : int
+        The selection round (0: the baseline alone).
+    cross : CrossFitted or None
+        The same model cross-fitted on the held-out folds (:func:`cross_fitted`); None scores candidates on
+        the training footing alone.
+    """
+
+    fit: WeightedFit
+    acc_tr: NDArray[np.float64]
+    acc_ho: NDArray[np.float64]
+    residual: NDArray[np.float64]
+    loss: NDArray[np.float64]
+    mse: NDArray[np.float64]
+    round: int = 0
+    cross: CrossFitted | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class Scored:
+    """A scored candidate with what its score stands on.
+
+    Attributes
+    ----------
+    ranked : RankedCandidate
+        The score (on the footing that decided it).
+    C_tr, C_ho : ndarray, shape (m_tr, n, c) and (m, n, c)
+        Its columns on the training and the held-out rows.
+    losses : dict of str to ndarray
+        Per footing it was scored on, by name (:data:`TRAINING`, :data:`CROSS`): its per-sample held-out
+        loss, shape (m, n), in noise variances.
+    """
+
+    ranked: RankedCandidate
+    C_tr: NDArray[np.float64]
+    C_ho: NDArray[np.float64]
+    losses: dict[str, NDArray[np.float64]]
+
+
+@dataclass(frozen=True, eq=False)
 class _Footing:
     """One footing's figures for a candidate (see :func:`score`)."""
 
@@ -186,30 +243,19 @@ def _figures(ctx, name, r, r_cur, mse_cur, js, gain, p_value) -> _Footing:
 
 
 def score(
-    ctx,
-    fit: WeightedFit,
-    acc_tr,
-    acc_ho,
-    C_tr,
-    C_ho,
-    cand,
-    r_cur,
-    mse_cur,
-    rnd,
-    cross: CrossFitted | None = None,
-    store: dict[str, NDArray[np.float64]] | None = None,
-) -> RankedCandidate:
+    ctx: Context, current: Current, cand: Candidate, C_tr: NDArray[np.float64], C_ho: NDArray[np.float64]
+) -> Scored:
     """Held-out score of a candidate refitted with the current model: loss on the joints it acts on.
 
-    Without ``cross``, on the training footing alone: the candidate is fitted with the current model on
-    the training data, and the gain, closure and test are taken against ``r_cur`` (the current model's
-    held-out residual on that fit).  With ``cross``, also on the cross-fitted footing (the candidate and
+    On the training footing, the candidate is fitted with the current model on the training data, and
+    the gain, closure and test are taken against ``current.residual`` (the current model's held-out
+    residual on that fit).  With ``current.cross``, also on the cross-fitted footing (the candidate and
     the current model fitted on the training data and the other held-out folds, each fold predicted by
-    the fit that did not see it, the gain taken against ``cross.residual``), and the candidate passes on
-    either: its p-value is the smaller of the two doubled (Bonferroni), and its gain, closure, per-sample
-    loss and ``gain_all`` are those of the footing that gave it.  ``refit["footing"]`` records both
-    footings' figures and which one decided; ``store``, when given, receives both footings' per-sample
-    losses (shape (m, n), noise variances) by footing name.
+    the fit that did not see it, the gain taken against ``current.cross.residual``), and the candidate
+    passes on either: its p-value is the smaller of the two doubled (Bonferroni), and its gain, closure,
+    per-sample loss and ``gain_all`` are those of the footing that gave it.  ``refit["footing"]``
+    records both footings' figures and which one decided; :attr:`Scored.losses` holds both footings'
+    per-sample losses.
 
     The training footing is blind where the held-out motion leaves the training states: there the
     refit's parameter error, fixed over the run, hides an effect of the size of the noise.  The
@@ -218,43 +264,73 @@ def score(
     with per-joint friction, on 3 s of a real TX40 wrist); neither footing sees all that the other does.
     """
     js = list(cand.scored) if cand.scored else list(range(len(ctx.sigma)))
+    training, evidence = _training_footing(ctx, current, js, C_tr, C_ho)
+    feet = [training]
+    if current.cross is not None:
+        feet.append(_cross_footing(ctx, current.cross, js, C_tr, C_ho))
+    ranked = _decided(feet, cand, current.round, int(C_tr.shape[2]), evidence)
+    return Scored(ranked=ranked, C_tr=C_tr, C_ho=C_ho, losses={f.name: f.loss for f in feet})
+
+
+def _training_footing(ctx: Context, current: Current, js: list[int], C_tr, C_ho) -> tuple[_Footing, float]:
+    """The training footing's figures, and how strongly the training data alone point at the candidate:
+    the log p-value of the Wald test of its coefficients, fitted on the training residual (the held-out
+    data play no part)."""
+    fit = current.fit
     # ``fit`` already holds the accepted columns in its baseline; solve with the candidate alone.
     x, beta, _ = fit.solve(C_tr)
-    X_ho = np.concatenate([ctx.ho.X0, acc_ho], axis=2) if acc_ho.shape[2] else ctx.ho.X0
+    X_ho = np.concatenate([ctx.ho.X0, current.acc_ho], axis=2) if current.acc_ho.shape[2] else ctx.ho.X0
     r = ctx.ho.y - predict(X_ho, x, C_ho, beta)
     # The refit moves every joint's prediction a little (shared base parameters); scoring the joints the
     # candidate acts on keeps that variance out of the test.
     L = losses(r[:, js], ctx.sigma[js], ctx.mask[:, js])
-    L_cur = losses(r_cur[:, js], ctx.sigma[js], ctx.mask[:, js])
-    # The refit's parameter error, fixed over the whole held-out run, lets any column that moves the
-    # baseline mend (or spoil) the held-out prediction by chance: the gain's variance gets that term,
-    # 4 tr(V_beta G C G^T), with G the held-out cross moment of the candidate's net prediction change and
-    # the baseline columns, C and V_beta the block covariances of the baseline and of the candidate's
-    # coefficients (independent: the candidate is fitted on the baseline's training residual).
+    L_cur = losses(current.residual[:, js], ctx.sigma[js], ctx.mask[:, js])
+    chance_var, V_beta = _chance_variance(ctx, fit, js, X_ho, C_tr, C_ho)
+    dm = st.diebold_mariano(L_cur, L, block=ctx.block, extra_variance=max(chance_var, 0.0))
+    footing = _figures(ctx, TRAINING, r, current.residual, current.mse, js, dm.mean, dm.p_value)
+    return footing, st.wald_logp(beta, V_beta)
+
+
+def _chance_variance(
+    ctx: Context, fit: WeightedFit, js: list[int], X_ho, C_tr, C_ho
+) -> tuple[float, NDArray[np.float64]]:
+    """The variance the refit's parameter error adds to the training footing's gain, and the block
+    covariance of the candidate's coefficients.
+
+    The refit's parameter error, fixed over the whole held-out run, lets any column that moves the
+    baseline mend (or spoil) the held-out prediction by chance: the gain's variance gets that term,
+    4 tr(V_beta G C G^T), with G the held-out cross moment of the candidate's net prediction change and
+    the baseline columns, C and V_beta the block covariances of the baseline and of the candidate's
+    coefficients (independent: the candidate is fitted on the baseline's training residual).
+    """
     net = C_ho - np.einsum("mnk,kc->mnc", X_ho, fit.regress(C_tr))
     w = ctx.mask[:, js] / ctx.sigma[js][None, :] ** 2
     G = np.einsum("mjc,mj,mjk->ck", net[:, js], w, X_ho[:, js]) / X_ho.shape[0]
     cov = np.nan_to_num(fit.covariance(ctx.block))
     V_beta = fit.projected_covariance(C_tr, ctx.block)
-    chance_var = 4.0 * float(np.trace(V_beta @ G @ cov @ G.T))
-    dm = st.diebold_mariano(L_cur, L, block=ctx.block, extra_variance=max(chance_var, 0.0))
-    feet = [_figures(ctx, TRAINING, r, r_cur, mse_cur, js, dm.mean, dm.p_value)]
-    if cross is not None:
-        r_cf = cross.fold.residual(C_tr, C_ho)
-        L_cf = losses(r_cf[:, js], ctx.sigma[js], ctx.mask[:, js])
-        L_cf_cur = losses(cross.residual[:, js], ctx.sigma[js], ctx.mask[:, js])
-        # The fold fits leave no fixed parameter error to widen the test with (each fold's own estimation
-        # error enters its losses, serially correlated within the fold: the blocks).  An aperiodic run
-        # shows an effect on a few moves, so block means of the gain are capped from above as the excess
-        # test's are (the test stays valid; a few large blocks no longer swamp its variance).
-        dm_cf = st.diebold_mariano(L_cf_cur, L_cf, block=ctx.block, cap=GAIN_CAP)
-        gain_cf = float(np.mean(L_cf_cur - L_cf))
-        feet.append(_figures(ctx, CROSS, r_cf, cross.residual, cross.mse, js, gain_cf, dm_cf.p_value))
+    return 4.0 * float(np.trace(V_beta @ G @ cov @ G.T)), V_beta
+
+
+def _cross_footing(ctx: Context, cross: CrossFitted, js: list[int], C_tr, C_ho) -> _Footing:
+    """The cross-fitted footing's figures: the candidate and the current model refitted per held-out fold."""
+    r_cf = cross.fold.residual(C_tr, C_ho)
+    L_cf = losses(r_cf[:, js], ctx.sigma[js], ctx.mask[:, js])
+    L_cf_cur = losses(cross.residual[:, js], ctx.sigma[js], ctx.mask[:, js])
+    # The fold fits leave no fixed parameter error to widen the test with (each fold's own estimation
+    # error enters its losses, serially correlated within the fold: the blocks).  An aperiodic run
+    # shows an effect on a few moves, so block means of the gain are capped from above as the excess
+    # test's are (the test stays valid; a few large blocks no longer swamp its variance).
+    dm_cf = st.diebold_mariano(L_cf_cur, L_cf, block=ctx.block, cap=GAIN_CAP)
+    gain_cf = float(np.mean(L_cf_cur - L_cf))
+    return _figures(ctx, CROSS, r_cf, cross.residual, cross.mse, js, gain_cf, dm_cf.p_value)
+
+
+def _decided(
+    feet: list[_Footing], cand: Candidate, rnd: int, n_columns: int, evidence: float
+) -> RankedCandidate:
+    """The candidate's score on the footing with the smaller p-value (doubled when there are two)."""
     # Ties go to the training footing (listed first): it is the one the model's own refit stands on.
     by = min(feet, key=lambda f: f.p_value if math.isfinite(f.p_value) else 1.0)
-    if store is not None:
-        store.clear()
-        store.update({f.name: f.loss for f in feet})
     refit: dict = {}
     if len(feet) > 1:
         refit = {
@@ -269,11 +345,9 @@ def score(
         mse_joint=by.mse_joint,
         gain_all=by.gain_all,
         loss=by.loss,
-        n_columns=int(C_tr.shape[2]),
+        n_columns=n_columns,
         refit=refit,
-        # How strongly the training data alone point at it: the Wald test of its coefficients, fitted on
-        # the training residual (the held-out data play no part).
-        training_evidence=st.wald_logp(beta, V_beta),
+        training_evidence=evidence,
     )
 
 
@@ -290,30 +364,34 @@ def on_training(rc: RankedCandidate, key: str) -> float:
     return float(rc.refit.get("footing", {}).get(TRAINING, {}).get(key, getattr(rc, key)))
 
 
-def parsimonious(ok: list, alpha: float, block: int, min_gain: float):
+def parsimonious(ok: list[Scored], alpha: float, block: int, min_gain: float) -> Scored:
     """The best acceptable candidate, or the simplest one on the same joints that it does not beat
     significantly (held-out loss on the joints either scores).
 
-    ``ok`` holds ``(group, RankedCandidate, C_tr, C_ho, losses)`` entries, best first, with ``losses``
-    the per-sample losses (m, n) of every footing the candidate was scored on, by name; the two are
-    compared on the training footing, the one every candidate is compared on (:func:`on_training`).
+    ``ok`` holds the acceptable candidates, best first; two are compared on their training footing's
+    per-sample losses (:attr:`Scored.losses`), the footing every candidate is compared on
+    (:func:`on_training`).
 
     A richer candidate whose columns contain a simpler one's must also beat it by ``min_gain`` noise
     variances per sample: an armature is nested in the spring and dead-zone candidates (their
     motor-inertia column), which edged it out by 0.05 with a DM p of 0.002."""
     best = ok[0]
-    rb = best[1]
+    rb = best.ranked
     simpler = sorted(
-        (s for s in ok[1:] if s[1].candidate.joints == rb.candidate.joints and s[1].n_columns < rb.n_columns),
-        key=lambda s: s[1].n_columns,
+        (
+            s
+            for s in ok[1:]
+            if s.ranked.candidate.joints == rb.candidate.joints and s.ranked.n_columns < rb.n_columns
+        ),
+        key=lambda s: s.ranked.n_columns,
     )
     n = rb.loss.shape[1]
-    lb = best[4].get(TRAINING, rb.loss)
+    lb = best.losses.get(TRAINING, rb.loss)
     for s in simpler:
-        js = sorted(set(s[1].candidate.scored or range(n)) | set(rb.candidate.scored or range(n)))
-        ls = s[4].get(TRAINING, s[1].loss)
+        js = sorted(set(s.ranked.candidate.scored or range(n)) | set(rb.candidate.scored or range(n)))
+        ls = s.losses.get(TRAINING, s.ranked.loss)
         dm = st.diebold_mariano(ls[:, js].sum(axis=1), lb[:, js].sum(axis=1), block=block)
-        if dm.p_value > alpha or (dm.mean < min_gain and _nested(s[2], best[2])):
+        if dm.p_value > alpha or (dm.mean < min_gain and _nested(s.C_tr, best.C_tr)):
             return s
     return best
 
@@ -326,7 +404,7 @@ def _nested(C_small: NDArray[np.float64], C_big: NDArray[np.float64], tol: float
     return bool(np.linalg.norm(B - A @ coef) <= tol * max(float(np.linalg.norm(B)), 1e-300))
 
 
-def confounding(fit: WeightedFit, scored: list, confound_deg: float) -> list:
+def confounding(fit: WeightedFit, scored: list[Scored], confound_deg: float) -> list[Scored]:
     """The scored candidates with, for the leading ones, their principal angle to the nearest other once
     the baseline is projected out, and the candidates they are not separable from (angle below
     ``confound_deg``, gain at least half their own).
@@ -335,13 +413,13 @@ def confounding(fit: WeightedFit, scored: list, confound_deg: float) -> list:
     ----------
     fit : WeightedFit
         The current fit (its columns are projected out).
-    scored : list of (int, RankedCandidate, ndarray, ndarray, ...)
-        Group index, score, training and held-out columns (and anything after them, kept); best first.
+    scored : list of Scored
+        The scored candidates, best first.
     confound_deg : float
         Angle (degrees) below which two candidates are not separable.
     """
-    top = [i for i, s in enumerate(scored[:8]) if s[1].gain > 0]
-    proj = [(scored[i][1], fit.projected(scored[i][2])) for i in top]
+    top = [i for i, s in enumerate(scored[:8]) if s.ranked.gain > 0]
+    proj = [(scored[i].ranked, fit.projected(scored[i].C_tr)) for i in top]
     out = list(scored)
     for i, (ri, Pi) in zip(top, proj, strict=True):
         best = None
@@ -356,8 +434,7 @@ def confounding(fit: WeightedFit, scored: list, confound_deg: float) -> list:
                 best = ang
             if ang < confound_deg and rk.gain >= 0.5 * ri.gain:
                 confounded.append(rk.candidate.key)
-        gi, _, C_tr, C_ho, *rest = out[i]
-        out[i] = (gi, replace(ri, confounded_with=confounded, angle_deg=best), C_tr, C_ho, *rest)
+        out[i] = replace(out[i], ranked=replace(ri, confounded_with=confounded, angle_deg=best))
     return out
 
 

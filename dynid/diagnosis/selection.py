@@ -10,6 +10,12 @@ close at least ``min_closure`` of the gap on their joint(s), the one that lowers
 the whole arm most (all compared on the training footing, whichever footing decided each; a simpler
 candidate on the same joints that it does not beat significantly there is preferred); the accepted
 candidate is refined and joins the model.  Rounds stop when none is acceptable or ``max_effects`` are accepted.
+
+A round, step by step: the current model (:class:`~dynid.diagnosis.screening.Current`) is cross-fitted;
+``_screen`` scores every open candidate group (:class:`~dynid.diagnosis.screening.Scored`: the score, the
+columns, each footing's losses); ``_tested`` refines the leaders and corrects the p-values;
+``_acceptable`` keeps the candidates that pass and close enough of their gap; ``_choose`` picks one;
+``_refit_chosen`` refines it; ``_with_accepted`` makes the next round's current model.
 """
 
 from __future__ import annotations
@@ -28,6 +34,8 @@ from dynid.diagnosis.result import RankedCandidate
 from dynid.diagnosis.screening import (
     Context,
     CrossFitted,
+    Current,
+    Scored,
     confounding,
     cross_fitted,
     on_training,
@@ -38,6 +46,9 @@ from dynid.diagnosis.screening import (
 from dynid.diagnosis.settings import DiagnosisSettings
 
 __all__ = ["Selection", "select"]
+
+Tuned = tuple[Candidate, NDArray[np.float64]]
+"""A candidate group's tuned variant and its training columns (m, n, c)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,7 +80,7 @@ class Selection:
     residual: NDArray[np.float64]
     loss: NDArray[np.float64]
     mse: NDArray[np.float64]
-    tuned: dict[int, tuple[Candidate, NDArray[np.float64]]]
+    tuned: dict[int, Tuned]
     notes: list[str]
     cross: CrossFitted
 
@@ -105,159 +116,205 @@ def select(
     cross0 : CrossFitted, optional
         The baseline already cross-fitted on those folds (the excess test's): the first round's footing.
     """
-    tr, ho = ctx.tr, ctx.ho
-    n = tr.y.shape[1]
-    fit, W = base.fit, base.weights
-    alpha, min_gain, min_closure, max_effects = (
-        settings.alpha,
-        settings.min_gain,
-        settings.min_closure,
-        settings.max_effects,
-    )
+    current = _baseline(ctx, base, held)
     accepted: list[RankedCandidate] = []
-    acc_tr = np.zeros((tr.y.shape[0], n, 0))
-    acc_ho = np.zeros((ho.y.shape[0], n, 0))
-    current_fit: WeightedFit = fit
-    r_cur, L_cur, mse_cur = held.residual, held.loss, held.mse
     ranking0: list[RankedCandidate] = []
     notes: list[str] = []
-    tuned: dict[int, tuple[Candidate, NDArray[np.float64]]] = {}
-    for rnd in range(max_effects + 1):
-        if rnd == 0 and cross0 is not None:
-            cross = cross0
-        else:
-            cross = cross_fitted(
-                ctx,
-                current_fit,
-                np.concatenate([tr.X0, acc_tr], axis=2),
-                np.concatenate([ho.X0, acc_ho], axis=2),
-                folds,
-            )
-        scored = []
-        for gi, group in enumerate(groups):
-            if any(
-                a.candidate.effect == group[0].effect and a.candidate.joints == group[0].joints
-                for a in accepted
-            ):
-                continue
-            if gi not in tuned:
-                tuned[gi] = tune(ctx, current_fit, group)
-            cand, C_tr = tuned[gi]
-            C_ho = ho.columns(cand)
-            feet: dict[str, NDArray[np.float64]] = {}
-            rc = score(ctx, current_fit, acc_tr, acc_ho, C_tr, C_ho, cand, r_cur, mse_cur, rnd, cross, feet)
-            scored.append((gi, rc, C_tr, C_ho, feet))
+    tuned: dict[int, Tuned] = {}
+    for rnd in range(settings.max_effects + 1):
+        cross = cross0 if rnd == 0 and cross0 is not None else _cross_fitted(ctx, current, folds)
+        current = replace(current, round=rnd, cross=cross)
+        scored, new = _screen(ctx, current, groups, accepted, tuned)
+        tuned.update(new)
         if not scored:
             break
-        # Two families at half the level each: all candidates, and those the training data alone rank
-        # first.  Their evidence is taken on the columns tuned on training data, before the leaders (chosen
-        # by their held-out gain) are refined: it must not touch the held-out noise the p-values come from.
-        evidence_of = {s[0]: s[1].training_evidence for s in scored}
-        if settings.refit and rnd < max_effects:
-            scored = refine_leaders(ctx, current_fit, acc_tr, acc_ho, scored, r_cur, mse_cur, rnd, cross)
-        evidence = np.array([evidence_of[s[0]] for s in scored])
-        p_adj = st.screened_holm([s[1].p_value for s in scored], evidence, settings.screen_top)
-        rank = np.empty(len(scored), dtype=int)
-        rank[np.argsort(evidence, kind="stable")] = np.arange(1, len(scored) + 1)
-        scored = [
-            (
-                gi,
-                replace(
-                    rc,
-                    p_holm=float(pa),
-                    significant=bool(pa < alpha and rc.gain >= min_gain),
-                    training_rank=int(rk),
-                ),
-                C_tr,
-                C_ho,
-                feet,
-            )
-            for (gi, rc, C_tr, C_ho, feet), pa, rk in zip(scored, p_adj, rank, strict=True)
-        ]
-        scored.sort(key=lambda s: -s[1].gain)
+        scored = _tested(ctx, current, scored, settings)
         if rnd == 0:
-            scored = confounding(current_fit, scored, settings.confound_deg)
-            ranking0 = [s[1] for s in scored]
-        if rnd >= max_effects:
+            scored = confounding(current.fit, scored, settings.confound_deg)
+            ranking0 = [s.ranked for s in scored]
+        if rnd >= settings.max_effects:
             break
-        # A candidate must close at least min_closure of the gap on its joints, and half of it where
-        # those joints show no significant excess (the background state estimation leaves there).
-        ok = [
-            s
-            for s in scored
-            if s[1].significant
-            and s[1].closure
-            >= (
-                min_closure
-                if significant_joint[list(s[1].candidate.scored or range(n))].any()
-                else max(min_closure, 0.5)
-            )
-        ]
-        resolved = []
-        for x in ok:
-            d = fitted_delay(ctx, current_fit, x) if x[1].candidate.effect == "delay" else None
-            if d is None or abs(d) >= ctx.min_delay:
-                resolved.append(x)
-                continue
-            note = (
-                f"{x[1].candidate.label}: a timing mismatch of {1000 * d:.2g} ms, shorter than one sample "
-                f"({1000 * ctx.min_delay:.2g} ms), is not told apart from the state estimation's phase error "
-                "and not taken as a delay."
-            )
-            if note not in notes:
-                notes.append(note)
-        ok = resolved
+        ok, found = _acceptable(ctx, current, scored, settings, significant_joint)
+        notes = list(dict.fromkeys([*notes, *found]))  # each note once, in the order first given
         if not ok:
             break
-        # Among the acceptable ones, the candidate that mends the whole arm most: a gain error on one joint
-        # leaks through the shared base parameters onto its neighbours, where a same-shaped candidate on
-        # the neighbour scores nearly as well on its own joint alone.  All are measured on the training
-        # footing (on_training): one footing, whichever decided each.
-        ok.sort(key=lambda s: -on_training(s[1], "gain_all"))
-        best = parsimonious(ok, alpha, ctx.block, min_gain)
-        gi, chosen, C_tr, C_ho, _ = best
-        rc, replaced = chosen, False
-        if settings.refit and "method" not in chosen.refit:
-            cand, C_tr2, C_ho2, info = refine(ctx, current_fit, chosen.candidate, C_tr)
-            rc2 = score(ctx, current_fit, acc_tr, acc_ho, C_tr2, C_ho2, cand, r_cur, mse_cur, rnd, cross)
-            if on_training(rc2, "gain") >= on_training(chosen, "gain"):
-                rc = replace(
-                    rc2,
-                    p_holm=chosen.p_holm,
-                    significant=chosen.significant,
-                    training_evidence=chosen.training_evidence,
-                    training_rank=chosen.training_rank,
-                    refit={**rc2.refit, **info},
-                    confounded_with=chosen.confounded_with,
-                    angle_deg=chosen.angle_deg,
-                )
-                C_tr, C_ho, replaced = C_tr2, C_ho2, True
-            else:
-                rc = replace(chosen, refit={**chosen.refit, **info, "kept": KEPT})
-        rc = replace(rc, accepted=True)
-        accepted.append(rc)
-        # The ranking shows it accepted: as chosen (with its refit note) unless a refit replaced it, and
-        # any entry of the same effect and joint(s).
-        ranking0 = [
-            rc
-            if r0 is chosen and not replaced
-            else (replace(r0, accepted=True) if r0.candidate.key == rc.candidate.key else r0)
-            for r0 in ranking0
-        ]
-        acc_tr = np.concatenate([acc_tr, C_tr], axis=2)
-        acc_ho = np.concatenate([acc_ho, C_ho], axis=2)
-        xa, ba, _ = fit.solve(acc_tr)
-        r_cur = ho.y - predict(ho.X0, xa, acc_ho, ba)
-        L_cur = losses(r_cur, ctx.sigma, ctx.mask)
-        mse_cur = mse(r_cur, ctx.mask)
-        current_fit = WeightedFit(np.concatenate([tr.X0, acc_tr], axis=2), tr.y, W)
-    return Selection(
-        accepted=accepted,
-        ranking=ranking0,
-        residual=r_cur,
-        loss=L_cur,
-        mse=mse_cur,
-        tuned=tuned,
-        notes=notes,
-        cross=cross,
+        chosen = _choose(ctx, ok, settings)
+        taken, replaced = _refit_chosen(ctx, current, chosen, settings)
+        accepted.append(rc := replace(taken.ranked, accepted=True))
+        ranking0 = _shown_accepted(ranking0, chosen.ranked, rc, replaced)
+        current = _with_accepted(ctx, base, current, taken)
+    return Selection(accepted, ranking0, current.residual, current.loss, current.mse, tuned, notes, cross)
+
+
+def _baseline(ctx: Context, base: Baseline, held: HeldOutBaseline) -> Current:
+    """The first round's current model: the baseline, no effect accepted."""
+    n = ctx.tr.y.shape[1]
+    empty_tr, empty_ho = np.zeros((ctx.tr.y.shape[0], n, 0)), np.zeros((ctx.ho.y.shape[0], n, 0))
+    return Current(base.fit, empty_tr, empty_ho, held.residual, held.loss, held.mse)
+
+
+def _cross_fitted(ctx: Context, current: Current, folds: int) -> CrossFitted:
+    """The current model (the baseline and the accepted effects) cross-fitted on the held-out folds."""
+    X_tr = np.concatenate([ctx.tr.X0, current.acc_tr], axis=2)
+    X_ho = np.concatenate([ctx.ho.X0, current.acc_ho], axis=2)
+    return cross_fitted(ctx, current.fit, X_tr, X_ho, folds)
+
+
+def _screen(
+    ctx: Context,
+    current: Current,
+    groups: list[list[Candidate]],
+    accepted: list[RankedCandidate],
+    tuned: dict[int, Tuned],
+) -> tuple[list[Scored], dict[int, Tuned]]:
+    """Every candidate group not yet accepted, scored on top of the current model in its tuned variant
+    (``tuned``: the groups tuned in earlier rounds); and the groups tuned here."""
+    scored: list[Scored] = []
+    new: dict[int, Tuned] = {}
+    for gi, group in enumerate(groups):
+        if any(
+            a.candidate.effect == group[0].effect and a.candidate.joints == group[0].joints for a in accepted
+        ):
+            continue
+        if gi not in tuned:
+            new[gi] = tune(ctx, current.fit, group)
+        cand, C_tr = tuned[gi] if gi in tuned else new[gi]
+        scored.append(score(ctx, current, cand, C_tr, ctx.ho.columns(cand)))
+    return scored, new
+
+
+def _tested(
+    ctx: Context, current: Current, scored: list[Scored], settings: DiagnosisSettings
+) -> list[Scored]:
+    """The round's candidates, the leading nonlinear ones refined, with their p-values corrected for the
+    candidates tested, their significance and their rank by the training data's evidence; largest gain
+    first."""
+    # Two families at half the level each: all candidates, and those the training data alone rank
+    # first.  Their evidence is taken on the columns tuned on training data, before the leaders (chosen
+    # by their held-out gain) are refined: it must not touch the held-out noise the p-values come from.
+    # (Refining keeps the list's order.)
+    evidence = np.array([s.ranked.training_evidence for s in scored])
+    if settings.refit and current.round < settings.max_effects:
+        scored = refine_leaders(ctx, current, scored)
+    p_adj = st.screened_holm([s.ranked.p_value for s in scored], evidence, settings.screen_top)
+    rank = np.empty(len(scored), dtype=int)
+    rank[np.argsort(evidence, kind="stable")] = np.arange(1, len(scored) + 1)
+    tested = [
+        replace(
+            s,
+            ranked=replace(
+                s.ranked,
+                p_holm=float(pa),
+                significant=bool(pa < settings.alpha and s.ranked.gain >= settings.min_gain),
+                training_rank=int(rk),
+            ),
+        )
+        for s, pa, rk in zip(scored, p_adj, rank, strict=True)
+    ]
+    tested.sort(key=lambda s: -s.ranked.gain)
+    return tested
+
+
+def _acceptable(
+    ctx: Context,
+    current: Current,
+    scored: list[Scored],
+    settings: DiagnosisSettings,
+    significant_joint: NDArray[np.bool_],
+) -> tuple[list[Scored], list[str]]:
+    """The significant candidates that close enough of their joints' gap, in the order given, and the
+    notes on the timing mismatches too short to be taken as a delay."""
+    n = ctx.tr.y.shape[1]
+    # A candidate must close at least min_closure of the gap on its joints, and half of it where
+    # those joints show no significant excess (the background state estimation leaves there).
+    ok = [
+        s
+        for s in scored
+        if s.ranked.significant
+        and s.ranked.closure
+        >= (
+            settings.min_closure
+            if significant_joint[list(s.ranked.candidate.scored or range(n))].any()
+            else max(settings.min_closure, 0.5)
+        )
+    ]
+    resolved, notes = [], []
+    for s in ok:
+        rc = s.ranked
+        d = fitted_delay(ctx, current.fit, rc, s.C_tr) if rc.candidate.effect == "delay" else None
+        if d is None or abs(d) >= ctx.min_delay:
+            resolved.append(s)
+            continue
+        notes.append(
+            f"{rc.candidate.label}: a timing mismatch of {1000 * d:.2g} ms, shorter than one sample "
+            f"({1000 * ctx.min_delay:.2g} ms), is not told apart from the state estimation's phase error "
+            "and not taken as a delay."
+        )
+    return resolved, notes
+
+
+def _choose(ctx: Context, ok: list[Scored], settings: DiagnosisSettings) -> Scored:
+    """Among the acceptable candidates, the one that mends the whole arm most, or a simpler one on the
+    same joints that it does not beat significantly (:func:`~dynid.diagnosis.screening.parsimonious`)."""
+    # A gain error on one joint leaks through the shared base parameters onto its neighbours, where a
+    # same-shaped candidate on the neighbour scores nearly as well on its own joint alone.  All are
+    # measured on the training footing (on_training): one footing, whichever decided each.
+    ok = sorted(ok, key=lambda s: -on_training(s.ranked, "gain_all"))
+    return parsimonious(ok, settings.alpha, ctx.block, settings.min_gain)
+
+
+def _refit_chosen(
+    ctx: Context, current: Current, chosen: Scored, settings: DiagnosisSettings
+) -> tuple[Scored, bool]:
+    """The chosen candidate refined (unless refining is off or it was refined as a leader), and whether
+    the refit's columns replaced the screen's: they do when they gain at least as much on the training
+    footing, the choice's figures (adjusted p-value, significance, evidence, confounding) kept."""
+    rc = chosen.ranked
+    if not settings.refit or "method" in rc.refit:
+        return chosen, False
+    cand, C_tr2, C_ho2, info = refine(ctx, current.fit, rc.candidate, chosen.C_tr)
+    refit = score(ctx, current, cand, C_tr2, C_ho2)
+    rc2 = refit.ranked
+    if on_training(rc2, "gain") >= on_training(rc, "gain"):
+        kept = replace(
+            rc2,
+            p_holm=rc.p_holm,
+            significant=rc.significant,
+            training_evidence=rc.training_evidence,
+            training_rank=rc.training_rank,
+            refit={**rc2.refit, **info},
+            confounded_with=rc.confounded_with,
+            angle_deg=rc.angle_deg,
+        )
+        return replace(refit, ranked=kept), True
+    return replace(chosen, ranked=replace(rc, refit={**rc.refit, **info, "kept": KEPT})), False
+
+
+def _shown_accepted(
+    ranking: list[RankedCandidate], chosen: RankedCandidate, accepted: RankedCandidate, replaced: bool
+) -> list[RankedCandidate]:
+    """The ranking showing a candidate accepted: as chosen (with its refit note) unless a refit replaced
+    it, and any entry of the same effect and joint(s)."""
+    return [
+        accepted
+        if r0 is chosen and not replaced
+        else (replace(r0, accepted=True) if r0.candidate.key == accepted.candidate.key else r0)
+        for r0 in ranking
+    ]
+
+
+def _with_accepted(ctx: Context, base: Baseline, current: Current, taken: Scored) -> Current:
+    """The current model with an accepted candidate's columns: the baseline refitted with every accepted
+    effect, its held-out residual, loss and mean square (scored on no footing yet)."""
+    acc_tr = np.concatenate([current.acc_tr, taken.C_tr], axis=2)
+    acc_ho = np.concatenate([current.acc_ho, taken.C_ho], axis=2)
+    xa, ba, _ = base.fit.solve(acc_tr)
+    r = ctx.ho.y - predict(ctx.ho.X0, xa, acc_ho, ba)
+    return Current(
+        fit=WeightedFit(np.concatenate([ctx.tr.X0, acc_tr], axis=2), ctx.tr.y, base.weights),
+        acc_tr=acc_tr,
+        acc_ho=acc_ho,
+        residual=r,
+        loss=losses(r, ctx.sigma, ctx.mask),
+        mse=mse(r, ctx.mask),
     )

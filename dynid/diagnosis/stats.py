@@ -7,7 +7,10 @@ test here either works on a long-run (Newey-West) variance or resamples whole bl
   another's, sample by sample, beyond what the serial correlation of the loss difference allows?
 * :func:`excess_test`: is a held-out loss above its floor, beyond the serial correlation and the
   error that the training data's parameter uncertainty leaves on held-out data?
-* :func:`holm`: Holm's step-down correction of several p-values (family-wise error rate).
+* :func:`holm`: Holm's step-down correction of several p-values (family-wise error rate); the fleet's
+  drift tests use it too.
+* :func:`ar_model`, :func:`ar_noise`, :func:`bootstrap_null`, :func:`gamma_tail`: a sieve bootstrap's
+  noise model, its draws, the null distribution drawn a chunk at a time, and its moment-matched tail.
 * :func:`block_bootstrap_ci`: interval of a ratio of means by the moving-block bootstrap.
 * :func:`ljung_box`: whiteness of a residual.
 * :func:`principal_angles`: how nearly two column spaces coincide.
@@ -17,6 +20,7 @@ test here either works on a long-run (Newey-West) variance or resamples whole bl
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,6 +38,7 @@ __all__ = [
     "ar_model",
     "ar_noise",
     "block_bootstrap_ci",
+    "bootstrap_null",
     "default_lag",
     "diebold_mariano",
     "excess_test",
@@ -49,6 +54,8 @@ __all__ = [
 AR_BURN = 500
 """Rows of each drawn noise series (:func:`ar_noise`) that the circular wrap of its filtering may reach,
 discarded."""
+BOOTSTRAP_CHUNK = 25
+"""Bootstrap draws per call of the statistic in :func:`bootstrap_null` (one matrix product each)."""
 
 
 def ar_model(x: NDArray[np.float64], order: int) -> tuple[NDArray[np.float64], float]:
@@ -83,6 +90,31 @@ def ar_noise(
     white = scipy.fft.rfft(rng.standard_normal((draws, len(models), size)), axis=2)
     drawn = scipy.fft.irfft(white * gains[None], size, axis=2)[:, :, size - length :]
     return drawn.transpose(0, 2, 1)
+
+
+def bootstrap_null(
+    statistic: Callable[[int], NDArray[np.float64]], draws: int, *, chunk: int = BOOTSTRAP_CHUNK
+) -> NDArray[np.float64]:
+    """A bootstrap's null distribution, drawn ``chunk`` draws at a time.
+
+    Parameters
+    ----------
+    statistic : callable
+        ``statistic(d)`` draws ``d`` new samples (from the caller's generator, so the draws continue
+        from one call to the next) and returns the statistic of each, shape (n, d).
+    draws : int
+        Draws in all (at least 1).
+    chunk : int
+        Draws per call: enough for a matrix product, few enough to bound the memory.
+
+    Returns
+    -------
+    ndarray, shape (n, draws)
+        The draws in order; :func:`gamma_tail` takes its tail.
+    """
+    return np.concatenate(
+        [statistic(min(chunk, draws - start)) for start in range(0, draws, chunk)], axis=1
+    )
 
 
 def gamma_tail(observed: NDArray[np.float64], null: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -20,8 +20,8 @@ grouped names: the shift is computed through the base-parameter map, not guessed
   at a fixed split); the scan takes the largest, its p-value is Bonferroni-corrected over the ``K - 1``
   splits, and the recording of change is the first after the best split.
 
-Over all robots x parameters the change p-values are adjusted by Holm's method (family-wise error rate
-``alpha``, default 0.05); a test below ``alpha`` flags its robot.
+Over all robots x parameters the change p-values are adjusted by Holm's method
+(:func:`dynid.diagnosis.stats.holm`; family-wise error rate ``alpha``, default 0.05); a test below ``alpha`` flags its robot.
 
 .. _inflation:
 
@@ -46,8 +46,10 @@ from typing import Any
 
 import numpy as np
 
+from dynid.diagnosis.stats import holm
 from dynid.exceptions import UsageError
 
+# ``holm`` is the diagnosis' (:func:`dynid.diagnosis.stats.holm`), named here as well for the fleet's callers.
 __all__ = ["TOOL_SIGMAS", "DriftResult", "DriftTest", "FleetOutlier", "detect_drift", "drift_parameters", "holm"]
 
 TOOL_SIGMAS = 3.0
@@ -231,29 +233,6 @@ class DriftResult:
                 for robot, os_ in self.fleet_outliers.items()
             },
         }
-
-
-def holm(p: np.ndarray) -> np.ndarray:
-    """Holm's step-down adjustment of p-values (family-wise error rate).
-
-    Parameters
-    ----------
-    p : ndarray, shape (m,)
-
-    Returns
-    -------
-    ndarray, shape (m,)
-        Adjusted p-values, at most 1, in the input's order.
-    """
-    p = np.asarray(p, dtype=float)
-    m = p.size
-    if m == 0:
-        return p.copy()
-    order = np.argsort(p, kind="stable")
-    adjusted = np.maximum.accumulate((m - np.arange(m)) * p[order])
-    out = np.empty(m)
-    out[order] = np.minimum(adjusted, 1.0)
-    return out
 
 
 def drift_parameters(parameters: list[dict[str, Any]], median_std: dict[str, float]) -> list[str]:
