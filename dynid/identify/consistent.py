@@ -195,7 +195,8 @@ def _phi_scale(phi_ref: NDArray[np.float64], n: int) -> NDArray[np.float64]:
 
 
 class ConsistentLS(LinkEstimator):
-    """Weighted least squares over physically consistent links (IPOPT, log-Cholesky).
+    """Weighted least squares over physically consistent links (a log-barrier method over the
+    pseudo-inertias' cones, see the module docstring).
 
     Parameters
     ----------
@@ -217,9 +218,9 @@ class ConsistentLS(LinkEstimator):
         inertial block; default 1e-6).  For a link whose URDF body is itself closer to the boundary,
         half its smallest eigenvalue is used instead, so the URDF body always qualifies.
     tol : float
-        IPOPT's tolerance.
+        Stop when the barrier's duality gap is below ``tol`` times the objective.
     max_iter : int
-        IPOPT's iteration limit.
+        Most Newton steps.
 
     Attributes
     ----------
@@ -241,8 +242,8 @@ class ConsistentLS(LinkEstimator):
         (``||x - x_hat|| / ||x_hat||``), ``mahalanobis`` (in standard deviations), ``rms_change``
         (N m per joint) and ``rms_ratio``.
     solver_ : dict
-        IPOPT's return status, iterations and time (0 iterations: the unconstrained estimate was
-        already consistent and is returned unchanged).
+        The solver's status, Newton steps and time (0 steps: the unconstrained estimate was already
+        consistent and is returned unchanged).
     """
 
     method = "consistent"

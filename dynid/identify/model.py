@@ -548,7 +548,7 @@ class ThreeLayerModel:
         or ``consistent`` (IRLS weighting with physically consistent links).  ``"auto"`` (default): the
         pipeline chosen from the recording (:mod:`dynid.identify.pipeline`): OLS with linear friction and
         no correction, or the paper's IRLS + nonlinear friction + mixture, whichever predicts each half of
-        the training recording from the other better (the richer one only if no joint is more than 10 %
+        the training recording from the other better (the richer one only if no joint is more than 5 %
         worse); ``model_.info["pipeline"]`` records the choice and its reason.
     friction : str
         Friction model (layer 2): a name of :data:`~dynid.identify.registry.FRICTION_MODELS` (``none``,
