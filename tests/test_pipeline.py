@@ -22,7 +22,12 @@ def linear_run(ur5):
 
 def test_candidates_keep_the_users_own_choices():
     assert candidates()[0] == BASELINE
-    assert candidates() == [("ols", "linear", "off"), ("ols", "seed", "off"), ("irls", "seed", "auto")]
+    assert candidates() == [
+        ("ols", "linear", "off"),
+        ("irls", "linear", "off"),
+        ("ols", "seed", "off"),
+        ("irls", "seed", "auto"),
+    ]
     assert candidates("stribeck", "off") == [("ols", "stribeck", "off"), ("irls", "stribeck", "off")]
 
 
@@ -121,3 +126,30 @@ def test_the_default_scores_a_fast_recording_at_ten_times_its_cut_off(ur5, fast_
     assert model.info["n_samples"] > 0.9 * fast_run.m
     assert np.all(np.isfinite(pipe["cv_rms"])) and np.all(np.asarray(pipe["cv_rms"]) < 2.0)
     assert model.info["data_sha256"] == data_fingerprint(fast_run)
+
+
+def test_the_simplest_pipeline_within_the_parsimony_margin_of_the_best_is_taken():
+    from dynid.identify.pipeline import PARSIMONY, decide
+
+    opts = candidates()
+    base = np.array([1.0, 2.0, 0.5])
+
+    def cv(*scores):
+        return np.array([s * base for s in scores])
+
+    # a richer pipeline 3 points better than the baseline: not enough, the baseline stays
+    choice = decide(opts, cv(1.0, 0.99, 0.98, 0.97))
+    assert (choice.method, choice.friction, choice.gmm) == BASELINE
+    assert f"within the {100 * PARSIMONY:.0f} points" in choice.reason and "irls+seed+auto" in choice.reason
+    # IRLS with linear friction 20 % better, the full pipeline 23 %: the simpler one
+    choice = decide(opts, cv(1.0, 0.80, 0.90, 0.77))
+    assert (choice.method, choice.friction, choice.gmm) == ("irls", "linear", "off")
+    assert "irls+seed+auto scores 3 points lower" in choice.reason
+    # the full pipeline far ahead: taken
+    choice = decide(opts, cv(1.0, 0.80, 0.90, 0.70))
+    assert (choice.method, choice.friction, choice.gmm) == ("irls", "seed", "auto")
+    # the best in the mean but one joint 6 % worse than the baseline: vetoed, the next best taken
+    vetoed = cv(1.0, 0.80, 0.90, 0.50)
+    vetoed[3, 1] = (1 + JOINT_TOLERANCE + 0.01) * base[1]
+    choice = decide(opts, vetoed)
+    assert (choice.method, choice.friction, choice.gmm) == ("irls", "linear", "off")

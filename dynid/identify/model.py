@@ -546,10 +546,11 @@ class ThreeLayerModel:
     method : str
         Layer-1 method: a weighting of :data:`~dynid.identify.registry.ESTIMATORS` (``ols``, ``irls``, ...)
         or ``consistent`` (IRLS weighting with physically consistent links).  ``"auto"`` (default): the
-        pipeline chosen from the recording (:mod:`dynid.identify.pipeline`): OLS with linear friction and
-        no correction, or the paper's IRLS + nonlinear friction + mixture, whichever predicts each half of
-        the training recording from the other better (the richer one only if no joint is more than 5 %
-        worse); ``model_.info["pipeline"]`` records the choice and its reason.
+        pipeline chosen from the recording (:mod:`dynid.identify.pipeline`): among OLS or IRLS with linear
+        friction, OLS with the paper's friction and the paper's IRLS + nonlinear friction + mixture, the
+        simplest within 5 points of the one that predicts each half of the training recording from the
+        other best (none with a joint more than 5 % worse than OLS with linear friction);
+        ``model_.info["pipeline"]`` records the choice and its reason.
     friction : str
         Friction model (layer 2): a name of :data:`~dynid.identify.registry.FRICTION_MODELS` (``none``,
         ``seed``, ...); ``linear`` keeps the coefficients identified with the links.  ``"auto"``
