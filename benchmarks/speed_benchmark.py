@@ -22,11 +22,19 @@ load of the machine (``os.getloadavg``) before and after each part:
     ``identify(robot, data)`` with default flags on the whole TX40 recording (45,000 rows, needs
     ``../shared/data``), against OLS with linear friction in the same process; FIGAROH 0.2.4's 9.0 s on
     the same recording is quoted from the issue.
+``cli``
+    The commands as a user runs them on FIGAROH's TX40 split, each a whole process (imports, reading
+    the CSV, the HTML report): ``dynid identify`` with defaults and with OLS + linear friction, and
+    ``dynid validate --report`` of each model on the held-out rows; wall time, CPU time and peak memory
+    of each (``os.wait4``), the median over ``--repeat`` rounds run one after the other.  With
+    ``--figaroh-example DIR`` (a copy of figaroh-examples' ``examples/staubli_tx40`` folder, laid out as
+    that repository lays it out) and ``--figaroh-python PY`` (a Python with figaroh installed), FIGAROH's
+    own example runs in the same rounds, as it ships (its HTML report, its verification, its archive).
 
 Run::
 
-    OMP_NUM_THREADS=1 python benchmarks/speed_benchmark.py [--part build excite identify] [--repeat N]
-        [--build-baseline] [--stages]
+    OMP_NUM_THREADS=1 python benchmarks/speed_benchmark.py [--part build excite identify cli] [--repeat N]
+        [--build-baseline] [--stages] [--figaroh-example DIR --figaroh-python PY]
 
 The machine may be shared: every time is printed with the CPU time beside it and the load averages.
 
@@ -66,6 +74,33 @@ default identification **3.83 s wall / 5.02 s of CPU** (OLS 0.51 s; five more ru
 are imports (scipy.signal alone 1.1 s) and 0.3 s reading the 11 MB file.  Fitting the physical layers
 alone in a second thread beside the joint fit was tried and dropped: 3.80 s mean over five runs against
 3.99 s one after the other, for 0.5 s more CPU.
+
+The default now chooses its pipeline by cross-validation (four candidates on two halves, then the chosen
+one on the whole).  Its fits share one system per dataset (8 builds of the TX40 split become 3, results
+identical to the bit), and the candidates are scored on the recording decimated to ten times its
+cut-off (``dynid.identify.pipeline.RATE_FACTOR``).  At the start of that work (eb9674c, load 0.5-1.0):
+default identification of the whole recording 15.7 s of CPU (OLS 0.66 s); after it (load 8): 5.7 s of
+CPU (OLS 0.67 s).  Fitting the chosen pipeline at the coarse rate too was tried and dropped: the TX40
+split's default fell from 7.2 to 3.8 s of CPU, but joint 4's held-out RMS rose from 1.08 to 1.29 N m.
+
+``--part cli --repeat 2 --figaroh-example ...`` at 5d4b1b1 (load 0.5-0.7; FIGAROH 1.0.2's example as its
+repository lays it out, run as it ships: it processes the whole recording decimated by 10, writes its
+report, archive and a 21 MB verdict, and exits 1 because its verification finds no held-out data
+configured), medians of 2 rounds:
+
+=====================================================  ======  ======  ========
+command                                                wall s  CPU s   peak MiB
+=====================================================  ======  ======  ========
+dynid identify (defaults)                                5.91    6.72       367
+dynid validate (defaults' model, HTML report)            3.30    3.29       244
+dynid identify --method ols --friction linear --gmm off  2.28    2.32       306
+dynid validate (OLS model, HTML report)                  3.31    3.30       250
+FIGAROH's TX40 example                                   8.96    8.89      1193
+=====================================================  ======  ======  ========
+
+identify + validate: defaults 10.0 s of CPU (1.13 times FIGAROH's example), OLS 5.6 s (0.63 times); peak
+memory 0.31 times.  Of validate's 3.3 s, 1.5 s are the command without ``--report`` (0.8 s of it imports)
+and 1.8 s the HTML report's figures and matplotlib.
 """
 
 from __future__ import annotations
