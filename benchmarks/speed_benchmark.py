@@ -83,7 +83,7 @@ default identification of the whole recording 15.7 s of CPU (OLS 0.66 s); after 
 CPU (OLS 0.67 s).  Fitting the chosen pipeline at the coarse rate too was tried and dropped: the TX40
 split's default fell from 7.2 to 3.8 s of CPU, but joint 4's held-out RMS rose from 1.08 to 1.29 N m.
 
-``--part cli --repeat 2 --figaroh-example ...`` at 5d4b1b1 (load 0.5-0.7; FIGAROH 1.0.2's example as its
+``--part cli --repeat 2 --figaroh-example ...`` at 1afe5ed (load 0.5-0.7; FIGAROH 1.0.2's example as its
 repository lays it out, run as it ships: it processes the whole recording decimated by 10, writes its
 report, archive and a 21 MB verdict, and exits 1 because its verification finds no held-out data
 configured), medians of 2 rounds:
