@@ -637,3 +637,37 @@ def test_every_candidate_is_judged_on_both_footings_and_passes_on_either(ur5):
         assert r.gain_all == foot[by]["gain_all"]
     assert deciders == {TRAINING, CROSS}
     json.dumps(d.to_dict())
+
+
+def test_none_says_what_it_means_and_a_gap_no_test_decides_gets_its_recording(small):
+    """A joint above the floor but within the tests' allowance: "none" says so.  A joint beyond the
+    allowance by more than QUIET_EXCESS but not significant, and no candidate on it: the summary says the
+    gap is not decided here, and the excitation that decides is printed."""
+    import dataclasses
+
+    from dynid.diagnosis.result import QUIET_EXCESS, settling_excitation, undecided_joints
+
+    model, train, held = small
+    d = diagnose(model, train, held, max_samples=3000, max_effects=1)
+    assert d.verdict == ["none"] and not d.undecided
+    ex = dict(d.excess)
+    n = len(ex["ratio_tested"])
+    allow = 1 + np.asarray(ex["tolerance"]) + np.asarray(ex["state_estimation"])
+    quiet = np.ones(n)
+    quiet[4] = allow[4] - 0.1  # above the floor, within the allowance
+    d_near = dataclasses.replace(d, excess={**ex, "ratio_tested": quiet, "p_joint": np.ones(n)})
+    assert undecided_joints(d_near) == []
+    text = d_near.summary()
+    assert f"{d.joint_names[4]} ({quiet[4]:.2g} noise variances of held-out error, {allow[4]:.2g} allowed)" in text
+    assert settling_excitation(d_near, robot="ur5", dq_max=model.robot.dq_max, rate=100.0) is None
+    beyond = quiet.copy()
+    beyond[4] = allow[4] + QUIET_EXCESS + 0.5  # beyond it, but the test does not confirm it
+    p = np.ones(n)
+    p[4] = 0.2
+    d_gap = dataclasses.replace(d, excess={**ex, "ratio_tested": beyond, "p_joint": p})
+    assert undecided_joints(d_gap) == [4]
+    assert f"Not decided here: {d.joint_names[4]}" in d_gap.summary()
+    settle = settling_excitation(d_gap, robot="ur5", dq_max=model.robot.dq_max, rate=100.0)
+    assert settle is not None and settle["reason"].startswith(f"Not decided: {d.joint_names[4]}")
+    assert settle["excite"].startswith("dynid excite --robot ur5") and settle["candidate"] is None
+    assert settle["heldout_seconds"] is not None and settle["heldout_seconds"] > held.duration

@@ -19,7 +19,15 @@ from dynid._io import to_jsonable
 from dynid.diagnosis.candidates import Candidate, describe_hyper, excitation_hint, settling_motion
 from dynid.validation.metrics import NoiseFloor
 
-__all__ = ["Diagnosis", "RankedCandidate", "heldout_needed", "settling_excitation", "verdict_text"]
+__all__ = [
+    "QUIET_EXCESS",
+    "Diagnosis",
+    "RankedCandidate",
+    "heldout_needed",
+    "settling_excitation",
+    "undecided_joints",
+    "verdict_text",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -289,6 +297,48 @@ def heldout_needed(d: Diagnosis) -> float | None:
     return float((t[-1] - t[0]) * max(1.0, (z_needed / z_now) ** 2) * 1.5)
 
 
+QUIET_EXCESS = 0.5
+"""Noise variances of held-out excess, beyond what the test allows for, that a joint may show without a
+significant test and without a word: above it the summary says the gap there is not decided by this run."""
+
+
+def undecided_joints(d: Diagnosis) -> list[int]:
+    """Joints (0-based) whose held-out error stands above what noise explains by more than
+    :data:`QUIET_EXCESS` noise variances, but not significantly, and that no accepted or undecided
+    candidate accounts for: a gap this held-out run can neither confirm nor dismiss."""
+    ex = d.excess
+    ratio = np.asarray(ex.get("ratio_tested", ex.get("ratio", ())), dtype=float)
+    if ratio.size == 0:
+        return []
+    tol = np.asarray(ex.get("tolerance", np.zeros(ratio.size)), dtype=float)
+    state = np.asarray(ex.get("state_estimation", np.zeros(ratio.size)), dtype=float)
+    sig = np.asarray(ex.get("significant_joint", np.zeros(ratio.size, dtype=bool)), dtype=bool)
+    covered: set[int] = set()
+    for r in (*d.accepted, *d.undecided):
+        covered.update(int(j) for j in (r.candidate.joints or range(ratio.size)))
+    return [
+        j
+        for j in range(ratio.size)
+        if not sig[j] and ratio[j] > 1 + tol[j] + state[j] + QUIET_EXCESS and j not in covered
+    ]
+
+
+def _quiet_seconds(d: Diagnosis, joints: list[int]) -> float | None:
+    """Seconds of held-out data of the same kind at which the largest such joint's excess would test
+    significant (its z-score grows as the square root of the run's length), with a margin of 1.5."""
+    from scipy.stats import norm
+
+    t = np.asarray(d.residuals.get("t", ()), dtype=float)
+    p = np.asarray(d.excess.get("p_joint", ()), dtype=float)
+    if t.size < 2 or p.size == 0:
+        return None
+    z_now = max(float(norm.isf(min(max(p[j], 1e-300), 1.0))) for j in joints)
+    if not z_now > 0.5:  # no sign of it in the test: no length of the same run is sure to show it
+        return None
+    z_needed = float(norm.isf(float(d.settings.get("alpha", 0.05)) / max(p.size, 1)))
+    return float((t[-1] - t[0]) * max(1.0, (z_needed / z_now) ** 2) * 1.5)
+
+
 def settling_excitation(
     d: Diagnosis, *, robot: str, dq_max, rate: float, out: str = "heldout_excitation"
 ) -> dict[str, Any] | None:
@@ -320,11 +370,19 @@ def settling_excitation(
         line).
     """
     lead = d.undecided[0] if d.undecided else None
-    if lead is None and not d.provisional:
+    quiet = undecided_joints(d) if lead is None else []
+    if lead is None and not d.provisional and not quiet:
         return None
-    need = heldout_needed(d)
+    need = heldout_needed(d) if lead is not None else (_quiet_seconds(d, quiet) if quiet else None)
     options: dict[str, Any] = {}
-    if lead is not None:
+    if lead is None and quiet:
+        names = ", ".join(d.joint_names[j] for j in quiet)
+        reason = (
+            f"Not decided: {names} show more error than the noise floor explains, not significantly on this "
+            "held-out run and closed by no candidate; a held-out run of a new motion decides"
+            + (f" (at least {need:.0f} s of it)." if need else ".")
+        )
+    elif lead is not None:
         cutoff = (d.settings.get("preprocessing") or {}).get("cutoff_hz")
         options, why = settling_motion(lead.candidate, dq_max, cutoff_hz=cutoff, period=10.0)
         # A motion aimed at the effect decides it; a new run of the default kind only may.
@@ -393,6 +451,32 @@ def _undecided_text(d: Diagnosis) -> list[str]:
     return lines
 
 
+def _sensitivity_text(d: Diagnosis) -> list[str]:
+    """What "none" means at this run's sensitivity, where a joint's error stands visibly above the floor
+    but within what the tests allow for (the floor's own error, the refit's misfit, quantised angles)."""
+    ex = d.excess
+    tested = np.asarray(ex.get("ratio_tested", ()), dtype=float)
+    if tested.size == 0:
+        return []
+    allow = 1 + np.asarray(ex.get("tolerance", np.zeros(tested.size)), dtype=float) + np.asarray(
+        ex.get("state_estimation", np.zeros(tested.size)), dtype=float
+    )
+    covered = {j for r in d.undecided for j in (r.candidate.joints or range(tested.size))}
+    covered.update(undecided_joints(d))
+    near = [j for j in range(tested.size) if 1.25 < tested[j] <= allow[j] and j not in covered]
+    if not near:
+        return []
+    names = ", ".join(
+        f"{d.joint_names[j]} ({tested[j]:.2g} noise variances of held-out error, {allow[j]:.2g} allowed)" for j in near
+    )
+    return [
+        f"At this run's sensitivity \"none\" leaves room for a small effect: {names} stand above the floor but "
+        "within what the tests allow for (the floor's own error, the refit's misfit, quantised angles), and an "
+        "effect that small is not told apart from them.  More held-out periods (a better-measured floor) "
+        "narrow the allowance."
+    ]
+
+
 def verdict_text(d: Diagnosis) -> str:
     """Plain-words account of a diagnosis (a few lines)."""
     dec = d.decomposition
@@ -403,6 +487,7 @@ def verdict_text(d: Diagnosis) -> str:
             f"No significant gap: the re-identified model's held-out error is {ratio:.2f} times the noise floor "
             f"(p = {d.excess['p_value']:.2g})."
         )
+        lines.extend(_sensitivity_text(d))
     elif d.verdict == ["unexplained"]:
         if d.excess["significant"]:
             evidence = f"the held-out error is {ratio:.2f} times the noise floor (significant)"
@@ -440,6 +525,19 @@ def verdict_text(d: Diagnosis) -> str:
             f"Together the accepted effects close {100 * dec['closure_overall']:.0f} % of the gap overall."
         )
     lines.extend(_undecided_text(d))
+    quiet = undecided_joints(d)
+    if quiet:
+        ratio = np.asarray(d.excess.get("ratio_tested", d.excess.get("ratio")), dtype=float)
+        need = _quiet_seconds(d, quiet)
+        names = ", ".join(f"{d.joint_names[j]} ({ratio[j]:.2g} noise variances)" for j in quiet)
+        lines.append(
+            f"Not decided here: {names} show more error than the noise floor and the tests' allowances "
+            "explain, but not significantly on this held-out run, and no candidate of the catalogue closes it. "
+            "It may be an effect this run shows too little of (Stribeck friction needs slow motion, a "
+            "temperature drift a long run): a held-out run of a new motion decides"
+            + (f", at least {need:.0f} s of it" if need else "")
+            + " (dynid diagnose prints the excitation that records it)."
+        )
     est = np.asarray(d.excess.get("estimation", ()), dtype=float)
     # On a joint where the two runs disagree on the parameters, what the refit on the other folds
     # predicts is an effect the parameters absorb, not their uncertainty: said in the consistency note.
