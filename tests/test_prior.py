@@ -77,3 +77,27 @@ def test_link_report_measures_the_move(ur5):
     assert report[2]["mass_ratio"] == pytest.approx(2.0) and report[2]["com_shift"] == pytest.approx(0.0, abs=1e-12)
     assert report[2]["divergence"] == pytest.approx(4 * (2 - np.log(2) - 1))
     assert report[0]["divergence"] == pytest.approx(0.0, abs=1e-9) and report[0]["decided_by"] is None
+
+
+def test_noise_free_data_choose_a_prior_and_fit_to_rounding(tmp_path):
+    """A simulation without noise fits the link parameters to rounding: the prior's cross-validation,
+    whose data term is in squared standard deviations, floors the residual instead of dividing by 0
+    (a LinAlgError from the consistent fit on such data, for an arm whose joints turn a full turn)."""
+    import warnings
+
+    from dynid.identify.columns import column_set
+    from dynid.identify.model import identify
+    from dynid.sim.synthetic import random_fourier, synthetic_dataset, true_parameters
+    from dynid.symbolic.robot import example_robot_data_dir, load_robot
+
+    text = (example_robot_data_dir() / "ur_description" / "urdf" / "ur5_robot.urdf").read_text()
+    (tmp_path / "ur5c.urdf").write_text(text.replace('type="revolute"', 'type="continuous"'))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        robot = load_robot(tmp_path / "ur5c.urdf")
+        rng = np.random.default_rng(0)
+        cols = column_set(robot)
+        data = synthetic_dataset(cols, true_parameters(cols, rng), random_fourier(robot, rng), rate=100, rng=rng)
+        model = identify(robot, data, method="ols", friction="linear", gmm="off")
+    scale = np.sqrt(np.mean(data.tau**2, axis=0))
+    assert np.all(np.isfinite(model.params)) and np.all(model.rms <= 1e-6 * scale)

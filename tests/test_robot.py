@@ -243,3 +243,60 @@ def test_state_of_the_wrong_size(ur5):
         ur5.check_state("q", np.zeros((10, 7)))
     with pytest.raises(ShapeError, match=r"q has 5 values; the robot 'ur5' has 6 joints"):
         ur5.check_state("q", np.zeros(5), batch=False)
+
+
+def _ur5_text() -> str:
+    from dynid.symbolic.robot import example_robot_data_dir
+
+    return (example_robot_data_dir() / "ur_description" / "urdf" / "ur5_robot.urdf").read_text()
+
+
+def test_a_zero_joint_axis_is_refused_in_one_sentence(tmp_path):
+    path = tmp_path / "axis0.urdf"
+    path.write_text(_ur5_text().replace('<axis xyz="0 0 1"/>', '<axis xyz="0 0 0"/>', 1))
+    with pytest.raises(RobotModelError, match=r"has the axis xyz=\"0 0 0\"; give a non-zero direction"):
+        load_robot(path)
+
+
+def test_continuous_joints_are_identified_as_revolute_joints_of_one_turn_and_export_as_they_were(tmp_path):
+    """A URDF of continuous joints (Pinocchio: a cosine and a sine per angle) loads with one angle per
+    joint, a range of a turn each way and a warning; its model has the revolute file's dynamics, and the
+    export writes the joints back as continuous and passes its reload check."""
+    import warnings
+
+    from dynid.exceptions import RobotModelWarning
+    from dynid.identify.columns import column_set
+    from dynid.identify.model import identify
+    from dynid.sim.synthetic import random_fourier, synthetic_dataset, true_parameters
+    from dynid.simmodel import export_model
+    from dynid.symbolic.robot import CONTINUOUS_RANGE
+
+    text = _ur5_text()
+    revolute = tmp_path / "ur5.urdf"
+    revolute.write_text(text)
+    continuous = tmp_path / "ur5_continuous.urdf"
+    continuous.write_text(text.replace('type="revolute"', 'type="continuous"'))
+    with pytest.warns(RobotModelWarning, match=r"continuous joint\(s\) shoulder_pan_joint, .*one turn each way"):
+        robot = load_robot(continuous)
+    same = load_robot(revolute)
+    assert robot.n == same.n == 6
+    np.testing.assert_array_equal(robot.q_max, CONTINUOUS_RANGE)
+    np.testing.assert_array_equal(robot.dq_max, same.dq_max)
+    rng = np.random.default_rng(0)
+    q, dq, ddq = (rng.uniform(-1, 1, (4, 6)) for _ in range(3))
+    a, b = robot.pin_model, same.pin_model
+    da, db = a.createData(), b.createData()
+    for k in range(4):
+        np.testing.assert_allclose(
+            pin.rnea(a, da, q[k], dq[k], ddq[k]), pin.rnea(b, db, q[k], dq[k], ddq[k]), rtol=1e-12, atol=1e-12
+        )
+    cols = column_set(robot)
+    data = synthetic_dataset(
+        cols, true_parameters(cols, rng), random_fourier(robot, rng), rate=100, rng=rng, noise=0.05
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = identify(robot, data, method="ols", friction="linear", gmm="off")
+        result = export_model(model, "urdf", tmp_path / "out.urdf")
+    assert all(c["passed"] for c in result.checks)
+    assert (tmp_path / "out.urdf").read_text().count('type="continuous"') == 6

@@ -215,7 +215,9 @@ def choose_prior(robot, system, *, grid: tuple[float, ...] = GRID, tolerance: fl
         sse = float(T[p, p] - 2 * g @ x + x @ H @ x)
         ridge = 1e-12 * max(float(np.trace(H)) / max(p, 1), 1e-300)
         R = np.linalg.cholesky(H + ridge * np.eye(p)).T
-        return x, R, max(sse, 1e-300)
+        # noise-free (simulated) data fit to rounding: the residual is floored at 1e-6 of the torque's RMS,
+        # so that the data term in squared standard deviations stays finite
+        return x, R, max(sse, 1e-12 * float(T[p, p]), 1e-300)
 
     x_all, _, sse_all = ols(total)
     # the residual's long-run variance factor: the data term in effective samples, as the joint refit's

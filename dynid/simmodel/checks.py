@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynid.identify.columns import column_set, linear_torque
-from dynid.symbolic.robot import SNAP_RAD
+from dynid.symbolic.robot import SNAP_RAD, pin_model_from_urdf
 
 __all__ = ["MJCF_TOLERANCE", "URDF_TOLERANCE", "check_mjcf", "check_urdf", "random_states"]
 
@@ -86,7 +86,7 @@ def check_urdf(path: str | Path, model, params, *, count: int = 50) -> dict[str,
     import pinocchio as pin
 
     robot = model.robot
-    full = pin.buildModelFromUrdf(str(path))
+    full = pin_model_from_urdf(path)
     names = list(full.names)[1:]
     locked = [full.getJointId(nm) for nm in names if nm not in robot.joint_names]
     pm = pin.buildReducedModel(full, locked, pin.neutral(full)) if locked else full

@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 
 from dynid.exceptions import UsageError
 from dynid.identify.consistent import is_consistent
-from dynid.symbolic.robot import SNAP_RAD
+from dynid.symbolic.robot import SNAP_RAD, pin_model_from_urdf
 
 __all__ = ["TemplateMatch", "match_template", "read_template", "robot_urdf", "write_urdf"]
 
@@ -131,7 +131,7 @@ def match_template(root: ET.Element, path: str | Path, robot) -> TemplateMatch:
             "identified for"
         )
     try:
-        full = pin.buildModelFromUrdf(str(path))
+        full = pin_model_from_urdf(path)
     except (ValueError, RuntimeError) as err:
         first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
         raise UsageError(

@@ -32,14 +32,17 @@ from dynid.exceptions import RobotModelError, RobotModelWarning, ShapeError
 
 __all__ = [
     "BUILTIN_ROBOTS",
+    "CONTINUOUS_RANGE",
     "DEFAULT_DDQ_MAX",
     "INERTIA_TOLERANCE",
     "PARAM_NAMES",
+    "SNAP_RAD",
     "RobotModel",
     "check_inertias",
     "check_simulable",
     "load_robot",
     "load_transmission",
+    "pin_model_from_urdf",
 ]
 
 PARAM_NAMES = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
@@ -580,9 +583,10 @@ def _load_urdf(path: Path, *, name: str, source: str, lock=(), tool=None, ddq_ma
             f"the URDF file '{path}' does not exist; give the path of an existing .urdf file."
         )
     _check_urdf_xml(path, lock)
+    text = _continuous_as_revolute(path, lock)
     try:
         with _captured_stderr() as said:
-            model = pin.buildModelFromUrdf(str(path))
+            model = pin.buildModelFromUrdf(str(path)) if text is None else pin.buildModelFromXML(text)
     except (ValueError, RuntimeError) as exc:
         lines = [ln.strip() for ln in (said.text or str(exc)).splitlines() if ln.strip().startswith("Error")]
         first = lines[0].removeprefix("Error:").strip() if lines else str(exc).strip().splitlines()[0]
@@ -595,6 +599,57 @@ def _load_urdf(path: Path, *, name: str, source: str, lock=(), tool=None, ddq_ma
     if model.nv == 0:
         raise RobotModelError(f"the URDF file '{path}' has no movable joint; give an arm with at least one.")
     return _from_pin_model(model, name=name, source=source, tool=tool, ddq_max=ddq_max)
+
+
+CONTINUOUS_RANGE = 2 * math.pi
+"""The position range (rad, each way) a continuous joint is identified with: one full turn."""
+
+
+def pin_model_from_urdf(path: str | os.PathLike[str]):
+    """Pinocchio's model of a URDF as dynid reads it: continuous joints as revolute joints (one angle
+    each, :data:`CONTINUOUS_RANGE`), no warning (for files dynid wrote or has read already)."""
+    import pinocchio as pin
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RobotModelWarning)
+        text = _continuous_as_revolute(Path(path))
+    return pin.buildModelFromUrdf(str(path)) if text is None else pin.buildModelFromXML(text)
+
+
+def _continuous_as_revolute(path: Path, lock=()) -> str | None:
+    """The URDF's text with its continuous joints as revolute joints of range +-:data:`CONTINUOUS_RANGE`
+    (their velocity and effort limits kept), with a warning; None when it has none.
+
+    Pinocchio models a continuous joint by the cosine and sine of its angle (two configuration numbers
+    for one velocity); the identification needs one angle per joint, which a revolute joint without a
+    meaningful stop is.
+    """
+    try:
+        tree = ET.parse(path)
+    except (ET.ParseError, OSError):
+        return None
+    names = []
+    for joint in tree.getroot().iter("joint"):
+        if joint.get("type") != "continuous" or joint.get("name") in lock:
+            continue
+        names.append(joint.get("name", "?"))
+        joint.set("type", "revolute")
+        limit = joint.find("limit")
+        if limit is None:
+            limit = ET.SubElement(joint, "limit", {"effort": "0", "velocity": str(math.pi)})
+        limit.set("lower", repr(-CONTINUOUS_RANGE))
+        limit.set("upper", repr(CONTINUOUS_RANGE))
+    if not names:
+        return None
+    warnings.warn(
+        f"the URDF file '{path}' has the continuous joint(s) {', '.join(names)}: dynid identifies them as "
+        f"revolute joints with a range of +-{CONTINUOUS_RANGE:.4g} rad (one turn each way) for the "
+        "excitation and the range checks; give them <limit lower upper> of their own (type revolute) for "
+        "another range.",
+        RobotModelWarning,
+        stacklevel=3,
+    )
+    return ET.tostring(tree.getroot(), encoding="unicode")
 
 
 def _load_mjcf(path: Path, *, name: str, source: str, tool=None) -> RobotModel:
@@ -657,6 +712,17 @@ def _check_urdf_xml(path: Path, lock=()) -> None:
                 "to identify it as a joint of its own."
             )
         _check_urdf_limit(joint.find("limit"), name, kind, path)
+        axis = joint.find("axis")
+        if axis is not None and kind in ("revolute", "continuous", "prismatic"):
+            try:
+                values = [float(v) for v in (axis.get("xyz") or "1 0 0").split()]
+            except ValueError:
+                values = []
+            if len(values) != 3 or not all(math.isfinite(v) for v in values) or max(map(abs, values)) == 0:
+                raise RobotModelError(
+                    f"joint '{name}' of the URDF file '{path}' has the axis xyz=\"{axis.get('xyz')}\"; give a "
+                    "non-zero direction of three numbers in its <axis> tag (e.g. xyz=\"0 0 1\")."
+                )
     for child_link, (name, parent_link) in parent_of.items():
         seen = {child_link}
         link = parent_link
