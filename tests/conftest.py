@@ -23,6 +23,34 @@ REPO = Path(__file__).resolve().parents[1]
 DATA = Path(__file__).resolve().parent / "data"
 SHARED_DATA = Path(os.environ.get("DYNID_SHARED_DATA", REPO.parent / "shared" / "data"))
 
+DH_TABLE = """\
+name = "my_arm"
+[joints]
+type  = ["R", "R", "P"]
+alpha = [0.0, -1.5708, 1.5708]
+a     = [0.0, 0.05, 0.3]
+d     = [0.35, 0.0, 0.1]
+theta = [0.0, -0.3, 0.0]
+q_min = [-2.8, -1.9, 0.0]
+q_max = [2.8, 1.9, 0.3]
+[links]
+m   = [5.0, 3.5, 2.0]
+cx  = [0.0, 0.12, 0.0]
+cy  = [-0.02, 0.0, 0.03]
+cz  = [-0.08, 0.01, -0.05]
+Ixx = [0.06, 0.02, 0.015]
+Iyy = [0.05, 0.07, 0.012]
+Izz = [0.03, 0.06, 0.006]
+Ixy = [0.0, 0.0, 0.0]
+Ixz = [0.0, 0.0, 0.0]
+Iyz = [0.0, 0.0, 0.0]
+armature = [0.1, 0.08, 0.0]
+[tool]
+d = 0.06
+"""
+"""A small modified-DH table (two revolute joints and a prismatic one, armature and a tool frame) that the
+bad-input and fuzz tests edit line by line."""
+
 
 def pytest_collection_modifyitems(config, items):
     """The real recordings are benchmark-sized: every ``realdata`` test runs in the slow tier."""

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import DH_TABLE
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
@@ -31,31 +32,7 @@ from dynid.symbolic.robot import check_inertias, check_simulable, load_robot
 
 ROWS = 1100  # 1.1 s at 1 kHz: enough for identify's trimming, small enough to be quick
 
-GOOD_TOML = """\
-name = "my_arm"
-[joints]
-type  = ["R", "R", "P"]
-alpha = [0.0, -1.5708, 1.5708]
-a     = [0.0, 0.05, 0.3]
-d     = [0.35, 0.0, 0.1]
-theta = [0.0, -0.3, 0.0]
-q_min = [-2.8, -1.9, 0.0]
-q_max = [2.8, 1.9, 0.3]
-[links]
-m   = [5.0, 3.5, 2.0]
-cx  = [0.0, 0.12, 0.0]
-cy  = [-0.02, 0.0, 0.03]
-cz  = [-0.08, 0.01, -0.05]
-Ixx = [0.06, 0.02, 0.015]
-Iyy = [0.05, 0.07, 0.012]
-Izz = [0.03, 0.06, 0.006]
-Ixy = [0.0, 0.0, 0.0]
-Ixz = [0.0, 0.0, 0.0]
-Iyz = [0.0, 0.0, 0.0]
-armature = [0.1, 0.08, 0.0]
-[tool]
-d = 0.06
-"""
+GOOD_TOML = DH_TABLE
 
 TWO_LINK_URDF = """\
 <?xml version="1.0"?>

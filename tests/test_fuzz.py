@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import DH_TABLE
 
 from dynid.cli import main
 from dynid.exceptions import CacheWarning, DataError, RobotModelError, UsageError
@@ -41,28 +42,6 @@ LOOP_URDF = """\
 </robot>
 """
 
-DH_TABLE = """\
-name = "NAME"
-[joints]
-type  = ["R", "R", "P"]
-alpha = [0.0, -1.5708, 1.5708]
-a     = [0.0, 0.05, 0.3]
-d     = [0.35, 0.0, 0.1]
-theta = [0.0, -0.3, 0.0]
-q_min = [-2.8, -1.9, 0.0]
-q_max = [2.8, 1.9, 0.3]
-[links]
-m   = [5.0, 3.5, 2.0]
-cx  = [0.0, 0.12, 0.0]
-cy  = [-0.02, 0.0, 0.03]
-cz  = [-0.08, 0.01, -0.05]
-Ixx = [0.06, 0.02, 0.015]
-Iyy = [0.05, 0.07, 0.012]
-Izz = [0.03, 0.06, 0.006]
-Ixy = [0.0, 0.0, 0.0]
-Ixz = [0.0, 0.0, 0.0]
-Iyz = [0.0, 0.0, 0.0]
-"""
 
 EMPTY_TABLE = (
     'name = "none"\n[joints]\ntype = []\nalpha = []\na = []\nd = []\ntheta = []\n[links]\nm = []\ncx = []\n'
@@ -593,7 +572,7 @@ def test_export_c_of_a_robot_with_an_odd_name(
     tmp_path: Path, name: str, capsys: pytest.CaptureFixture[str]
 ) -> None:
     robot = tmp_path / "arm.toml"
-    robot.write_text(DH_TABLE.replace("NAME", name))
+    robot.write_text(DH_TABLE.replace("my_arm", name))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         code = main(["export-c", "--robot", str(robot), "--out", str(tmp_path / "c")])

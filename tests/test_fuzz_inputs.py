@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import DH_TABLE
 
 from dynid.cli import main
 from dynid.exceptions import DataError, DataWarning, ModelFileError, RobotModelError, UsageError
@@ -34,29 +35,6 @@ from dynid.symbolic.robot import load_robot
 ROWS = 1100  # training run: 1.1 s at 1 kHz, enough for identify's trimming
 HELD_SECONDS = 4.2  # held-out run: two periods of the 2 s excitation (base frequency 0.5 Hz)
 
-DH_TABLE = """\
-name = "arm"
-[joints]
-type  = ["R", "R", "P"]
-alpha = [0.0, -1.5708, 1.5708]
-a     = [0.0, 0.05, 0.3]
-d     = [0.35, 0.0, 0.1]
-theta = [0.0, -0.3, 0.0]
-q_min = [-2.8, -1.9, 0.0]
-q_max = [2.8, 1.9, 0.3]
-[links]
-m   = [5.0, 3.5, 2.0]
-cx  = [0.0, 0.12, 0.0]
-cy  = [-0.02, 0.0, 0.03]
-cz  = [-0.08, 0.01, -0.05]
-Ixx = [0.06, 0.02, 0.015]
-Iyy = [0.05, 0.07, 0.012]
-Izz = [0.03, 0.06, 0.006]
-Ixy = [0.0, 0.0, 0.0]
-Ixz = [0.0, 0.0, 0.0]
-Iyz = [0.0, 0.0, 0.0]
-armature = [0.1, 0.08, 0.0]
-"""
 
 
 # ---------------------------------------------------------------------- fixtures
@@ -262,7 +240,7 @@ CASES: list[tuple[str, Callable[[Path], list[str]], str]] = [
     ),
     (
         "dh_gravity_1e6",
-        lambda f: ["info", "--robot", _toml(f, "g.toml", 'name = "arm"', 'name = "arm"\ngravity = [0, 0, -9.81e6]')],
+        lambda f: ["info", "--robot", _toml(f, "g.toml", 'name = "my_arm"', 'name = "my_arm"\ngravity = [0, 0, -9.81e6]')],
         r"'gravity' in the table '.*g\.toml' is \[0, 0, -9\.81e\+06\], of magnitude 9\.81e\+06 m/s\^2, outside the 0 "
         r"to 100 m/s\^2 an arm is used in; give it in m/s\^2",
     ),
@@ -427,7 +405,7 @@ def test_a_ros2_bag_in_mn_m_is_refused_by_validate(work: Path, capsys: pytest.Ca
 # ---------------------------------------------------------------------- 2. DH tables that hold
 @pytest.mark.parametrize("gravity", ["[0, 0, 0]", "[0, 0, -1.62]", "[0, 9.81, 0]", "[0, 0, -99]"])
 def test_a_table_with_gravity_within_range_loads(tmp_path: Path, gravity: str) -> None:
-    path = _toml(tmp_path, "g.toml", 'name = "arm"', f'name = "arm"\ngravity = {gravity}')
+    path = _toml(tmp_path, "g.toml", 'name = "my_arm"', f'name = "my_arm"\ngravity = {gravity}')
     np.testing.assert_allclose(load_robot(path).gravity, json.loads(gravity), rtol=0, atol=0)
 
 
