@@ -396,3 +396,24 @@ def test_a_model_identified_from_a_relative_urdf_path_loads_from_another_folder(
     (tmp_path / "x" / "ur5.urdf").unlink()  # gone everywhere: one sentence naming what to give
     with pytest.raises(ModelFileError, match=r"cannot be loaded here .*give the robot it was identified for"):
         load_model("../M.json")
+
+
+def test_a_model_finds_its_own_description_before_a_namesake_in_the_current_folder(tmp_path, monkeypatch):
+    """Identified with --robot robot.urdf (a UR5) in folder A, loaded from folder B whose robot.urdf is
+    another arm: the model's own file (found from the model's folder) is taken, not the namesake."""
+    import shutil
+
+    from dynid.symbolic.robot import example_robot_data_dir, load_robot
+
+    urdfs = example_robot_data_dir() / "ur_description" / "urdf"
+    for folder, arm in (("A", "ur5_robot.urdf"), ("B", "ur10_robot.urdf")):
+        (tmp_path / folder).mkdir()
+        shutil.copy(urdfs / arm, tmp_path / folder / "robot.urdf")
+    monkeypatch.chdir(tmp_path / "A")
+    robot = load_robot("robot.urdf")
+    rng = np.random.default_rng(4)
+    cols = column_set(robot)
+    data = synthetic_dataset(cols, true_parameters(cols, rng), random_fourier(robot, rng), rate=100, rng=rng)
+    save_model(identify(robot, data, method="ols", friction="linear", gmm="off", physical=False), "M.json")
+    monkeypatch.chdir(tmp_path / "B")
+    assert load_model("../A/M.json").robot.key == robot.key

@@ -86,7 +86,7 @@ from dynid.identify.estimators import (
 )
 from dynid.identify.friction import FRICTION_MODELS, FrictionLayer
 from dynid.identify.gmr import GMRCorrection
-from dynid.identify.linear_system import build_system, sharing_systems
+from dynid.identify.linear_system import build_system, forget_shared, sharing_systems
 from dynid.identify.prior import PriorChoice, choose_prior, link_report
 from dynid.identify.refine import refine
 from dynid.identify.registry import method_names
@@ -813,13 +813,17 @@ class ThreeLayerModel:
         pre = self.preprocessing or Preprocessing()
         if pre.decimate == 1:  # scored at a rate of RATE_FACTOR times the cut-off, at the whole one's cut-off
             settings = pre.resolve(data)
-            cv_data = coarse_recording(data, settings["cutoff_hz"])
+            # the rate must carry the states' band too (a state cut-off above the torque's)
+            band = max(c for c in (settings["cutoff_hz"], settings["state_cutoff_hz"], 0.0) if c is not None)
+            cv_data = coarse_recording(data, band or None)
             if cv_data is not data:
                 cv_pre = replace(
                     pre, cutoff=settings["cutoff_hz"], state_cutoff=settings["state_cutoff_hz"], trim=settings["trim_s"]
                 )
                 if isinstance(half, PriorChoice):  # the same information in D times fewer, less correlated samples
                     half = replace(half, kappa=max(1.0, half.kappa / cv_data.meta["coarse"]["decimate"]))
+        if cv_data is data:  # halves at full size: the whole recording's system is not held beside theirs
+            forget_shared(data)
         choice = choose_pipeline(
             lambda m, f, g: self._with(method=m, friction=f, gmm=g, reference_weight=half, preprocessing=cv_pre),
             cv_data,
@@ -1302,22 +1306,34 @@ def identify(
 
 # ---------------------------------------------------------------------------- files
 def _recorded_robot(info_robot: dict[str, Any], path: Path, name: str, load_robot) -> Any:
-    """The robot a model file names: its source as given (a built-in name, or a path from the folder
-    it was identified in), else the same file found from the model's folder, else where it was."""
-    tried = [info_robot["source"]]
+    """The robot a model file names, the first of these that is that robot (its key and joint count):
+    a built-in name or an absolute path as recorded; the description found from the model's folder; the
+    path as given, from the current folder; where it was."""
+    source = info_robot["source"]
+    tried = []
     relative = info_robot.get("source_from_model")
     if isinstance(relative, str):
         tried.append(str(path.parent / relative))
+    tried.append(source)
     if isinstance(info_robot.get("source_path"), str):
         tried.append(info_robot["source_path"])
     first: DynidError | None = None
-    for source in dict.fromkeys(tried):
-        if source != tried[0] and not Path(source).is_file():
+    other = None
+    for candidate in dict.fromkeys(tried):
+        if candidate != source and not Path(candidate).is_file():
             continue
         try:
-            return load_robot(source)
+            base = robot = load_robot(candidate)
+            if info_robot.get("transmission") is not None:
+                robot = robot.with_transmission(info_robot["transmission"])
         except DynidError as err:
             first = first or err
+            continue
+        if robot.key == info_robot.get("key") and robot.n == info_robot.get("n"):
+            return base
+        other = other or base
+    if other is not None:
+        return other  # load_model names the mismatch
     raise ModelFileError(
         f"{name} was identified for the robot '{info_robot.get('name')}' from '{info_robot.get('source')}', "
         f"which cannot be loaded here ({first}); give the robot it was identified for (--robot, where the "
