@@ -153,3 +153,16 @@ def test_the_simplest_pipeline_within_the_parsimony_margin_of_the_best_is_taken(
     vetoed[3, 1] = (1 + JOINT_TOLERANCE + 0.01) * base[1]
     choice = decide(opts, vetoed)
     assert (choice.method, choice.friction, choice.gmm) == ("irls", "linear", "off")
+
+
+def test_a_candidate_a_half_could_not_support_is_out_quietly():
+    import warnings
+
+    from dynid.identify.pipeline import decide
+
+    opts = candidates()
+    cv = np.array([[1.0, 2.0], [0.5, 1.0], [np.nan, np.nan], [0.9, 1.9]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no "Mean of empty slice" for the failed row
+        choice = decide(opts, cv)
+    assert (choice.method, choice.friction, choice.gmm) == ("irls", "linear", "off")

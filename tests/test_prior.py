@@ -97,7 +97,9 @@ def test_noise_free_data_choose_a_prior_and_fit_to_rounding(tmp_path):
         robot = load_robot(tmp_path / "ur5c.urdf")
         rng = np.random.default_rng(0)
         cols = column_set(robot)
-        data = synthetic_dataset(cols, true_parameters(cols, rng), random_fourier(robot, rng), rate=100, rng=rng)
+        data = synthetic_dataset(
+            cols, true_parameters(cols, rng), random_fourier(robot, rng), rate=100, rng=rng, noise=0.0
+        )
         model = identify(robot, data, method="ols", friction="linear", gmm="off")
     scale = np.sqrt(np.mean(data.tau**2, axis=0))
     assert np.all(np.isfinite(model.params)) and np.all(model.rms <= 1e-6 * scale)

@@ -69,6 +69,7 @@ __all__ = [
     "column_set",
     "compiled_base_regressor",
     "describe_joints",
+    "forget_shared",
     "linear_torque",
     "prepare",
     "sharing_systems",
@@ -368,7 +369,7 @@ def sharing_systems() -> Iterator[None]:
     """Within this block, :func:`build_system` builds each system once and hands out copies.
 
     The default identification fits several pipelines on the same data (its cross-validation fits
-    three candidates on each half of the recording, then the chosen one on the whole): they all take
+    four candidates on each half of the recording, then the chosen one on the whole): they all take
     the same system of the same dataset (the same robot, preprocessing, friction and armature
     columns), so it is built once per dataset.  The copies share the data matrix, which nothing
     writes after :func:`build_system`, and the arrays derived from it, which are keyed by what they
@@ -380,6 +381,14 @@ def sharing_systems() -> Iterator[None]:
         yield
     finally:
         _SHARED.reset(token)
+
+
+def forget_shared(data: Dataset) -> None:
+    """Let go of the systems :func:`sharing_systems` keeps for ``data`` (a later build builds again)."""
+    shared = _SHARED.get()
+    if shared:
+        for key in [k for k, v in shared.items() if v[0] is data]:
+            del shared[key]
 
 
 def build_system(

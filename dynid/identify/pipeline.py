@@ -5,11 +5,12 @@ beats a plain fit on the arms it was tuned on and can lose to it on others: on t
 pre-filtered torque sensors see little friction, ordinary least squares with linear friction predicts a
 motion it has not seen better on every joint.  Which one a recording supports is a question the
 recording can answer.  :func:`choose_pipeline` cuts the training recording in two contiguous halves,
-fits each candidate on one half and scores its prediction of the other (a motion not seen), both ways,
-and takes the candidate with the best mean relative error over the joints; a candidate other than
-ordinary least squares with linear friction is taken only if its mean relative error is lower and no
-joint is worse by more than :data:`JOINT_TOLERANCE`, so the default is not worse than dynid's simplest
-pipeline on that score beyond the resolution of two halves.  Training data only; the held-out recording is never seen.
+fits each candidate (:func:`candidates`, from the simplest to the richest) on one half and scores its
+prediction of the other, both ways; a candidate with a joint worse than ordinary least squares with
+linear friction by more than :data:`JOINT_TOLERANCE` is out, and of the others the simplest whose mean
+relative error is within :data:`PARSIMONY` of the best is taken (:func:`decide`), so the default is not
+worse than dynid's simplest pipeline on that score beyond the resolution of two halves.  Training data
+only; the held-out recording is never seen.
 """
 
 from __future__ import annotations
@@ -168,7 +169,9 @@ def coarse_recording(data, cutoff: float | None):
     if D < 2:
         return data
     if not data.is_uniform:  # on the uniform grid the preprocessing would resample it to
-        data = resample(data)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # its gaps are the preprocessing's to report, once
+            data = resample(data)
     runs = data.runs
     keep = np.concatenate([np.arange(r.start, r.stop, D) for r in runs])
 
@@ -213,25 +216,25 @@ def choose_pipeline(make, data, options: list[tuple[str, str, str | int]]) -> Pi
             "the recording is too short to cross-validate two halves of it: the full pipeline is kept",
         )  # fmt: skip
     halves = (data.select_rows(np.arange(half)), data.select_rows(np.arange(half, data.m)))
-    mse = np.full((len(options), data.n), np.nan)
+    total = np.zeros((len(options), data.n))
+    failed = np.zeros(len(options), dtype=bool)
     done = 0
-    with (
-        sharing_systems(),  # each half's system built once for every candidate, let go after
-        stage("choosing the pipeline by cross-validation on two halves of the recording", total=2 * len(options)),
-    ):
-        for i, (method, friction, gmm) in enumerate(options):
-            total = np.zeros(data.n)
-            try:
-                for a, b in ((0, 1), (1, 0)):
-                    with warnings.catch_warnings():
-                        warnings.simplefilter("ignore")
-                        model = make(method, friction, gmm).fit(halves[a]).model_
-                        total += _score(model, halves[b])
+    with stage("choosing the pipeline by cross-validation on two halves of the recording", total=2 * len(options)):
+        for a, b in ((0, 1), (1, 0)):
+            # every candidate fitted on one half, its system built once and let go before the other's
+            with sharing_systems():
+                for i, (method, friction, gmm) in enumerate(options):
+                    if not failed[i]:
+                        try:
+                            with warnings.catch_warnings():
+                                warnings.simplefilter("ignore")
+                                model = make(method, friction, gmm).fit(halves[a]).model_
+                                total[i] += _score(model, halves[b])
+                        except DynidError:
+                            failed[i] = True  # a candidate a half cannot support (too few samples) is out
                     done += 1
                     advance(done)
-                mse[i] = total / 2
-            except DynidError:
-                continue  # a candidate the half cannot support (too few samples for its layers) is out
+    mse = np.where(failed[:, None], np.nan, total / 2)
     return decide(options, np.sqrt(mse), data.meta.get("coarse", {}).get("rate_hz"))
 
 
@@ -258,7 +261,9 @@ def decide(
         m, f, g = options[-1]
         return PipelineChoice(m, f, g, list(options), cv, "the baseline could not be fitted on a half: the full "
                               "pipeline is kept")  # fmt: skip
-    score = np.nanmean(cv / np.maximum(base, 1e-300), axis=1)
+    fitted = np.all(np.isfinite(cv), axis=1)  # a candidate a half could not support has no score
+    score = np.full(len(options), np.inf)
+    score[fitted] = np.mean(cv[fitted] / np.maximum(base, 1e-300), axis=1)
     ok = np.all(cv <= (1 + JOINT_TOLERANCE) * base, axis=1) & np.all(np.isfinite(cv), axis=1)
     ok[0] = True
     best = int(np.argmin(np.where(ok, score, np.inf)))
