@@ -155,3 +155,9 @@ def test_seed_model_holds_an_implausible_static_level_at_the_coulomb_level(rng) 
     assert fit.coef_[6] == fit.coef_[1] == 1.5 * before[1]
     again = FrictionLayer.from_dict(FrictionLayer(model="seed").fit(dq[:, None], F[:, None]).to_dict())
     assert again.models_[0].tied_ == (False, True)  # read back from a file, still held
+    # equal levels that were not held (a joint that never moves backwards: both 0) stay apart
+    untied = with_coef(SeedFriction(), [1.0, 0.0, 0.5, 0.0, 0.0, 1.4, 0.0, 0.05])
+    back = FrictionLayer.from_dict({"model": "seed", "joints": [untied.to_dict()["coef"]]}).models_[0]
+    assert back.tied_ == (False, False) and len(back.linear_coef()) == 7
+    old_file = {k: v for k, v in untied.to_dict()["coef"].items() if not k.endswith("_held")}
+    assert FrictionLayer.from_dict({"model": "seed", "joints": [old_file]}).models_[0].tied_ == (False, False)

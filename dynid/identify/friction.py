@@ -717,12 +717,18 @@ class SeedFriction(_ShapedFriction):
 
     @property
     def tied_(self) -> tuple[bool, bool]:
-        """Whether ``ks+ = kc+`` and ``ks- = kc-`` are held (the static level not told apart)."""
-        tied = self.__dict__.get("_tied")
-        if tied is None:  # a model read from a file: equal levels were held equal
-            c = self.coef_
-            tied = (bool(c[5] == c[0]), bool(c[6] == c[1]))
-        return tied
+        """Whether ``ks+ = kc+`` and ``ks- = kc-`` are held (the static level not told apart); the model
+        file records it (``ks_pos_held``, ``ks_neg_held``; files written before the rule held none)."""
+        return self.__dict__.get("_tied") or (False, False)
+
+    def to_dict(self) -> dict[str, Any]:
+        out = super().to_dict()
+        out["coef"]["ks_pos_held"], out["coef"]["ks_neg_held"] = (float(t) for t in self.tied_)
+        return out
+
+    def _restore(self, coef: dict[str, Any]) -> None:
+        """Read what :meth:`to_dict` wrote beside the coefficients (the held static levels)."""
+        self._tied = (bool(coef.get("ks_pos_held", 0.0)), bool(coef.get("ks_neg_held", 0.0)))
 
     @property
     def _linear(self) -> tuple[int, ...]:  # type: ignore[override]
@@ -754,6 +760,7 @@ class SeedFriction(_ShapedFriction):
 
     def _fit(self, dq, F, dq_k, sampling, around) -> None:
         self._tied = (False, False)
+        self.__dict__.pop("_filtered_basis", None)  # an earlier fit's
         super()._fit(dq, F, dq_k, sampling, around)
         A = self.__dict__.get("_filtered_basis")
         if A is None:
@@ -1145,6 +1152,8 @@ class FrictionLayer:
                 mdl = klass()
                 mdl.coef_ = np.array([float(coef[k]) for k in klass.coef_names])
                 mdl.rms_ = float("nan")
+                if hasattr(mdl, "_restore"):
+                    mdl._restore(coef)
                 models.append(mdl)
         except (KeyError, TypeError, ValueError) as err:
             raise ModelFileError(
