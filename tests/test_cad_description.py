@@ -104,3 +104,23 @@ def test_a_model_of_the_cad_description_exports_onto_it(urdfs, runs, tmp_path):
     check = next(c for c in result.checks if c["check"].startswith("URDF in Pinocchio"))
     assert check["passed"] and 1e-8 < check["tolerance"] <= 10 * robot_module.SNAP_RAD
     assert "right angles as written" in check["check"] and check["relative_error"] > 1e-12
+
+
+def test_a_model_of_a_description_with_rounded_axes_exports_onto_it(urdfs, runs, tmp_path):
+    """Axes written 3e-5 off a principal direction are snapped like placements, and counted alike in the
+    export's reload allowance."""
+    from dynid.simmodel import export_model
+
+    text = urdfs[0].read_text()
+    rounded = text.replace('<axis xyz="0 0 1"/>', '<axis xyz="0 0.00003 1"/>')
+    assert rounded != text
+    path = tmp_path / "panda_axes.urdf"
+    path.write_text(rounded)
+    train, _ = runs
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RobotModelWarning)
+        robot = load_robot(path)
+        model = identify(robot, train, method="ols", friction="linear", gmm="off")
+        result = export_model(model, "urdf", tmp_path / "out.urdf")
+    check = next(c for c in result.checks if c["check"].startswith("URDF in Pinocchio"))
+    assert check["passed"] and check["tolerance"] > 1e-8 and check["relative_error"] > 1e-8

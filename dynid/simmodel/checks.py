@@ -101,10 +101,11 @@ def check_urdf(path: str | Path, model, params, *, count: int = 50) -> dict[str,
     # the snap, which the tolerance allows (ten times it).
     snap = 0.0
     if pm.njoints - 1 == robot.n:
-        snap = max(
-            float(np.abs(np.asarray(pm.jointPlacements[i + 1].rotation) - joint.rotation).max())
-            for i, joint in enumerate(robot.joints)
-        )
+        for i, joint in enumerate(robot.joints):
+            snap = max(snap, float(np.abs(np.asarray(pm.jointPlacements[i + 1].rotation) - joint.rotation).max()))
+            inner = pm.joints[i + 1].extract()
+            if hasattr(inner, "axis"):  # an unaligned joint: its axis is snapped too
+                snap = max(snap, float(np.abs(np.asarray(inner.axis, dtype=float) - joint.axis).max()))
     tolerance = URDF_TOLERANCE if snap > SNAP_RAD else max(URDF_TOLERANCE, 10.0 * snap)
     check = "URDF in Pinocchio: rigid body + armature (model.armature) vs dynid"
     if tolerance > URDF_TOLERANCE:
