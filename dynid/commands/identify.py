@@ -63,9 +63,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--method",
         default="auto",
         choices=("auto", *method_names()),
-        help="layer-1 method; auto (default): ols with linear friction and no correction, or the paper's "
-        "irls + seed friction + gmm, whichever predicts one half of the recording from the other better "
-        "(the richer one only if no joint is worse)",
+        help="layer-1 method; auto (default): among ols or irls with linear friction, ols with the paper's "
+        "seed friction and the paper's irls + seed friction + gmm, the simplest within 5 points of the one "
+        "that predicts one half of the recording from the other best (none with a joint 5 %% worse than ols "
+        "with linear friction)",
     )
     parser.add_argument(
         "--friction",

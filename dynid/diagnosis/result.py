@@ -308,7 +308,7 @@ def undecided_joints(d: Diagnosis) -> list[int]:
     candidate accounts for: a gap this held-out run can neither confirm nor dismiss."""
     ex = d.excess
     ratio = np.asarray(ex.get("ratio_tested", ex.get("ratio", ())), dtype=float)
-    if ratio.size == 0:
+    if ratio.size == 0 or d.provisional:  # a floor that is only a lower bound inflates every ratio
         return []
     tol = np.asarray(ex.get("tolerance", np.zeros(ratio.size)), dtype=float)
     state = np.asarray(ex.get("state_estimation", np.zeros(ratio.size)), dtype=float)

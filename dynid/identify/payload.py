@@ -719,6 +719,7 @@ def attach_payload(model, payload: PayloadResult):
     Pd = P @ delta
     cov = model.cov + Pd @ payload.cov @ Pd.T
     info = dict(model.info)
+    info.pop("data_sha256", None)  # a model with a payload was not identified on the unloaded recording alone
     consistency = info.get("consistency")
     if consistency and "standard_params" in consistency:
         phi = np.asarray(consistency["standard_params"], dtype=np.float64).reshape(-1).copy()

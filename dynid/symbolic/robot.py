@@ -523,7 +523,8 @@ def _from_pin_model(model, *, name: str, source: str, tool: str | None, ddq_max)
         tool_name, tool_parent, tool_rot, tool_pos = "tool", n, np.eye(3), np.zeros(3)
     q_min = np.array(model.lowerPositionLimit, dtype=float)
     q_max = np.array(model.upperPositionLimit, dtype=float)
-    # Continuous joints and missing limits: one turn either way.
+    # Missing limits (a URDF's continuous joints arrive as revolute ones of +-CONTINUOUS_RANGE): half a turn
+    # either way.
     unbounded = ~np.isfinite(q_min) | ~np.isfinite(q_max) | (q_min >= q_max) | (np.abs(q_min) > 1e10)
     q_min[unbounded], q_max[unbounded] = -math.pi, math.pi
     dq_max = np.array(model.velocityLimit, dtype=float)
