@@ -277,7 +277,7 @@ def run_demo(
 
         if first_build:
             say(
-                "first run in this environment: building the symbolic generator once (about 45 s on 2 idle cores, "
+                "first run in this environment: building the symbolic generator once (about 40 s on 2 idle cores, "
                 f"more on a slow machine), cached in {cache_dir()}; later runs skip this"
             )
         funcs = robot_functions(robot, progress=say)

@@ -264,7 +264,7 @@ def generator_is_built() -> bool:
 
 
 def generator_path(progress: Progress | None = stderr_progress) -> Path:
-    """Path of the compiled generator, building it on first use (about 45 s on 2 idle cores).
+    """Path of the compiled generator, building it on first use (about 40 s on 2 idle cores).
 
     Its translation units compile in parallel (:func:`build_jobs` at a time), then link.
     """
@@ -314,7 +314,7 @@ def generator_path(progress: Progress | None = stderr_progress) -> Path:
             _run_parallel(
                 compile_cmds,
                 "building the symbolic generator (Pinocchio on CasADi SX)",
-                f"about 45 s on 2 idle cores, {jobs} compiler{'s' if jobs > 1 else ''} in parallel, cached for "
+                f"about 40 s on 2 idle cores, {jobs} compiler{'s' if jobs > 1 else ''} in parallel, cached for "
                 "this environment",
                 jobs,
                 progress,
