@@ -1,0 +1,125 @@
+"""The defaults on arms nobody tuned dynid on, from the command line as a user runs it (prints figures).
+
+For each arm of example-robot-data (UR10, UR3, xArm 7, Unitree Z1, a double pendulum) and two kinds of
+friction, a training and a held-out run are simulated on two different excitations (``dynid excite``
+seeds 0 and 1; ``dynid simulate`` with the links 20 % off the description, ``--truth-seed 42`` so both runs
+are one arm, angles and torques only, the simulator's default noise): scenario ``a`` Coulomb and viscous
+friction, ``b`` Stribeck friction.  Each is identified with the defaults and with dynid's simplest pipeline
+(``--method ols --friction linear --gmm off``) and both are validated on the held-out run.  Printed per
+case: the pipeline the defaults chose, every joint's held-out RMS ratio defaults / simplest (the promise:
+at most 1.05), the exported bodies' total mass against the description's, and the identify times.
+
+The double pendulum's description has zero limits; a copy with +-3.14 rad and 6 rad/s is used.
+
+Run:  OMP_NUM_THREADS=1 python benchmarks/unseen_arms_benchmark.py [--arms ur10 ur3 xarm7 z1 dp] [--out DIR]
+      (about 10 minutes on 2 cores for all five)
+
+Measured at the change that added it (load 0.5-2): worst joint ratio per arm, scenario a / b: UR10 0.99 / 0.74,
+UR3 0.97 / 0.93, xArm 7 0.99 / 1.37 (joints 2-4), Z1 1.06 / 0.88, double pendulum 0.97 / 1.16: 7 of 10 within 1.05.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+ARMS = {
+    "ur10": "ur10",
+    "ur3": "ur_description/urdf/ur3_robot.urdf",
+    "xarm7": "xarm_description/urdf/xarm7.urdf",
+    "z1": "z1_description/urdf/z1.urdf",
+    "dp": "double_pendulum_description/urdf/double_pendulum_simple.urdf",
+}
+EXCITE = ["--harmonics", "3", "--base-freq", "0.2", "--max-tries", "2", "--patience", "1", "--baseline", "5"]
+SCENARIOS = {"a": ["--friction", "linear"], "b": ["--friction", "stribeck", "--effects", "stribeck"]}
+
+
+def dynid(*args: str, cwd: Path) -> float:
+    """Run ``dynid ARGS`` quietly in ``cwd``; its wall time (s).  A failure stops the benchmark with its message."""
+    start = time.perf_counter()
+    proc = subprocess.run(
+        [sys.executable, "-m", "dynid", *args, "--quiet"], cwd=cwd, capture_output=True, text=True
+    )
+    if proc.returncode != 0:
+        raise SystemExit(f"dynid {' '.join(args)} failed: {proc.stderr.strip().splitlines()[-1]}")
+    return time.perf_counter() - start
+
+
+def robot_path(name: str, folder: Path) -> str:
+    from dynid.symbolic.robot import example_robot_data_dir
+
+    if "/" not in ARMS[name]:
+        return ARMS[name]
+    path = example_robot_data_dir() / ARMS[name]
+    if name != "dp":
+        return str(path)
+    text = path.read_text().replace('lower="0"', 'lower="-3.14"').replace('upper="0"', 'upper="3.14"')
+    text = text.replace('effort="0"', 'effort="5"').replace('velocity="0"', 'velocity="6"')
+    patched = folder / "double_pendulum.urdf"
+    patched.write_text(text)
+    return str(patched)
+
+
+def urdf_mass(robot: str) -> float:
+    from dynid.symbolic import load_robot
+
+    return float(np.sum(load_robot(robot).params.reshape(-1, 10)[:, 0]))
+
+
+def run_arm(name: str, folder: Path) -> None:
+    import warnings
+
+    warnings.simplefilter("ignore")
+    folder.mkdir(parents=True, exist_ok=True)
+    robot = robot_path(name, folder)
+    for seed, out in ((0, "T.json"), (1, "H.json")):
+        dynid("excite", "--robot", robot, *EXCITE, "--seed", str(seed), "--out", out, cwd=folder)
+    for sc, friction in SCENARIOS.items():
+        for traj, seed, duration, out in (("T.json", 1, 30, "train.csv"), ("H.json", 2, 20, "held.csv")):
+            dynid("simulate", "--robot", robot, "--trajectory", traj, *friction, "--perturb", "0.2", "--seed",
+                  str(seed), "--truth-seed", "42", "--duration", str(duration), "--out", f"{sc}_{out}", cwd=folder)  # fmt: skip
+        t_def = dynid("identify", "--robot", robot, "--data", f"{sc}_train.csv", "--out", f"{sc}_def.json", cwd=folder)
+        t_ols = dynid("identify", "--robot", robot, "--data", f"{sc}_train.csv", "--out", f"{sc}_ols.json",
+                      "--method", "ols", "--friction", "linear", "--gmm", "off", cwd=folder)  # fmt: skip
+        dynid("validate", "--model", f"{sc}_def.json", "--data", f"{sc}_held.csv", "--compare", f"{sc}_ols.json",
+              "--json", f"{sc}_val.json", cwd=folder)  # fmt: skip
+        dynid("export", "--model", f"{sc}_def.json", "--format", "urdf", "--out", f"{sc}_def.urdf", cwd=folder)
+        val = json.loads((folder / f"{sc}_val.json").read_text())
+        rms = [np.asarray(m["rms"], dtype=float) for m in val["models"]]
+        ratio = rms[0] / rms[1]
+        pipe = json.loads((folder / f"{sc}_def.json").read_text())["pipeline"]
+        mass = urdf_mass(str(folder / f"{sc}_def.urdf")) / urdf_mass(robot)
+        print(
+            f"{name:6s} {sc}  {pipe['method']}+{pipe['friction']}+{pipe['gmm']:<5}  worst {ratio.max():5.2f} "
+            f"(joint {int(ratio.argmax()) + 1})  ratios {' '.join(f'{r:.2f}' for r in ratio)}  "
+            f"mass x{mass:.2f}  identify {t_def:.0f} s / {t_ols:.0f} s",
+            flush=True,
+        )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
+    parser.add_argument("--arms", nargs="+", choices=sorted(ARMS), default=list(ARMS))
+    parser.add_argument("--out", help="folder to keep the runs in (default: a temporary one)")
+    args = parser.parse_args()
+    print("arm    sc  defaults' pipeline    held-out RMS, defaults / ols + linear per joint (promise: <= 1.05)")
+    with tempfile.TemporaryDirectory() as tmp:
+        base = Path(args.out) if args.out else Path(tmp)
+        for name in args.arms:
+            run_arm(name, base / name)
+
+
+if __name__ == "__main__":
+    main()
