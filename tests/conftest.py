@@ -84,3 +84,46 @@ def shared_data() -> Path:
     if not SHARED_DATA.is_dir():
         pytest.skip(f"the real recordings are not at {SHARED_DATA} (set DYNID_SHARED_DATA to their folder)")
     return SHARED_DATA
+
+
+def snapshot(folder: Path) -> dict[str, bytes]:
+    """Every file of a folder (recursively, following no link) with its bytes; links and pipes by kind."""
+    out = {}
+    for p in sorted(folder.rglob("*")):
+        rel = str(p.relative_to(folder))
+        if p.is_symlink():
+            out[rel] = b"link->" + os.readlink(p).encode()
+        elif p.is_fifo():
+            out[rel] = b"fifo"
+        elif p.is_file():
+            out[rel] = p.read_bytes()
+        elif p.is_dir():
+            out[rel] = b"dir"
+    return out
+
+
+def assert_refused(argv, folder: Path, pattern: str, capsys, *, ignore_warnings: bool = False) -> str:
+    """Run the command line; assert exit 2, one stderr line matching ``pattern``, no traceback, and the
+    folder untouched (no file added, lost or changed).  ``ignore_warnings``: Python warnings raised on the
+    way are not printed (the line is the refusal alone)."""
+    import re
+    import warnings
+
+    from dynid.cli import main
+
+    before = snapshot(folder)
+    capsys.readouterr()
+    with warnings.catch_warnings():
+        if ignore_warnings:
+            warnings.simplefilter("ignore")
+        code = main(argv)
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert "Traceback" not in err, err
+    assert code == 2, err
+    assert len(lines) == 1, err
+    assert re.search(pattern, lines[0]), lines[0]
+    after = snapshot(folder)
+    assert sorted(after) == sorted(before), f"files added or lost: {set(after) ^ set(before)}"
+    assert [k for k in before if after[k] != before[k]] == []
+    return lines[0]

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import DH_TABLE
+from conftest import DH_TABLE, assert_refused, snapshot
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
@@ -105,27 +105,8 @@ def work(base: Path, tmp_path: Path) -> Path:
     return tmp_path
 
 
-def snapshot(folder: Path) -> dict[str, bytes]:
-    """Every file of a folder (recursively) with its bytes."""
-    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
-def assert_refused(argv: list[str], folder: Path, pattern: str, capsys: pytest.CaptureFixture[str]) -> str:
-    """Run the command; assert exit 2, one line matching ``pattern``, no traceback, the folder untouched."""
-    before = snapshot(folder)
-    capsys.readouterr()
-    code = main(argv)
-    err = capsys.readouterr().err
-    lines = [line for line in err.splitlines() if line.strip()]
-    assert "Traceback" not in err, err
-    assert code == 2, err
-    assert len(lines) == 1, err
-    assert re.search(pattern, lines[0]), lines[0]
-    after = snapshot(folder)
-    assert sorted(after) == sorted(before), f"files added or lost: {set(after) ^ set(before)}"
-    changed = [name for name in before if after[name] != before[name]]
-    assert not changed, f"changed by a refused run: {changed}"
-    return lines[0]
 
 
 # ---------------------------------------------------------------------- bad datasets

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import DH_TABLE
+from conftest import DH_TABLE, assert_refused, snapshot
 
 from dynid.cli import main
 from dynid.exceptions import CacheWarning, DataError, RobotModelError, UsageError
@@ -84,39 +84,8 @@ def work(base: Path, tmp_path: Path) -> Path:
     return tmp_path
 
 
-def snapshot(folder: Path) -> dict[str, bytes]:
-    """Every file of a folder (recursively, following no link) with its bytes; links and pipes by kind."""
-    out = {}
-    for p in sorted(folder.rglob("*")):
-        rel = str(p.relative_to(folder))
-        if p.is_symlink():
-            out[rel] = b"link->" + os.readlink(p).encode()
-        elif p.is_fifo():
-            out[rel] = b"fifo"
-        elif p.is_file():
-            out[rel] = p.read_bytes()
-        elif p.is_dir():
-            out[rel] = b"dir"
-    return out
 
 
-def assert_refused(argv: list[str], folder: Path, pattern: str, capsys: pytest.CaptureFixture[str]) -> str:
-    """Run the command; assert exit 2, one line matching ``pattern``, no traceback, the folder untouched."""
-    before = snapshot(folder)
-    capsys.readouterr()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        code = main(argv)
-    err = capsys.readouterr().err
-    lines = [line for line in err.splitlines() if line.strip()]
-    assert "Traceback" not in err, err
-    assert code == 2, err
-    assert len(lines) == 1, err
-    assert re.search(pattern, lines[0]), lines[0]
-    after = snapshot(folder)
-    assert sorted(after) == sorted(before), f"files added or lost: {set(after) ^ set(before)}"
-    assert [k for k in before if after[k] != before[k]] == []
-    return lines[0]
 
 
 # ---------------------------------------------------------------------- helpers making bad inputs
