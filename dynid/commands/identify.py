@@ -144,8 +144,9 @@ def _links_line(figures: dict) -> str:
         return "link inertias: not checked for physical consistency (--unconstrained)"
     held = c.get("at_bound", [])
     if not held:
-        return "link inertias: physically consistent as identified" + (
-            f" ({c['mahalanobis']:.3g} std from the unconstrained estimate)"
+        return "link inertias: physically consistent, no link at the consistency bound" + (
+            f" (the pull toward the description's bodies put the estimate {c['mahalanobis']:.3g} std from the "
+            "unconstrained one)"
             if c["mahalanobis"] > 1e-6
             else ""
         )
