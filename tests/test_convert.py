@@ -52,7 +52,9 @@ def test_the_command_writes_a_dataset_dynid_reads(tmp_path, capsys):
         "--json", str(tmp_path / "C.json"), "--quiet",
     ]  # fmt: skip
     assert main(argv) == 0
-    assert "1000 samples of 3 joints" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "1000 samples of 3 joints" in out
+    assert "converted: t ms -> s; angles deg -> rad; torques x 0.001 -> N m" in out
     ds = load_dataset(tmp_path / "D.csv")
     np.testing.assert_allclose(ds.q, q, rtol=1e-8)
     assert json.loads((tmp_path / "C.json").read_text())["joints"] == 3

@@ -108,6 +108,13 @@ def run(args: argparse.Namespace) -> int:
     )
     for key, cols in ds.meta.get("columns", {}).items():
         print(f"  {key}: {', '.join(cols) if isinstance(cols, list) else cols}")
+    done = [
+        *([f"t {args.time_unit} -> s"] if getattr(args, "time_unit", "s") != "s" else []),
+        *(["angles deg -> rad"] if getattr(args, "degrees", False) else []),
+        *([f"torques x {args.torque_scale} -> N m"] if getattr(args, "torque_scale", None) else []),
+    ]
+    if done and getattr(args, "recording", None) is None:  # a named recording's adapter does its own
+        print(f"  converted: {'; '.join(done)}")
     print(f"wrote {out}")
     write_figures(
         args.json,
