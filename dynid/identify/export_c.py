@@ -128,11 +128,8 @@ def _friction_basis(mdl: Any, v: ca.SX) -> list[tuple[str, ca.SX]] | None:
         k = len(mdl.linear_coef())
         return list(zip(("fc", "fv", "fo")[:k], [ca.sign(v), v, ca.SX(1.0)][:k], strict=True))
     if kind is SeedFriction:  # a static level held at its Coulomb level shares the Coulomb column
-        cols = _seed(v, float(mdl.coef_[-1]))
-        for c, st, tied in ((0, 5, mdl.tied_[0]), (1, 6, mdl.tied_[1])):
-            if tied:
-                cols[c] = cols[c] + cols[st]
-        return [(mdl.coef_names[k], cols[k]) for k in mdl._linear]
+        cols = mdl.merged(_seed(v, float(mdl.coef_[-1])))
+        return list(zip((mdl.coef_names[k] for k in mdl._linear), cols, strict=True))
     if kind is StribeckFriction:
         vs = float(mdl.coef_[-1])
         e = ca.exp(-((v / vs) ** 2))

@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import inspect
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, ClassVar, Self
 
@@ -660,6 +661,9 @@ class _ShapedFriction(FrictionModel):
         return np.ascontiguousarray(self._columns(speeds, shape).T)
 
 
+_STATIC_PAIRS = ((0, 5), (1, 6))  # the seed model's (Coulomb, static level) coefficients, per direction
+
+
 class SeedFriction(_ShapedFriction):
     """The paper's friction model (METHOD.md section 2): low/high-speed split at a threshold lambda.
 
@@ -733,28 +737,26 @@ class SeedFriction(_ShapedFriction):
     @property
     def _linear(self) -> tuple[int, ...]:  # type: ignore[override]
         tied = self.tied_
-        return (0, 1, 2, 3, 4, *(k for k, t in ((5, tied[0]), (6, tied[1])) if not t))
+        return (0, 1, 2, 3, 4, *(st for (_, st), held in zip(_STATIC_PAIRS, tied, strict=True) if not held))
+
+    def merged(self, cols: Sequence[Any]) -> list[Any]:
+        """The seven columns (arrays, or symbols for the C export) in the order of :meth:`linear_coef`: a
+        held static level's column added to its Coulomb column, and dropped."""
+        cols = list(cols)
+        for (c, st), held in zip(_STATIC_PAIRS, self.tied_, strict=True):
+            if held:
+                cols[c] = cols[c] + cols[st]
+        return [cols[k] for k in self._linear]
 
     def columns(self, dq):
         A = self._columns(dq, self.coef_[-1])
-        return self._merge(A)
-
-    def _merge(self, A: NDArray[np.float64]) -> NDArray[np.float64]:
-        """The seven columns with a tied static level added to its Coulomb column (and dropped)."""
-        tied = self.tied_
-        if not any(tied):
-            return A
-        A = A.copy()
-        for c, st, t in ((0, 5, tied[0]), (1, 6, tied[1])):
-            if t:
-                A[:, c] += A[:, st]
-        return A[:, list(self._linear)]
+        return np.column_stack(self.merged(A.T)) if any(self.tied_) else A
 
     def set_linear(self, coef: ArrayLike) -> None:
         super().set_linear(coef)
-        tied, new = self.tied_, self.coef_.copy()
-        for c, st, t in ((0, 5, tied[0]), (1, 6, tied[1])):
-            if t:
+        new = self.coef_.copy()
+        for (c, st), held in zip(_STATIC_PAIRS, self.tied_, strict=True):
+            if held:
                 new[st] = new[c]
         self.coef_ = new
 
@@ -766,26 +768,16 @@ class SeedFriction(_ShapedFriction):
         if A is None:
             A = self._columns(dq if sampling is None else dq_k, self.coef_[-1])
         c = self.coef_
-        tied = [bool(c[st] > self.static_ratio * c[k] + 1e-12) for k, st in ((0, 5), (1, 6))]
-        if not any(tied):
+        held = tuple(bool(c[st] > self.static_ratio * c[k] + 1e-12) for k, st in _STATIC_PAIRS)
+        if not any(held):
             return
-        self._tied = (tied[0], tied[1])
-        keep = list(self._linear)
-        m = len(F)
-        merged = A.copy()
-        for k, st, t in ((0, 5, tied[0]), (1, 6, tied[1])):
-            if t:
-                merged[:, k] += A[:, st]
-        merged = np.ascontiguousarray(merged[:, keep])
-        coef, rss = bounded_lsq(merged, F, self.bounds[: len(keep)])
-        full = self.coef_.copy()
-        full[keep] = coef
-        for k, st, t in ((0, 5, tied[0]), (1, 6, tied[1])):
-            if t:
-                full[st] = full[k]
+        self._tied = held
+        merged = np.column_stack(self.merged(A.T))
+        coef, rss = bounded_lsq(merged, F, self.bounds[: merged.shape[1]])
+        self.set_linear(coef)  # the held static levels follow their Coulomb levels
         if sampling is not None:
             self._filtered_basis = merged
-        self._set(full, rss, m)
+        self._set(self.coef_, rss, len(F))
 
     @classmethod
     def simulator_items(cls) -> dict[str, str]:
