@@ -294,7 +294,24 @@ def heldout_needed(d: Diagnosis) -> float | None:
         screened = top.training_rank is not None and top.training_rank <= k
         family = 2 * (k if screened else len(d.ranking))
     z_needed = float(norm.isf(alpha / family))
+    return _seconds_to_significance(t, z_now, z_needed)
+
+
+def _seconds_to_significance(t: NDArray[np.float64], z_now: float, z_needed: float) -> float:
+    """Seconds of a run of the same kind as ``t`` at which a z-score of ``z_now`` on it reaches ``z_needed``:
+    it grows as the square root of the run's length; a margin of 1.5 for the chance that this run's was lucky."""
     return float((t[-1] - t[0]) * max(1.0, (z_needed / z_now) ** 2) * 1.5)
+
+
+def _tested_and_allowed(d: Diagnosis) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Each joint's held-out error as the excess test saw it and what the test allows for, both in noise
+    variances (``1 + tolerance + state estimation``: the floor, the refit's misfit, quantised angles)."""
+    ex = d.excess
+    tested = np.asarray(ex.get("ratio_tested", ex.get("ratio", ())), dtype=float)
+    zeros = np.zeros(tested.size)
+    allow = 1 + np.asarray(ex.get("tolerance", zeros), dtype=float)
+    allow = allow + np.asarray(ex.get("state_estimation", zeros), dtype=float)
+    return tested, allow
 
 
 QUIET_EXCESS = 0.5
@@ -306,20 +323,17 @@ def undecided_joints(d: Diagnosis) -> list[int]:
     """Joints (0-based) whose held-out error stands above what noise explains by more than
     :data:`QUIET_EXCESS` noise variances, but not significantly, and that no accepted or undecided
     candidate accounts for: a gap this held-out run can neither confirm nor dismiss."""
-    ex = d.excess
-    ratio = np.asarray(ex.get("ratio_tested", ex.get("ratio", ())), dtype=float)
+    ratio, allow = _tested_and_allowed(d)
     if ratio.size == 0 or d.provisional:  # a floor that is only a lower bound inflates every ratio
         return []
-    tol = np.asarray(ex.get("tolerance", np.zeros(ratio.size)), dtype=float)
-    state = np.asarray(ex.get("state_estimation", np.zeros(ratio.size)), dtype=float)
-    sig = np.asarray(ex.get("significant_joint", np.zeros(ratio.size, dtype=bool)), dtype=bool)
+    sig = np.asarray(d.excess.get("significant_joint", np.zeros(ratio.size, dtype=bool)), dtype=bool)
     covered: set[int] = set()
     for r in (*d.accepted, *d.undecided):
         covered.update(int(j) for j in (r.candidate.joints or range(ratio.size)))
     return [
         j
         for j in range(ratio.size)
-        if not sig[j] and ratio[j] > 1 + tol[j] + state[j] + QUIET_EXCESS and j not in covered
+        if not sig[j] and ratio[j] > allow[j] + QUIET_EXCESS and j not in covered
     ]
 
 
@@ -336,7 +350,7 @@ def _quiet_seconds(d: Diagnosis, joints: list[int]) -> float | None:
     if not z_now > 0.5:  # no sign of it in the test: no length of the same run is sure to show it
         return None
     z_needed = float(norm.isf(float(d.settings.get("alpha", 0.05)) / max(p.size, 1)))
-    return float((t[-1] - t[0]) * max(1.0, (z_needed / z_now) ** 2) * 1.5)
+    return _seconds_to_significance(t, z_now, z_needed)
 
 
 def settling_excitation(
@@ -454,13 +468,9 @@ def _undecided_text(d: Diagnosis) -> list[str]:
 def _sensitivity_text(d: Diagnosis) -> list[str]:
     """What "none" means at this run's sensitivity, where a joint's error stands visibly above the floor
     but within what the tests allow for (the floor's own error, the refit's misfit, quantised angles)."""
-    ex = d.excess
-    tested = np.asarray(ex.get("ratio_tested", ()), dtype=float)
+    tested, allow = _tested_and_allowed(d)
     if tested.size == 0:
         return []
-    allow = 1 + np.asarray(ex.get("tolerance", np.zeros(tested.size)), dtype=float) + np.asarray(
-        ex.get("state_estimation", np.zeros(tested.size)), dtype=float
-    )
     covered = {j for r in d.undecided for j in (r.candidate.joints or range(tested.size))}
     covered.update(undecided_joints(d))
     near = [j for j in range(tested.size) if 1.25 < tested[j] <= allow[j] and j not in covered]
@@ -527,7 +537,7 @@ def verdict_text(d: Diagnosis) -> str:
     lines.extend(_undecided_text(d))
     quiet = undecided_joints(d)
     if quiet:
-        ratio = np.asarray(d.excess.get("ratio_tested", d.excess.get("ratio")), dtype=float)
+        ratio, _ = _tested_and_allowed(d)
         need = _quiet_seconds(d, quiet)
         names = ", ".join(f"{d.joint_names[j]} ({ratio[j]:.2g} noise variances)" for j in quiet)
         lines.append(
