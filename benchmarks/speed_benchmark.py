@@ -280,19 +280,28 @@ def _stage_timers() -> tuple[dict[str, list[float]], list]:
     return totals, undo
 
 
-def part_identify(repeat: int, stages: bool = False) -> None:
+def _tx40():
+    """The TX40 recording and its URDF, or None (said) where the shared recordings are not."""
     from dynid.data.adapters import load_recording, recording_model_path
+
+    warnings.simplefilter("ignore")
+    try:
+        return load_recording("tx40"), str(recording_model_path("tx40"))
+    except Exception as exc:  # the shared recordings are not everywhere
+        print(f"  skipped: {exc}")
+        return None
+
+
+def part_identify(repeat: int, stages: bool = False) -> None:
     from dynid.identify.model import identify
     from dynid.symbolic import load_robot
 
     print("\n== default identification of the TX40 recording (45,000 rows) against OLS")
-    warnings.simplefilter("ignore")
-    try:
-        data = load_recording("tx40")
-    except Exception as exc:  # the shared recordings are not everywhere
-        print(f"  skipped: {exc}")
+    found = _tx40()
+    if found is None:
         return
-    robot = load_robot(str(recording_model_path("tx40")))
+    data, urdf = found
+    robot = load_robot(urdf)
     identify(robot, data.select_rows(np.arange(2000)), method="ols", friction="linear", gmm="off")  # warm-up
     for k in range(repeat):
         print(f"  [{load()}]")
@@ -329,17 +338,13 @@ TX40_SPLIT = (
 def part_cli(repeat: int, figaroh_example: str | None, figaroh_python: str) -> None:
     """The commands as a user runs them on FIGAROH's TX40 split, whole processes, beside FIGAROH's own
     TX40 example when a copy of it is given (``--figaroh-example``)."""
-    from dynid.data.adapters import load_recording, recording_model_path
     from dynid.data.files import save_dataset
 
     print("\n== the TX40 split from the shell: whole processes (imports and file reading included)")
-    warnings.simplefilter("ignore")
-    try:
-        data = load_recording("tx40")
-    except Exception as exc:  # the shared recordings are not everywhere
-        print(f"  skipped: {exc}")
+    found = _tx40()
+    if found is None:
         return
-    urdf = str(recording_model_path("tx40"))
+    data, urdf = found
     train_end, held_start = TX40_SPLIT
     with tempfile.TemporaryDirectory() as tmp:
         train, held = Path(tmp, "train.csv"), Path(tmp, "heldout.csv")
