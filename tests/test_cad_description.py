@@ -8,7 +8,7 @@ import warnings
 import numpy as np
 import pytest
 
-import dynid.symbolic.robot as robot_module
+import dynid.symbolic.urdf as urdf_module
 from dynid.exceptions import RobotModelWarning
 from dynid.identify.columns import column_set
 from dynid.identify.model import identify
@@ -79,8 +79,8 @@ def test_ols_on_the_cad_description_predicts_as_on_the_exact_one(urdfs, exact, r
 
 def test_without_the_snap_the_rounded_arm_is_another_arm(urdfs, exact, runs, monkeypatch):
     """The control: the rounded arm left as it is gains a base parameter the exact arm does not have."""
-    monkeypatch.setattr(robot_module, "SNAP_RAD", 0.0)
-    monkeypatch.setattr(robot_module, "SNAP_M", 0.0)
+    monkeypatch.setattr(urdf_module, "SNAP_RAD", 0.0)
+    monkeypatch.setattr(urdf_module, "SNAP_M", 0.0)
     raw = load_robot(urdfs[1])
     assert column_set(raw).p == column_set(exact).p + 1
     train, heldout = runs
@@ -102,7 +102,7 @@ def test_a_model_of_the_cad_description_exports_onto_it(urdfs, runs, tmp_path):
         model = identify(cad, train, method="ols", friction="linear", gmm="off")
         result = export_model(model, "urdf", tmp_path / "out.urdf")
     check = next(c for c in result.checks if c["check"].startswith("URDF in Pinocchio"))
-    assert check["passed"] and 1e-8 < check["tolerance"] <= 10 * robot_module.SNAP_RAD
+    assert check["passed"] and 1e-8 < check["tolerance"] <= 10 * urdf_module.SNAP_RAD
     assert "right angles as written" in check["check"] and check["relative_error"] > 1e-12
 
 

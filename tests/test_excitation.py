@@ -17,15 +17,9 @@ import pytest
 from dynid.cli import main
 from dynid.exceptions import RobotModelError, UsageError
 from dynid.optim.approach import default_home, executable_trajectory, point_to_point
-from dynid.optim.excitation import (
-    CartesianLimits,
-    ExcitationError,
-    ExcitationProblem,
-    _functions,
-    _SmoothCriterion,
-    _soft_log_cond2,
-    design_excitation,
-)
+from dynid.optim.criteria import SmoothCriterion, soft_log_cond2
+from dynid.optim.excitation import CartesianLimits, ExcitationError, ExcitationProblem, design_excitation
+from dynid.optim.problem import excitation_functions
 from dynid.optim.trajectory import load_trajectory
 from dynid.symbolic import load_robot
 
@@ -76,7 +70,7 @@ def test_optimised_beats_its_start_and_the_baseline_with_full_rank(problem, stac
     assert first.cond < 0.7 * first.start_cond
     assert first.objective < first.start_objective
     H = problem.regressor(stacked.trajectories[0])
-    assert np.linalg.matrix_rank(H) == _functions(problem).n_base
+    assert np.linalg.matrix_rank(H) == excitation_functions(problem).n_base
     np.testing.assert_allclose(np.linalg.cond(H), first.cond, rtol=1e-10)
     assert stacked.cond < stacked.baseline_cond
 
@@ -123,7 +117,7 @@ def test_cartesian_floor_holds(ur5):
     problem = ExcitationProblem(robot=ur5, criterion="cond", cartesian=CartesianLimits(z_min=-0.3), **SMALL)
     result = design_excitation(problem, seed=0, n_jobs=2, patience=1, max_tries=2, baseline=5)
     q = result.trajectories[0].evaluate(problem.times(fine=True))[0]
-    z = _functions(problem).tool_positions(q)[:, 2]
+    z = excitation_functions(problem).tool_positions(q)[:, 2]
     assert z.min() >= -0.3
     assert result.stages[0].cond < result.stages[0].start_cond
 
@@ -135,7 +129,7 @@ def test_smooth_criterion_gradient_matches_finite_differences(criterion):
     H = rng.standard_normal((40, 6)) * np.array([1.0, 3.0, 0.2, 1.0, 5.0, 0.5])
     A = H.T @ H
     gravity = np.array([True, True, False, False, False, False])
-    fn = _SmoothCriterion(criterion, gravity, 16.0)
+    fn = SmoothCriterion(criterion, gravity, 16.0)
     w, s = np.array([1.0, 0.3, 0.7]), np.full(6, 0.5)
     _, dA, _, _ = fn(A, w, s)
     E = rng.standard_normal((6, 6))
@@ -150,9 +144,9 @@ def test_smooth_log_cond_bounds_the_exact_one():
     H = rng.standard_normal((50, 8)) @ np.diag(np.logspace(0, 2, 8))
     exact = 2 * np.log(np.linalg.cond(H))
     for p in (4.0, 16.0, 64.0):
-        value, _ = _soft_log_cond2(H.T @ H, p)
+        value, _ = soft_log_cond2(H.T @ H, p)
         assert exact <= value + 1e-12 <= exact + 2 * np.log(8) / p + 1e-12
-    value, _ = _soft_log_cond2(H.T @ H, np.inf)
+    value, _ = soft_log_cond2(H.T @ H, np.inf)
     np.testing.assert_allclose(value, exact, rtol=1e-10)
 
 

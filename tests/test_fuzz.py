@@ -516,13 +516,13 @@ def test_dead_torque_channel_is_refused_by_the_reader(base: Path, tmp_path: Path
 
 def test_transmission_tables_that_hold() -> None:
     """A valid coupling still loads; a matrix given in full too."""
-    from dynid.symbolic.robot import _transmission_table
+    from dynid.symbolic.transmission import transmission_table
 
-    R = _transmission_table({"coupled": [[5, 6, 1.0]]}, 6, "t")
+    R = transmission_table({"coupled": [[5, 6, 1.0]]}, 6, "t")
     assert R[5, 4] == 1.0 and np.trace(R) == 6
-    np.testing.assert_array_equal(_transmission_table({"matrix": np.eye(3).tolist()}, 3, "t"), np.eye(3))
+    np.testing.assert_array_equal(transmission_table({"matrix": np.eye(3).tolist()}, 3, "t"), np.eye(3))
     with pytest.raises(RobotModelError, match=r"has both 'matrix' and 'coupled'"):
-        _transmission_table({"matrix": np.eye(3).tolist(), "coupled": [[1, 2, 1.0]]}, 3, "t")
+        transmission_table({"matrix": np.eye(3).tolist(), "coupled": [[1, 2, 1.0]]}, 3, "t")
 
 
 def test_robot_names_become_c_identifiers_and_c_text() -> None:
