@@ -24,8 +24,9 @@ import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal, Protocol, TypeVar, overload
 
 import numpy as np
 
@@ -35,7 +36,16 @@ if TYPE_CHECKING:
     from dynid.diagnosis import Diagnosis
     from dynid.validation.validate import ValidationResult
 
-__all__ = ["DEFAULT_ROBOT", "DEMO_FILES", "DEMO_MARKER", "PERTURB", "SETTINGS", "DemoResult", "StageRecord", "run_demo"]
+__all__ = [
+    "DEFAULT_ROBOT",
+    "DEMO_FILES",
+    "DEMO_MARKER",
+    "PERTURB",
+    "SETTINGS",
+    "DemoResult",
+    "StageRecord",
+    "run_demo",
+]
 
 DEFAULT_ROBOT = "ur5"
 
@@ -85,6 +95,16 @@ SETTINGS: dict[str, dict[str, Any]] = {
 PERTURB = 0.1
 _DECIMATE = 4  # 1 kHz -> 250 Hz after the 20 Hz filter: the same information, a quarter of the work
 _STAGES = 7
+
+
+class _Summarised(Protocol):
+    """A stage's result: it says what the stage did in one line."""
+
+    @property
+    def summary(self) -> str: ...
+
+
+_R = TypeVar("_R", bound=_Summarised)
 
 
 @dataclass(frozen=True)
@@ -154,6 +174,9 @@ class DemoResult:
         return [s.stage for s in self.stages if s.status == "failed"]
 
 
+_FULL = "full"  # the label of the full method among the compared ones
+
+
 class _Stages:
     """Runs named stages, reports progress, keeps a record of each."""
 
@@ -162,26 +185,32 @@ class _Stages:
         self.progress = progress
         self.records: list[StageRecord] = []
 
-    def run(self, label: str, fn: Callable[[], str], *, may_fail: bool = False) -> None:
-        """Run one stage: ``fn`` does the work and returns a one-line summary.
+    @overload
+    def run(self, label: str, fn: Callable[[], _R], *, may_fail: Literal[False] = ...) -> _R: ...
+    @overload
+    def run(self, label: str, fn: Callable[[], _R], *, may_fail: bool) -> _R | None: ...
 
-        ``may_fail``: a :class:`~dynid.exceptions.DynidError` of this stage is recorded as a failure
-        and the next stages still run.
+    def run(self, label: str, fn: Callable[[], _R], *, may_fail: bool = False) -> _R | None:
+        """Run one stage: ``fn`` does the work and returns its result, whose ``summary`` is one line.
+
+        ``may_fail``: a :class:`~dynid.exceptions.DynidError` of this stage is recorded as a failure,
+        None is returned and the next stages still run.
         """
         self.progress(f"[{len(self.records) + 1}/{self.total}] {label}...")
         start = time.perf_counter()
         try:
-            summary = fn()
+            result = fn()
         except DynidError as err:
             if not may_fail:
                 raise
             elapsed = time.perf_counter() - start
             self.records.append(StageRecord(label, "failed", f"failed: {err}", elapsed))
             self.progress(f"      failed: {err} ({elapsed:.1f} s)")
-            return
+            return None
         elapsed = time.perf_counter() - start
-        self.records.append(StageRecord(label, "done", summary, elapsed))
-        self.progress(f"      {summary} ({elapsed:.1f} s)")
+        self.records.append(StageRecord(label, "done", result.summary, elapsed))
+        self.progress(f"      {result.summary} ({elapsed:.1f} s)")
+        return result
 
     @property
     def failed(self) -> list[str]:
@@ -190,6 +219,125 @@ class _Stages:
 
 def _silent(line: str) -> None:
     """The default progress: nothing."""
+
+
+@dataclass(frozen=True)
+class _Demo:
+    """What every stage reads: the robot, the folder, the mode, the seed and the progress."""
+
+    robot: Any
+    out: Path
+    mode: str
+    seed: int
+    first_build: bool  # the symbolic generator is built in this run
+    progress: Callable[[str], None]
+
+    @property
+    def settings(self) -> dict[str, Any]:
+        """The mode's settings (:data:`SETTINGS`)."""
+        return SETTINGS[self.mode]
+
+    def say(self, message: str) -> None:
+        """A long step's news, indented under its stage's counter."""
+        self.progress(f"      {message}")
+
+
+@dataclass(frozen=True)
+class _Step:
+    """A stage that hands nothing on but its summary line and its figures for the demo's JSON."""
+
+    summary: str
+    figures: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class _Excitation:
+    """The excitation design: the problem (its limits give the held-out run's trajectory too) and its result."""
+
+    problem: Any
+    design: Any
+    trajectory: Any
+    summary: str
+    figures: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class _SimulatedRun:
+    """One simulated run and the dataset file written from it."""
+
+    result: Any
+    path: Path
+
+
+@dataclass(frozen=True)
+class _Runs:
+    """The simulated truth and the two runs, read back from their files."""
+
+    truth: Any
+    identification: Any
+    validation: Any
+    validation_period: float
+    identification_file: Path
+    summary: str
+    figures: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class _Fits:
+    """The models of the compared methods, in :data:`~dynid.validation.validate.COMPARISON`'s order."""
+
+    fitted: tuple[Any, ...]
+    files: dict[str, str]  # model file name by label
+    summary: str
+    figures: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class _Validation:
+    """Every model on the held-out run, side by side, and against the simulated truth."""
+
+    results: tuple[ValidationResult, ...]
+    rows: list[dict[str, Any]]
+    truth_errors: dict[str, dict[str, float]]
+    summary: str
+
+    def labelled(self, label: str) -> ValidationResult:
+        """The validation of the model with this label."""
+        return next(r for r in self.results if r.label == label)
+
+    @property
+    def full(self) -> ValidationResult:
+        """The validation of the full method."""
+        return self.labelled(_FULL)
+
+
+@dataclass(frozen=True)
+class _Diagnosis:
+    """The gap diagnosis of the full method and its page."""
+
+    result: Diagnosis
+    report: Path
+    summary: str
+    figures: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class _Report:
+    """The HTML report and the figures it adds to the demo's JSON."""
+
+    path: Path
+    summary: str
+    figures: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class _Outcome:
+    """What the stages made: the figures so far (in stage order) and the results the demo returns."""
+
+    figures: dict[str, Any]
+    validation: _Validation
+    diagnosis: _Diagnosis | None
+    report: _Report
 
 
 def run_demo(
@@ -226,23 +374,25 @@ def run_demo(
         A stage other than the diagnosis failed (a failed diagnosis is recorded in the result).
     """
     say_line = _silent if progress is None else progress
-
-    def say(message: str) -> None:
-        say_line(f"      {message}")
-
     if isinstance(seed, bool) or int(seed) != seed or seed < 0:
         raise UsageError(f"the seed is {seed}; give a whole number of at least 0.")
-    out = Path(out_dir)
+    out = _claim_folder(Path(out_dir))
+    mode = "quick" if quick else "full"
+    started = time.perf_counter()
+    stages = _Stages(total=_STAGES, progress=say_line)
+    demo = _start(out, mode, seed, say_line)
+    outcome = _run_stages(demo, stages)
+    return _result(demo, stages, outcome, total=time.perf_counter() - started)
+
+
+def _claim_folder(out: Path) -> Path:
+    """Check the demo's folder, make it and mark it as the demo's (see :data:`DEMO_MARKER`)."""
     if out.exists() and not out.is_dir():
         raise UsageError(f"out_dir '{out}' is a file; give a folder for the demo's files.")
     if not out.parent.exists():
         raise UsageError(
             f"the folder '{out.parent}' of out_dir does not exist; create it or write elsewhere."
         )
-
-    from dynid.symbolic.build import cache_dir, generator_is_built
-    from dynid.symbolic.robot import load_robot
-
     clash = [f for f in DEMO_FILES if (out / f).exists()]
     if clash and not (out / DEMO_MARKER).is_file():
         raise UsageError(
@@ -252,316 +402,418 @@ def run_demo(
     out.mkdir(exist_ok=True)
     # first of all: the folder is the demo's, so that a later demo may overwrite what this one writes
     (out / DEMO_MARKER).write_text("written by dynid demo; its files may be replaced by the next demo\n")
-    mode = "quick" if quick else "full"
-    cfg = SETTINGS[mode]
-    started = time.perf_counter()
-    stages = _Stages(total=_STAGES, progress=say_line)
+    return out
+
+
+def _start(out: Path, mode: str, seed: int, progress: Callable[[str], None]) -> _Demo:
+    """The demo's robot and settings, announced."""
+    from dynid.symbolic.build import generator_is_built
+    from dynid.symbolic.robot import load_robot
+
     # The UR5 at its own limits (URDF; 10 rad/s^2 where the URDF has none), as a user's first run has it.
     robot = load_robot(DEFAULT_ROBOT)
-    state: dict[str, Any] = {}
-    figures: dict[str, Any] = {"robot": DEFAULT_ROBOT, "mode": mode, "seed": seed}
-    first_build = not generator_is_built()
-    figures["first_run_build"] = first_build
-    say_line(
+    demo = _Demo(
+        robot=robot, out=out, mode=mode, seed=seed, first_build=not generator_is_built(), progress=progress
+    )
+    progress(
         f"dynid demo ({mode}): {robot.name}, {robot.n} joints; the simulated robot is the UR5 with its inertial "
         f"parameters perturbed by {100 * PERTURB:g} %, the paper's friction and noisy sensors. Files go to {out}."
     )
+    return demo
 
-    # ------------------------------------------------------------------ 1. symbolic model
-    def symbolic() -> str:
-        import pinocchio as pin
 
-        from dynid.symbolic.base import base_parameters
-        from dynid.symbolic.export import compiled_functions
-        from dynid.symbolic.functions import robot_functions
+def _result(demo: _Demo, stages: _Stages, outcome: _Outcome, *, total: float) -> DemoResult:
+    """The demo's result: its figures completed with the stages and the total time (s)."""
+    from dynid._io import to_jsonable
 
-        if first_build:
-            say(
-                "first run in this environment: building the symbolic generator once (about 40 s on 2 idle cores, "
-                f"more on a slow machine), cached in {cache_dir()}; later runs skip this"
-            )
-        funcs = robot_functions(robot, progress=say)
-        base = base_parameters(funcs)
-        lib = compiled_functions(robot, progress=say)
-        rng = np.random.default_rng([seed, 0])
-        q, dq, ddq = rng.uniform(-1, 1, size=(3, 500, robot.n))
-        tau = lib.rnea(q, dq, ddq)
-        model, data = robot.pin_model, robot.pin_model.createData()
-        err = max(
-            float(np.abs(tau[k] - pin.rnea(model, data, q[k], dq[k], ddq[k])).max()) for k in range(len(q))
-        )
-        state["base"] = base
-        figures["n_base"] = base.n_base
-        figures["c_export_max_error"] = err
-        return (
-            f"{base.n_base} base parameters ({int(base.gravity_related.sum())} gravity-related); compiled C rnea "
-            f"matches numeric Pinocchio to {err:.1e} N m on 500 random states"
-        )
+    figures = {
+        **outcome.figures,
+        "stages": [r.to_dict() for r in stages.records],
+        # Every stage exists now; the key stays so that files written before read the same.
+        "stages_missing": [],
+        "stages_failed": stages.failed,
+        "total_s": total,
+    }
+    return DemoResult(
+        out_dir=demo.out,
+        mode=demo.mode,
+        stages=tuple(stages.records),
+        figures=to_jsonable(figures),
+        results=outcome.validation.results,
+        diagnosis=None if outcome.diagnosis is None else outcome.diagnosis.result,
+        report=outcome.report.path,
+        total_s=total,
+    )
 
-    # ------------------------------------------------------------------ 2. excitation
-    def excite() -> str:
-        from dynid.optim.excitation import ExcitationProblem, design_excitation
 
-        problem = ExcitationProblem(
-            robot=robot, harmonics=cfg["harmonics"], base_freq=cfg["base_freq"], criterion="seed"
-        )
-        result = design_excitation(
-            problem,
-            seed=seed,
-            patience=cfg["patience"],
-            max_tries=cfg["max_tries"],
-            baseline=cfg["baseline"],
-            n_jobs=2,
-            progress=say,
-        )
-        traj = result.trajectories[0]
-        traj.save(out / "excitation.json")
-        state["problem"], state["excitation"], state["trajectory"] = problem, result, traj
-        figures["excitation"] = {
-            "cond": result.cond,
-            "baseline_cond": result.baseline_cond,
-            "feasible": result.feasible,
-            "harmonics": cfg["harmonics"],
-            "period_s": traj.period,
-        }
-        return (
-            f"{cfg['harmonics']} harmonics, period {traj.period:g} s: cond {result.cond:.4g} against "
-            f"{result.baseline_cond:.4g} for the best of {cfg['baseline']} random feasible trajectories; "
-            f"wrote {out / 'excitation.json'}"
-        )
-
-    # ------------------------------------------------------------------ 3. simulation
-    def simulate_runs() -> str:
-        from dynid.data.files import load_dataset
-        from dynid.sim.simulator import build_truth, simulate, write_simulation
-
-        traj = state["trajectory"]
-        truth = build_truth(robot, friction="seed", perturb=PERTURB, truth_seed=seed)
-        # The held-out run follows another trajectory (random, within the limits), several periods long.
-        other = state["problem"].random_trajectory(np.random.default_rng([seed, 7]), amplitude=0.9)
-        runs = {}
-        for name, trajectory, periods, run_seed in (
-            ("identification", traj, cfg["id_periods"], seed + 1),
-            ("validation", other, cfg["val_periods"], seed + 2),
-        ):
-            result = simulate(
-                robot,
-                trajectory,
-                truth=truth,
-                seed=run_seed,
-                duration=periods * trajectory.period,
-                source=f"the demo's {name} trajectory",
-            )
-            path, _ = write_simulation(result, out / f"{name}.csv")
-            runs[name] = (result, path)
-        state["truth"] = truth
-        # Read back what was written: the rest of the demo sees the files a user would pass to dynid.
-        state["data"] = {k: load_dataset(p, robot.n) for k, (_, p) in runs.items()}
-        state["val_period"] = other.period
-        state["paths"] = {k: p for k, (_, p) in runs.items()}
-        ident, val = runs["identification"][0], runs["validation"][0]
-        figures["runs"] = {
-            "identification": {"duration_s": float(ident.t[-1]), "samples": int(ident.t.size)},
-            "validation": {
-                "duration_s": float(val.t[-1]),
-                "samples": int(val.t.size),
-                "periods": cfg["val_periods"],
-            },
-        }
-        return (
-            f"identification run {ident.t[-1]:.0f} s ({cfg['id_periods']} periods of the excitation), validation "
-            f"run {val.t[-1]:.0f} s ({cfg['val_periods']} periods of another trajectory), 1 kHz; wrote "
-            f"{runs['identification'][1].name} and {runs['validation'][1].name} with their .truth.json"
-        )
-
-    # ------------------------------------------------------------------ 4. identification
-    def identify_models() -> str:
-        from dynid.identify.linear_system import Preprocessing
-        from dynid.identify.model import save_model
-        from dynid.validation.validate import COMPARISON, identify_methods
-
-        fitted = identify_methods(
-            robot,
-            state["data"]["identification"],
-            methods=COMPARISON,
-            preprocessing=Preprocessing(decimate=_DECIMATE),
-            random_state=seed,
-            progress=say,
-        )
-        files = {}
-        for f in fitted:
-            name = "model.json" if f.label == "full" else f"model_{f.label.lower()}.json"
-            save_model(f.model, out / name)
-            files[f.label] = name
-        state["fitted"], state["files"] = fitted, files
-        figures["identification"] = {
-            f.label: {
-                "method": f.model.method,
-                "cond": f.model.cond,
-                "file": files[f.label],
-                "seconds": f.seconds,
-                "warnings": f.warnings,
-            }
-            for f in fitted
-        }
-        return (
-            "the full method (consistent links, the paper's friction, GMM), OLS and IRLS (linear friction) in "
-            + ", ".join(f"{f.seconds:.1f} s" for f in fitted)
-            + f"; wrote {', '.join(files.values())}"
-        )
-
-    # ------------------------------------------------------------------ 5. validation
-    def validation() -> str:
-        from dynid.validation.validate import compare, validate
-
-        data = state["data"]["validation"]
-        results = [
-            validate(
-                f.model,
-                data,
-                period=state["val_period"],
-                label=f.label,
-                info={"model_file": state["files"][f.label], "seconds": f.seconds},
-            )
-            for f in state["fitted"]
-        ]
-        state["results"] = results
-        state["rows"] = compare(results)
-        full = results[0]
-        state["truth_errors"] = _truth_errors(state["truth"], {r.label: r.model for r in results})
-        return (
-            f"held-out mean RMS: full {full.metrics['rms_mean']:.4g}, OLS {results[1].metrics['rms_mean']:.4g}, "
-            f"IRLS {results[2].metrics['rms_mean']:.4g} N m; noise floor {full.noise.rms_mean:.4g} N m "
-            f"({full.noise.detail})"
-        )
-
-    # ------------------------------------------------------------------ 6. diagnosis
-    def diagnosis() -> str:
-        from dynid.diagnosis import diagnose, write_diagnosis_report
-
-        full = state["results"][0]
-        result = diagnose(
-            full.model,
-            state["data"]["identification"],
-            state["data"]["validation"],
-            period=state["val_period"],
-        )
-        state["diagnosis"] = result
-        figures["diagnosis"] = result.to_dict()
-        path = write_diagnosis_report(
-            result, out / "diagnosis.html", title="dynid demo: gap diagnosis of the full method"
-        )
-        state["diagnosis_report"] = path
-        figures["diagnosis_report"] = str(path)
-        text = result.summary().splitlines()
-        return f"verdict {', '.join(result.verdict)}; wrote {path}: {text[0] if text else ''}"
-
-    # ------------------------------------------------------------------ 7. report
-    def report() -> str:
-        from dynid._io import to_jsonable
-        from dynid.validation.report import html_table, render_report
-
-        results = state["results"]
-        full = results[0]
-        figures.update(
-            {
-                **full.figures(),
-                "models": state["rows"],
-                "truth_relative_error": state["truth_errors"],
-                "report": str(out / "report.html"),
-            }
-        )
-        stage_rows = [[r.stage, r.status, r.summary, r.seconds] for r in stages.records]
-        truth_rows = [
-            [
-                r.label,
-                state["truth_errors"][r.label]["rigid_body"],
-                state["truth_errors"][r.label]["worst_joint_torque"],
-            ]
-            for r in results
-        ]
-        sections = [
-            (
-                "Against the simulated truth",
-                '<p class="note">The simulator knows the robot it drove. Relative error of the identified '
-                "rigid-body parameters (base parameters and armature, weighted by how much torque each one "
-                "makes on the held-out motion): the RMS over joints of Y(x - x_true) over the RMS of Y x_true, "
-                "and the largest joint's.</p>"
-                + html_table(
-                    ["model", "relative error (all joints)", "worst joint"], truth_rows, table_id="truth"
-                ),
-            ),
-            (
-                "How this report was made",
-                html_table(
-                    ["stage", "status", "summary", "seconds"], stage_rows, table_id="stages", text_columns=3
-                ),
-            ),
-        ]
-        if "diagnosis" in state:
-            fragment = _diagnosis_html(state["diagnosis"], full.label)
-            name = html.escape(Path(state["diagnosis_report"]).name)
-            fragment += (
-                f'<p class="note">The diagnosis in full (gap map, decomposition, every candidate): '
-                f'<a href="{name}">{name}</a>, beside this file.</p>'
-            )
-            sections.insert(0, ("Sim-to-real gap diagnosis", fragment))
-        else:
-            row = next((r for r in stages.records if r.stage.startswith("sim-to-real")), None)
-            why = row.summary if row else "not run"
-            sections.insert(0, ("Sim-to-real gap diagnosis", f'<p class="note">{html.escape(why)}.</p>'))
-        exc = state["excitation"]
-        rep = render_report(
-            results,
-            figures=to_jsonable(figures),
-            title="dynid demo: UR5 identified from a simulated run, validated on another",
-            context={
-                "identification data": f"{state['paths']['identification'].name} (the optimised excitation)",
-                "truth": f"UR5 with inertial parameters perturbed by {100 * PERTURB:g} %, the paper's friction",
-                "mode": mode,
-            },
-            sections=sections,
-            conditions=[
-                ("excitation design (cond of H* on its grid)", exc.cond),
-                (f"best of {cfg['baseline']} random feasible trajectories", exc.baseline_cond),
-            ],
-        )
-        path = rep.write(out / "report.html")
-        state["report"] = path
-        return f"wrote {path} ({len(rep.figures)} figures, {len(rep.html) / 1e6:.1f} MB)"
-
+def _run_stages(demo: _Demo, stages: _Stages) -> _Outcome:
+    """The seven stages in order, each handing its result to those after it."""
     # One BLAS / OpenMP thread: on small matrices a threaded BLAS is many times slower here (the
     # excitation's figures took 5 s instead of 0.1 s on 2 busy cores); joblib's workers set their own.
     import scipy.linalg  # noqa: F401  (loads scipy's BLAS, so that the limit below covers it)
     from threadpoolctl import threadpool_limits
 
+    figures: dict[str, Any] = {
+        "robot": DEFAULT_ROBOT,
+        "mode": demo.mode,
+        "seed": demo.seed,
+        "first_run_build": demo.first_build,
+    }
     with threadpool_limits(limits=1):
-        stages.run("symbolic dynamics, base parameters and compiled C (Pinocchio on CasADi)", symbolic)
-        stages.run("excitation design (Fourier series, IPOPT)", excite)
-        stages.run("simulated identification and validation runs", simulate_runs)
-        stages.run("identification: the full three-layer method, OLS and IRLS", identify_models)
-        stages.run("validation on the held-out run", validation)
-        stages.run("sim-to-real gap diagnosis", diagnosis, may_fail=True)
-        stages.run("HTML report", report)
+        symbolic = stages.run(
+            "symbolic dynamics, base parameters and compiled C (Pinocchio on CasADi)",
+            partial(_symbolic, demo),
+        )
+        figures.update(symbolic.figures)
+        excitation = stages.run("excitation design (Fourier series, IPOPT)", partial(_excite, demo))
+        figures.update(excitation.figures)
+        runs = stages.run(
+            "simulated identification and validation runs", partial(_simulate, demo, excitation)
+        )
+        figures.update(runs.figures)
+        fits = stages.run(
+            "identification: the full three-layer method, OLS and IRLS", partial(_identify, demo, runs)
+        )
+        figures.update(fits.figures)
+        validation = stages.run("validation on the held-out run", partial(_validate, demo, runs, fits))
+        diagnosis = stages.run(
+            "sim-to-real gap diagnosis", partial(_diagnose, demo, runs, validation), may_fail=True
+        )
+        if diagnosis is not None:
+            figures.update(diagnosis.figures)
+        report = stages.run(
+            "HTML report",
+            partial(
+                _report, demo, excitation, runs, validation, diagnosis, tuple(stages.records), dict(figures)
+            ),
+        )
+        figures.update(report.figures)
+    return _Outcome(figures=figures, validation=validation, diagnosis=diagnosis, report=report)
 
-    from dynid._io import to_jsonable
 
-    total = time.perf_counter() - started
-    figures["stages"] = [r.to_dict() for r in stages.records]
-    # Every stage exists now; the key stays so that files written before read the same.
-    figures["stages_missing"] = []
-    figures["stages_failed"] = stages.failed
-    figures["total_s"] = total
-    return DemoResult(
-        out_dir=out,
-        mode=mode,
-        stages=tuple(stages.records),
-        figures=to_jsonable(figures),
-        results=tuple(state["results"]),
-        diagnosis=state.get("diagnosis"),
-        report=state.get("report"),
-        total_s=total,
+# ---------------------------------------------------------------------- 1. symbolic model
+def _symbolic(demo: _Demo) -> _Step:
+    """Symbolic functions, base parameters, and the compiled C's rnea checked against Pinocchio."""
+    import pinocchio as pin
+
+    from dynid.symbolic.base import base_parameters
+    from dynid.symbolic.build import cache_dir
+    from dynid.symbolic.export import compiled_functions
+    from dynid.symbolic.functions import robot_functions
+
+    robot = demo.robot
+    if demo.first_build:
+        demo.say(
+            "first run in this environment: building the symbolic generator once (about 40 s on 2 idle cores, "
+            f"more on a slow machine), cached in {cache_dir()}; later runs skip this"
+        )
+    funcs = robot_functions(robot, progress=demo.say)
+    base = base_parameters(funcs)
+    lib = compiled_functions(robot, progress=demo.say)
+    rng = np.random.default_rng([demo.seed, 0])
+    q, dq, ddq = rng.uniform(-1, 1, size=(3, 500, robot.n))
+    tau = lib.rnea(q, dq, ddq)
+    model, data = robot.pin_model, robot.pin_model.createData()
+    err = max(float(np.abs(tau[k] - pin.rnea(model, data, q[k], dq[k], ddq[k])).max()) for k in range(len(q)))
+    return _Step(
+        summary=(
+            f"{base.n_base} base parameters ({int(base.gravity_related.sum())} gravity-related); compiled C rnea "
+            f"matches numeric Pinocchio to {err:.1e} N m on 500 random states"
+        ),
+        figures={"n_base": base.n_base, "c_export_max_error": err},
     )
+
+
+# ---------------------------------------------------------------------- 2. excitation
+def _excite(demo: _Demo) -> _Excitation:
+    """The optimised excitation trajectory, written to ``excitation.json``."""
+    from dynid.optim.excitation import ExcitationProblem, design_excitation
+
+    cfg = demo.settings
+    problem = ExcitationProblem(
+        robot=demo.robot, harmonics=cfg["harmonics"], base_freq=cfg["base_freq"], criterion="seed"
+    )
+    result = design_excitation(
+        problem,
+        seed=demo.seed,
+        patience=cfg["patience"],
+        max_tries=cfg["max_tries"],
+        baseline=cfg["baseline"],
+        n_jobs=2,
+        progress=demo.say,
+    )
+    traj = result.trajectories[0]
+    traj.save(demo.out / "excitation.json")
+    return _Excitation(
+        problem=problem,
+        design=result,
+        trajectory=traj,
+        summary=(
+            f"{cfg['harmonics']} harmonics, period {traj.period:g} s: cond {result.cond:.4g} against "
+            f"{result.baseline_cond:.4g} for the best of {cfg['baseline']} random feasible trajectories; "
+            f"wrote {demo.out / 'excitation.json'}"
+        ),
+        figures={
+            "excitation": {
+                "cond": result.cond,
+                "baseline_cond": result.baseline_cond,
+                "feasible": result.feasible,
+                "harmonics": cfg["harmonics"],
+                "period_s": traj.period,
+            }
+        },
+    )
+
+
+# ---------------------------------------------------------------------- 3. simulation
+def _simulate(demo: _Demo, excitation: _Excitation) -> _Runs:
+    """The identification run on the excitation and a held-out run on another trajectory, as files."""
+    from dynid.data.files import load_dataset
+    from dynid.sim.simulator import build_truth
+
+    cfg = demo.settings
+    truth = build_truth(demo.robot, friction="seed", perturb=PERTURB, truth_seed=demo.seed)
+    # The held-out run follows another trajectory (random, within the limits), several periods long.
+    other = excitation.problem.random_trajectory(np.random.default_rng([demo.seed, 7]), amplitude=0.9)
+    ident = _simulate_run(
+        demo, truth, "identification", excitation.trajectory, cfg["id_periods"], demo.seed + 1
+    )
+    val = _simulate_run(demo, truth, "validation", other, cfg["val_periods"], demo.seed + 2)
+    # Read back what was written: the rest of the demo sees the files a user would pass to dynid.
+    return _Runs(
+        truth=truth,
+        identification=load_dataset(ident.path, demo.robot.n),
+        validation=load_dataset(val.path, demo.robot.n),
+        validation_period=other.period,
+        identification_file=ident.path,
+        summary=(
+            f"identification run {ident.result.t[-1]:.0f} s ({cfg['id_periods']} periods of the excitation), "
+            f"validation run {val.result.t[-1]:.0f} s ({cfg['val_periods']} periods of another trajectory), "
+            f"1 kHz; wrote {ident.path.name} and {val.path.name} with their .truth.json"
+        ),
+        figures={
+            "runs": {
+                "identification": {
+                    "duration_s": float(ident.result.t[-1]),
+                    "samples": int(ident.result.t.size),
+                },
+                "validation": {
+                    "duration_s": float(val.result.t[-1]),
+                    "samples": int(val.result.t.size),
+                    "periods": cfg["val_periods"],
+                },
+            }
+        },
+    )
+
+
+def _simulate_run(
+    demo: _Demo, truth: Any, name: str, trajectory: Any, periods: int, seed: int
+) -> _SimulatedRun:
+    """One simulated run of ``periods`` periods of ``trajectory``, written to ``<name>.csv`` with its truth."""
+    from dynid.sim.simulator import simulate, write_simulation
+
+    result = simulate(
+        demo.robot,
+        trajectory,
+        truth=truth,
+        seed=seed,
+        duration=periods * trajectory.period,
+        source=f"the demo's {name} trajectory",
+    )
+    path, _ = write_simulation(result, demo.out / f"{name}.csv")
+    return _SimulatedRun(result=result, path=path)
+
+
+# ---------------------------------------------------------------------- 4. identification
+def _identify(demo: _Demo, runs: _Runs) -> _Fits:
+    """The full method, OLS and IRLS on the identification run, each written to its model file."""
+    from dynid.identify.linear_system import Preprocessing
+    from dynid.identify.model import save_model
+    from dynid.validation.validate import COMPARISON, identify_methods
+
+    fitted = identify_methods(
+        demo.robot,
+        runs.identification,
+        methods=COMPARISON,
+        preprocessing=Preprocessing(decimate=_DECIMATE),
+        random_state=demo.seed,
+        progress=demo.say,
+    )
+    files = {}
+    for f in fitted:
+        name = "model.json" if f.label == _FULL else f"model_{f.label.lower()}.json"
+        save_model(f.model, demo.out / name)
+        files[f.label] = name
+    return _Fits(
+        fitted=tuple(fitted),
+        files=files,
+        summary=(
+            "the full method (consistent links, the paper's friction, GMM), OLS and IRLS (linear friction) in "
+            + ", ".join(f"{f.seconds:.1f} s" for f in fitted)
+            + f"; wrote {', '.join(files.values())}"
+        ),
+        figures={
+            "identification": {
+                f.label: {
+                    "method": f.model.method,
+                    "cond": f.model.cond,
+                    "file": files[f.label],
+                    "seconds": f.seconds,
+                    "warnings": f.warnings,
+                }
+                for f in fitted
+            }
+        },
+    )
+
+
+# ---------------------------------------------------------------------- 5. validation
+def _validate(demo: _Demo, runs: _Runs, fits: _Fits) -> _Validation:
+    """Every model on the held-out run, and its rigid body against the simulated truth."""
+    from dynid.validation.validate import compare, validate
+
+    results = tuple(
+        validate(
+            f.model,
+            runs.validation,
+            period=runs.validation_period,
+            label=f.label,
+            info={"model_file": fits.files[f.label], "seconds": f.seconds},
+        )
+        for f in fits.fitted
+    )
+    rows = compare(list(results))
+    truth_errors = _truth_errors(runs.truth, {r.label: r.model for r in results})
+    by_label = {r.label: r for r in results}
+    full, ols, irls = by_label[_FULL], by_label["OLS"], by_label["IRLS"]
+    return _Validation(
+        results=results,
+        rows=rows,
+        truth_errors=truth_errors,
+        summary=(
+            f"held-out mean RMS: full {full.metrics['rms_mean']:.4g}, OLS {ols.metrics['rms_mean']:.4g}, "
+            f"IRLS {irls.metrics['rms_mean']:.4g} N m; noise floor {full.noise.rms_mean:.4g} N m "
+            f"({full.noise.detail})"
+        ),
+    )
+
+
+# ---------------------------------------------------------------------- 6. diagnosis
+def _diagnose(demo: _Demo, runs: _Runs, validation: _Validation) -> _Diagnosis:
+    """The gap diagnosis of the full method, with its own page ``diagnosis.html``."""
+    from dynid.diagnosis import diagnose, write_diagnosis_report
+
+    result = diagnose(
+        validation.full.model,
+        runs.identification,
+        runs.validation,
+        period=runs.validation_period,
+    )
+    path = write_diagnosis_report(
+        result, demo.out / "diagnosis.html", title="dynid demo: gap diagnosis of the full method"
+    )
+    text = result.summary().splitlines()
+    return _Diagnosis(
+        result=result,
+        report=path,
+        summary=f"verdict {', '.join(result.verdict)}; wrote {path}: {text[0] if text else ''}",
+        figures={"diagnosis": result.to_dict(), "diagnosis_report": str(path)},
+    )
+
+
+# ---------------------------------------------------------------------- 7. report
+def _report(
+    demo: _Demo,
+    excitation: _Excitation,
+    runs: _Runs,
+    validation: _Validation,
+    diagnosis: _Diagnosis | None,
+    records: tuple[StageRecord, ...],
+    figures: dict[str, Any],
+) -> _Report:
+    """The HTML report: every model on the held-out run, the diagnosis, the truth and the stages before it."""
+    from dynid._io import to_jsonable
+    from dynid.validation.report import render_report
+
+    full = validation.full
+    added = {
+        **full.figures(),
+        "models": validation.rows,
+        "truth_relative_error": validation.truth_errors,
+        "report": str(demo.out / "report.html"),
+    }
+    rep = render_report(
+        list(validation.results),
+        figures=to_jsonable({**figures, **added}),
+        title="dynid demo: UR5 identified from a simulated run, validated on another",
+        context={
+            "identification data": f"{runs.identification_file.name} (the optimised excitation)",
+            "truth": f"UR5 with inertial parameters perturbed by {100 * PERTURB:g} %, the paper's friction",
+            "mode": demo.mode,
+        },
+        sections=[
+            _diagnosis_section(diagnosis, full.label, records),
+            _truth_section(validation),
+            ("How this report was made", _stages_table(records)),
+        ],
+        conditions=[
+            ("excitation design (cond of H* on its grid)", excitation.design.cond),
+            (
+                f"best of {demo.settings['baseline']} random feasible trajectories",
+                excitation.design.baseline_cond,
+            ),
+        ],
+    )
+    path = rep.write(demo.out / "report.html")
+    return _Report(
+        path=path,
+        summary=f"wrote {path} ({len(rep.figures)} figures, {len(rep.html) / 1e6:.1f} MB)",
+        figures=added,
+    )
+
+
+def _diagnosis_section(
+    diagnosis: _Diagnosis | None, label: str, records: tuple[StageRecord, ...]
+) -> tuple[str, str]:
+    """The report's section on the diagnosis: its verdict and candidates, or why it failed."""
+    title = "Sim-to-real gap diagnosis"
+    if diagnosis is None:
+        row = next((r for r in records if r.stage.startswith("sim-to-real")), None)
+        why = row.summary if row else "not run"
+        return title, f'<p class="note">{html.escape(why)}.</p>'
+    name = html.escape(Path(diagnosis.report).name)
+    return title, _diagnosis_html(diagnosis.result, label) + (
+        f'<p class="note">The diagnosis in full (gap map, decomposition, every candidate): '
+        f'<a href="{name}">{name}</a>, beside this file.</p>'
+    )
+
+
+def _truth_section(validation: _Validation) -> tuple[str, str]:
+    """The report's section on each model's rigid body against the simulated truth."""
+    from dynid.validation.report import html_table
+
+    errors = validation.truth_errors
+    rows = [
+        [r.label, errors[r.label]["rigid_body"], errors[r.label]["worst_joint_torque"]]
+        for r in validation.results
+    ]
+    return (
+        "Against the simulated truth",
+        '<p class="note">The simulator knows the robot it drove. Relative error of the identified '
+        "rigid-body parameters (base parameters and armature, weighted by how much torque each one "
+        "makes on the held-out motion): the RMS over joints of Y(x - x_true) over the RMS of Y x_true, "
+        "and the largest joint's.</p>"
+        + html_table(["model", "relative error (all joints)", "worst joint"], rows, table_id="truth"),
+    )
+
+
+def _stages_table(records: tuple[StageRecord, ...]) -> str:
+    """The stages that ran before the report, as an HTML table."""
+    from dynid.validation.report import html_table
+
+    rows = [[r.stage, r.status, r.summary, r.seconds] for r in records]
+    return html_table(["stage", "status", "summary", "seconds"], rows, table_id="stages", text_columns=3)
 
 
 def _truth_errors(truth: Any, models: dict[str, Any]) -> dict[str, dict[str, float]]:

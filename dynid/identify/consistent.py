@@ -40,20 +40,42 @@ is not convex, and where the closest consistent body lies on the boundary (an in
 unconstrained estimate) the factor's diagonal drifts to -inf; IPOPT stopped at its 1000-iteration limit
 on 8 of 10 such UR5 problems (2 s each) with its own objective still 1e-6 to 1e-3 above the optimum.
 When the unconstrained estimate already has an eps-consistent standard vector, it is returned as it is.
+
+:func:`consistent_solution` runs in four phases: the start (:func:`_search_start`), the problem in the
+variables ``(y, w)`` with a strictly feasible point (:func:`_barrier_problem`), the barrier iterations
+(:func:`_central_path`), and the answer (the links held at the bound, then the bodies nearest the
+description).  The pseudo-inertia algebra and :func:`described_bodies` live in
+:mod:`dynid.identify.bodies`; their names stay importable from here.
 """
 
 from __future__ import annotations
 
 import time
 import warnings
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import scipy.linalg
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
 from dynid.data.preparation import Preprocessing
 from dynid.exceptions import IdentificationWarning, UsageError
+from dynid.identify.bodies import (
+    EPS,
+    add_neg_logdet,
+    clip_eigenvalues,
+    described_bodies,
+    is_consistent,
+    link_inertials,
+    log_cholesky,
+    newton_direction,
+    physical_scale,
+    pseudo_inertia,
+    pseudo_inertia_jacobian,
+    reference_bodies,
+    standard_from_pseudo_inertia,
+)
 from dynid.identify.columns import EXTRA_KINDS, ColumnSet
 from dynid.identify.estimators import ESTIMATORS, LinkEstimator
 from dynid.identify.linear_system import LinearSystem
@@ -63,12 +85,6 @@ _MU_FACTOR = 0.1  # barrier weight decrease per centring
 # multiplier (squared std per relative loosening) above which a link is held at the bound: measured 6-2000 on
 # UR5 links the data push against the bound, at most 5e-4 where only the pull of the unseen directions does
 _BOUND_FORCE = 0.05
-# pull of the armature and friction toward their description, relative to the links' divergence: a base
-# parameter that holds a link's inertia and an armature together (joint 1's axis) leaves the link at its
-# description and the armature takes the rest
-_EXTRA_PULL = 1e-3
-EPS = 1e-6
-"""Default smallest eigenvalue (SI, kg m^2) of a consistent pseudo-inertia (see :class:`ConsistentLS`)."""
 __all__ = [
     "EPS",
     "ConsistentLS",
@@ -81,117 +97,6 @@ __all__ = [
     "pseudo_inertia",
     "standard_from_pseudo_inertia",
 ]
-
-
-def pseudo_inertia(params: ArrayLike) -> NDArray[np.float64]:
-    """Pseudo-inertia matrices of standard parameters.
-
-    Parameters
-    ----------
-    params : array_like, shape (10,) or (k, 10)
-        ``[m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz]`` per link (kg, kg m, kg m^2).
-
-    Returns
-    -------
-    ndarray, shape (4, 4) or (k, 4, 4)
-    """
-    p = np.asarray(params, dtype=np.float64)
-    single = p.ndim == 1
-    p = p.reshape(-1, 10)
-    J = (p @ _E_FLAT).reshape(-1, 4, 4)  # J is linear in the parameters: sum_i params_i E_i
-    return J[0] if single else J
-
-
-def _basis() -> NDArray[np.float64]:
-    """(10, 4, 4): the pseudo-inertia of each unit standard parameter."""
-    E = np.zeros((10, 4, 4))
-    for i, (a, b) in enumerate([(3, 3), (0, 3), (1, 3), (2, 3)]):
-        E[i, a, b] = E[i, b, a] = 1.0
-    # inertia entries [Ixx, Ixy, Iyy, Ixz, Iyz, Izz]: Sigma = tr(I)/2 * 1 - I
-    for i, (a, b) in zip(range(4, 10), [(0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2)], strict=True):
-        if a == b:
-            E[i, :3, :3] = 0.5 * np.eye(3)
-            E[i, a, a] -= 1.0
-        else:
-            E[i, a, b] = E[i, b, a] = -1.0
-    return E
-
-
-_E = _basis()  # (10, 4, 4): J = sum_i params_i _E[i]
-_E_FLAT = _E.reshape(10, 16)
-
-
-def standard_from_pseudo_inertia(J):
-    """Standard parameters ``[m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz]`` of a pseudo-inertia.
-
-    Works on numpy arrays of shape (4, 4) and on CasADi matrices alike.
-
-    Parameters
-    ----------
-    J : ndarray or casadi.SX, shape (4, 4)
-        Pseudo-inertia.
-    """
-    S = J[0:3, 0:3]
-    tr = S[0, 0] + S[1, 1] + S[2, 2]
-    return [
-        J[3, 3],
-        J[0, 3],
-        J[1, 3],
-        J[2, 3],
-        tr - S[0, 0],
-        -S[0, 1],
-        tr - S[1, 1],
-        -S[0, 2],
-        -S[1, 2],
-        tr - S[2, 2],
-    ]
-
-
-def log_cholesky(J: ArrayLike) -> NDArray[np.float64]:
-    """The 10 log-Cholesky parameters of a positive definite pseudo-inertia (``J = U U^T``).
-
-    Parameters
-    ----------
-    J : array_like, shape (4, 4)
-        Positive definite pseudo-inertia.
-    """
-    J = np.asarray(J, dtype=np.float64)
-    Lf = np.linalg.cholesky(J[::-1, ::-1])
-    U = Lf[::-1, ::-1]
-    return np.array(
-        [
-            np.log(U[0, 0]),
-            U[0, 1],
-            U[0, 2],
-            U[0, 3],
-            np.log(U[1, 1]),
-            U[1, 2],
-            U[1, 3],
-            np.log(U[2, 2]),
-            U[2, 3],
-            np.log(U[3, 3]),
-        ]
-    )
-
-
-def _project_pd(J: NDArray[np.float64], floor: float) -> NDArray[np.float64]:
-    """Nearest matrix with eigenvalues >= floor (symmetric eigenvalue clipping)."""
-    w, V = np.linalg.eigh(0.5 * (J + J.T))
-    return (V * np.maximum(w, floor)) @ V.T
-
-
-def _phi_scale(phi_ref: NDArray[np.float64], n: int) -> NDArray[np.float64]:
-    """Typical size of each physical parameter (kg, kg m, kg m^2, N m...), for a scaled minimum norm."""
-    out = np.ones(14 * n)
-    for link in range(n):
-        v = phi_ref[10 * link : 10 * link + 10]
-        m = max(abs(v[0]), 1e-3)
-        inertia = max(abs(v[4]) + abs(v[6]) + abs(v[9]), 1e-2 * m) / 3
-        out[10 * link] = m
-        out[10 * link + 1 : 10 * link + 4] = np.maximum(np.abs(v[1:4]), 0.05 * m)
-        out[10 * link + 4 : 10 * link + 10] = np.maximum(np.abs(v[4:]), inertia)
-    out[10 * n : 11 * n] = np.maximum(np.abs(phi_ref[10 * n : 11 * n]), 1e-2)
-    return out
 
 
 class ConsistentLS(LinkEstimator):
@@ -412,127 +317,247 @@ def consistent_solution(
         whose consistency constraint holds the fit away from the unconstrained estimate).
     """
     started = time.perf_counter()
+    start = _search_start(robot, cols, x_hat, mask, eps)
+    if start.consistent and reference_weight == 0:
+        # x_hat has an eps-consistent standard vector: it is the (weighted least-squares) answer itself;
+        # the description decides the bodies in the directions it leaves open.
+        status = "unconstrained estimate is consistent"
+        return _answer(robot, cols, start, start.phi0, status, 0, [], describe=describe, started=started)
+    problem = _barrier_problem(start, R, scale2, reference_weight)
+    path = _central_path(problem, tol=tol, max_iter=max_iter)
+    if path.status != "converged":
+        warnings.warn(
+            f"the consistent fit stopped after {path.steps} Newton steps before its tolerance; the result is "
+            "consistent but may not be the closest one: raise max_iter or tol",
+            IdentificationWarning,
+            stacklevel=4,
+        )
+    phi_opt = np.zeros(14 * start.n)
+    phi_opt[problem.act] = problem.c0 + problem.G @ path.v
+    e = 10 * start.n + start.e_idx
+    phi_opt[e] = np.maximum(phi_opt[e], start.lb_e)
+    at_bound = _links_at_bound(problem, start, path)
+    return _answer(
+        robot, cols, start, phi_opt, path.status, path.steps, at_bound, describe=describe, started=started
+    )
+
+
+@dataclass(frozen=True)
+class _SearchStart:
+    """Phase 1 of :func:`consistent_solution`: where the search starts, and the margins it keeps.
+
+    ``phi0`` is the vector with ``x = x_hat`` closest to the URDF in a per-parameter scale ``D``
+    (masses move relative to the mass, inertias relative to the inertia, friction in N m).
+    """
+
+    n: int
+    mask: NDArray[np.bool_]  # identified parameters the estimate covers
+    P: NDArray[np.float64]  # their rows of the map from the physical vector
+    xm: NDArray[np.float64]  # the estimate of them
+    D: NDArray[np.float64]  # (14 n,) scale of each physical parameter
+    phi0: NDArray[np.float64]  # (14 n,) the start
+    J_ref: NDArray[np.float64]  # (n, 4, 4) the URDF's pseudo-inertias
+    eps_l: NDArray[np.float64]  # (n,) margin per link
+    J_ref_pd: NDArray[np.float64]  # (n, 4, 4) the described pseudo-inertias, safely positive definite
+    e_idx: NDArray[np.intp]  # extras in play, indices into the 4 n extras
+    lb_e: NDArray[np.float64]  # their lower bounds (0, or -inf for an offset)
+    e_scale: NDArray[np.float64]  # their scale
+
+    @property
+    def consistent(self) -> bool:
+        """Every start body is inside its margin and every extra at or above its bound."""
+        n = self.n
+        return all(
+            np.linalg.eigvalsh(pseudo_inertia(self.phi0[10 * k : 10 * k + 10])).min() > self.eps_l[k]
+            for k in range(n)
+        ) and np.all(self.phi0[10 * n + self.e_idx] >= self.lb_e)
+
+
+def _search_start(robot, cols: ColumnSet, x_hat, mask, eps) -> _SearchStart:
+    """Phase 1: the start closest to the URDF among the vectors with the estimated parameters."""
     n = cols.n
     mask = np.ones(cols.p, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
     P = cols.P[mask]
     xm = np.asarray(x_hat, dtype=np.float64)[mask]
-
     # extras in play: enabled ones that some parameter of the mask holds
     enabled = cols.enabled_extras & np.any(P[:, 10 * n :] != 0, axis=0)
     phi_ref = np.concatenate([robot.params, robot.armature * enabled[:n], np.zeros(3 * n)])
-    # start: the vector with x = x_hat closest to the URDF in a per-parameter scale (masses move
-    # relative to the mass, inertias relative to the inertia, friction in N m)
-    D = _phi_scale(phi_ref, n)
+    D = physical_scale(phi_ref, n)
     phi0 = phi_ref + D * np.linalg.lstsq(P * D, xm - P @ phi_ref, rcond=None)[0]
-    J_ref = pseudo_inertia(robot.params.reshape(n, 10))
-    eps_l, J_ref_pd = _reference_bodies(robot.params, eps)
+    eps_l, J_ref_pd = reference_bodies(robot.params, eps)
     e_idx = np.flatnonzero(enabled)
     kinds = [EXTRA_KINDS[e // n] for e in e_idx]
     lb_e = np.array([-np.inf if k == "offset" else 0.0 for k in kinds])
     e0 = np.maximum(phi0[10 * n + e_idx], lb_e)
     e_scale = np.maximum(np.abs(e0), max(1e-2 * float(np.abs(e0).max(initial=0.0)), 1e-6))
+    return _SearchStart(
+        n=n,
+        mask=mask,
+        P=P,
+        xm=xm,
+        D=D,
+        phi0=phi0,
+        J_ref=pseudo_inertia(robot.params.reshape(n, 10)),
+        eps_l=eps_l,
+        J_ref_pd=J_ref_pd,
+        e_idx=e_idx,
+        lb_e=lb_e,
+        e_scale=e_scale,
+    )
 
-    start_ok = all(
-        np.linalg.eigvalsh(pseudo_inertia(phi0[10 * k : 10 * k + 10])).min() > eps_l[k] for k in range(n)
-    ) and np.all(phi0[10 * n + e_idx] >= lb_e)
-    if start_ok and reference_weight == 0:
-        # x_hat has an eps-consistent standard vector: it is the (weighted least-squares) answer itself;
-        # the description decides the bodies in the directions it leaves open.
-        prior = {}
-        if describe:
-            phi0, prior = described_bodies(robot, cols, phi0, mask=mask, eps=eps_l)
-        return phi0, {
-            "status": "unconstrained estimate is consistent",
-            "iterations": 0,
-            "time_s": time.perf_counter() - started,
-            "eps": eps_l.tolist(),
-            "at_bound": [],
-            "prior": prior,
-        }
 
-    # Variables v = (y, w), the physical vector affine in them: y = R (x - x_hat) / sigma (whitened
-    # change of the identified parameters, so the data term is ||y||^2) and w coordinates of the
-    # directions P does not see (its null space, in the per-parameter scale D).
+@dataclass(frozen=True)
+class _BarrierProblem:
+    """Phase 2 of :func:`consistent_solution`: the convex problem in the variables ``v = (y, w)``.
+
+    ``y = R (x - x_hat) / sigma`` is the whitened change of the identified parameters (the data term is
+    ``||y||^2``), ``w`` the coordinates of the directions ``P`` does not see (its null space, in the
+    per-parameter scale); the physical parameters in play are ``phi[act] = c0 + G v``.
+    """
+
+    act: NDArray[np.intp]  # physical parameters in play: every link's, then the extras in play
+    c0: NDArray[np.float64]
+    G: NDArray[np.float64]
+    v0: NDArray[np.float64]  # a strictly feasible start
+    weight: NDArray[np.float64]  # of (v - centre)^2: 1 for y, _RHO for w
+    centre: NDArray[np.float64]
+    B_all: NDArray[np.float64]  # (n, nv, 4, 4): dJ_l / dv
+    lower: NDArray[np.bool_]  # extras in play with a finite lower bound
+    Ge: NDArray[np.float64]  # their rows of G
+    lbe: NDArray[np.float64]  # their bounds
+    se: NDArray[np.float64]  # their scale
+    shift: NDArray[np.float64]  # (n, 4, 4): eps_l I
+    reference_weight: float
+    Jr_inv: NDArray[np.float64]  # (n, 4, 4): inverses of the described pseudo-inertias
+    logdet_ref: NDArray[np.float64]
+    prior_grad: NDArray[np.float64]  # the gradient of the pull's trace term (constant)
+
+    @property
+    def nu(self) -> int:
+        """The barrier parameter: 4 per pseudo-inertia, 1 per bound."""
+        return 4 * len(self.shift) + int(self.lower.sum())
+
+    def distance(self, v):
+        """The data term and the vanishing pull: ``sum weight (v - centre)^2``."""
+        return float(np.sum(self.weight * (v - self.centre) ** 2))
+
+    def bodies(self, v):
+        """The pseudo-inertias at ``v`` and the slack of the bounded extras."""
+        n = len(self.shift)
+        pa = self.c0 + self.G @ v
+        return pseudo_inertia(pa[: 10 * n].reshape(n, 10)), pa[10 * n :][self.lower] - self.lbe
+
+    def value(self, v, mu):
+        """The barrier objective at ``v`` (inf outside the feasible set)."""
+        Js, slack = self.bodies(v)
+        if np.any(slack <= 0):
+            return np.inf
+        out = self.distance(v) - mu * float(np.sum(np.log(slack / self.se)))
+        try:
+            L = np.linalg.cholesky(Js - self.shift)
+        except np.linalg.LinAlgError:
+            return np.inf
+        out -= 2 * mu * float(np.log(np.diagonal(L, axis1=1, axis2=2)).sum())
+        if self.reference_weight > 0:
+            sign, logdet = np.linalg.slogdet(Js)
+            if np.any(sign <= 0):
+                return np.inf
+            out += self.reference_weight * float(
+                np.sum(np.einsum("lab,lba->l", self.Jr_inv, Js) - logdet + self.logdet_ref - 4)
+            )
+        return out
+
+    def newton_step(self, v, mu):
+        """The Newton step at ``v`` and its decrement."""
+        Js, slack = self.bodies(v)
+        grad = 2 * self.weight * (v - self.centre) + self.prior_grad
+        hess = np.diag(2 * self.weight)
+        add_neg_logdet(Js - self.shift, self.B_all, mu, grad, hess)
+        if self.reference_weight > 0:
+            add_neg_logdet(Js, self.B_all, self.reference_weight, grad, hess)
+        grad -= mu * (self.Ge.T @ (1.0 / slack))
+        hess += mu * (self.Ge.T / slack**2) @ self.Ge
+        step = newton_direction(hess, grad)
+        return step, float(-grad @ step)
+
+
+def _barrier_problem(start: _SearchStart, R, scale2: float, reference_weight: float) -> _BarrierProblem:
+    """Phase 2: the variables, the map to the physical vector, and a strictly feasible start."""
+    n, e_idx = start.n, start.e_idx
     act = np.concatenate([np.arange(10 * n), 10 * n + e_idx])
-    D_a = D[act]
-    Uk, sk, Vkt = np.linalg.svd(P[:, act] * D_a, full_matrices=True)
+    D_a = start.D[act]
+    Uk, sk, Vkt = np.linalg.svd(start.P[:, act] * D_a, full_matrices=True)
     rank = int(np.sum(sk > 1e-12 * sk[0]))
     to_psi = (Vkt[:rank].T / sk[:rank]) @ Uk[:, :rank].T  # minimum-norm psi = phi / D of an x
     V2 = Vkt[rank:].T
     sigma = float(np.sqrt(scale2))
     Rinv = scipy.linalg.solve_triangular(R, np.eye(len(R)), check_finite=False)
-    c0 = D_a * (to_psi @ xm)
     G = np.hstack([D_a[:, None] * (to_psi @ (sigma * Rinv)), D_a[:, None] * V2])  # phi_a = c0 + G v
-    ny, nv = len(xm), G.shape[1]
-    weight = np.concatenate([np.ones(ny), np.full(nv - ny, _RHO)])
-    centre = np.concatenate([np.zeros(ny), V2.T @ (phi0[act] / D_a)])
-    B = [np.einsum("ik,iab->kab", G[10 * link : 10 * link + 10], _E) for link in range(n)]  # dJ_l / dv
-    lower = np.isfinite(lb_e)
-    Ge, lbe, se = G[10 * n :][lower], lb_e[lower], e_scale[lower]
-
-    # a strictly feasible start: the start bodies pushed inside by 1 % of their size, extras too
-    phi_f = phi0.copy()
-    for link in range(n):
-        margin = eps_l[link] + 1e-2 * max(float(np.linalg.eigvalsh(J_ref[link]).max()), 1e-6)
-        Jf = _project_pd(pseudo_inertia(phi_f[10 * link : 10 * link + 10]), margin)
-        phi_f[10 * link : 10 * link + 10] = standard_from_pseudo_inertia(Jf)
-    phi_f[10 * n + e_idx] = np.maximum(phi_f[10 * n + e_idx], np.where(lower, lb_e + 1e-2 * e_scale, -np.inf))
-    v = np.concatenate([R @ (P[:, act] @ phi_f[act] - xm) / sigma, V2.T @ (phi_f[act] / D_a)])
-
-    shift = eps_l[:, None, None] * np.eye(4)  # (n, 4, 4)
-    Jr_inv = np.linalg.inv(J_ref_pd)  # (n, 4, 4)
-    logdet_ref = np.linalg.slogdet(J_ref_pd)[1]
-    B_all = np.stack(B)  # (n, nv, 4, 4)
-    prior_grad = (
-        reference_weight * np.einsum("lab,lkba->k", Jr_inv, B_all) if reference_weight > 0 else np.zeros(nv)
+    ny, nv = len(start.xm), G.shape[1]
+    lower = np.isfinite(start.lb_e)
+    phi_f = _interior_point(start, lower)
+    B_all = pseudo_inertia_jacobian(G, n)
+    Jr_inv = np.linalg.inv(start.J_ref_pd)
+    return _BarrierProblem(
+        act=act,
+        c0=D_a * (to_psi @ start.xm),
+        G=G,
+        v0=np.concatenate([R @ (start.P[:, act] @ phi_f[act] - start.xm) / sigma, V2.T @ (phi_f[act] / D_a)]),
+        weight=np.concatenate([np.ones(ny), np.full(nv - ny, _RHO)]),
+        centre=np.concatenate([np.zeros(ny), V2.T @ (start.phi0[act] / D_a)]),
+        B_all=B_all,
+        lower=lower,
+        Ge=G[10 * n :][lower],
+        lbe=start.lb_e[lower],
+        se=start.e_scale[lower],
+        shift=start.eps_l[:, None, None] * np.eye(4),
+        reference_weight=reference_weight,
+        Jr_inv=Jr_inv,
+        logdet_ref=np.linalg.slogdet(start.J_ref_pd)[1],
+        prior_grad=(
+            reference_weight * np.einsum("lab,lkba->k", Jr_inv, B_all)
+            if reference_weight > 0
+            else np.zeros(nv)
+        ),
     )
 
-    def bodies(v):
-        pa = c0 + G @ v
-        return pseudo_inertia(pa[: 10 * n].reshape(n, 10)), pa[10 * n :][lower] - lbe
 
-    def value(v, mu):
-        Js, slack = bodies(v)
-        if np.any(slack <= 0):
-            return np.inf
-        out = float(np.sum(weight * (v - centre) ** 2)) - mu * float(np.sum(np.log(slack / se)))
-        try:
-            L = np.linalg.cholesky(Js - shift)
-        except np.linalg.LinAlgError:
-            return np.inf
-        out -= 2 * mu * float(np.log(np.diagonal(L, axis1=1, axis2=2)).sum())
-        if reference_weight > 0:
-            sign, logdet = np.linalg.slogdet(Js)
-            if np.any(sign <= 0):
-                return np.inf
-            out += reference_weight * float(
-                np.sum(np.einsum("lab,lba->l", Jr_inv, Js) - logdet + logdet_ref - 4)
-            )
-        return out
+def _interior_point(start: _SearchStart, lower: NDArray[np.bool_]) -> NDArray[np.float64]:
+    """A strictly feasible physical vector: the start bodies pushed inside by 1 % of their size, extras too."""
+    n, e_idx = start.n, start.e_idx
+    phi_f = start.phi0.copy()
+    for link in range(n):
+        margin = start.eps_l[link] + 1e-2 * max(float(np.linalg.eigvalsh(start.J_ref[link]).max()), 1e-6)
+        Jf = clip_eigenvalues(pseudo_inertia(phi_f[10 * link : 10 * link + 10]), margin)
+        phi_f[10 * link : 10 * link + 10] = standard_from_pseudo_inertia(Jf)
+    floor = np.where(lower, start.lb_e + 1e-2 * start.e_scale, -np.inf)
+    phi_f[10 * n + e_idx] = np.maximum(phi_f[10 * n + e_idx], floor)
+    return phi_f
 
-    def newton_step(v, mu):
-        Js, slack = bodies(v)
-        grad = 2 * weight * (v - centre) + prior_grad
-        hess = np.diag(2 * weight)
-        _add_neg_logdet(Js - shift, B_all, mu, grad, hess)
-        if reference_weight > 0:
-            _add_neg_logdet(Js, B_all, reference_weight, grad, hess)
-        grad -= mu * (Ge.T @ (1.0 / slack))
-        hess += mu * (Ge.T / slack**2) @ Ge
-        step = _newton_direction(hess, grad)
-        return step, float(-grad @ step)
 
-    nu = 4 * n + int(lower.sum())  # barrier parameter: 4 per pseudo-inertia, 1 per bound
-    mu = max(float(np.sum(weight * (v - centre) ** 2)) / nu, 1e-6)
+@dataclass(frozen=True)
+class _CentralPath:
+    """Phase 3 of :func:`consistent_solution`: where the barrier method stopped."""
+
+    v: NDArray[np.float64]
+    mu: float  # the last barrier weight
+    steps: int  # Newton steps in all
+    status: str  # "converged" or "max_iter"
+
+
+def _central_path(problem: _BarrierProblem, *, tol: float, max_iter: int) -> _CentralPath:
+    """Phase 3: centring by damped Newton steps, dividing the barrier weight until the gap is closed."""
+    v, nu = problem.v0, problem.nu
+    mu = max(problem.distance(v) / nu, 1e-6)
     steps, status = 0, "converged"
     while True:
         while steps < max_iter:  # centring: damped Newton with a backtracking line search
-            step, decrement = newton_step(v, mu)
+            step, decrement = problem.newton_step(v, mu)
             steps += 1
-            f0, t = value(v, mu), 1.0
+            f0, t = problem.value(v, mu), 1.0
             if decrement <= 1e-9 * max(1.0, abs(f0)):
                 break
-            while value(v + t * step, mu) > f0 - 0.25 * t * decrement:
+            while problem.value(v + t * step, mu) > f0 - 0.25 * t * decrement:
                 t *= 0.5
                 if t < 1e-10:  # no descent left at rounding level: centred as well as it can be
                     break
@@ -542,241 +567,58 @@ def consistent_solution(
         if steps >= max_iter:
             status = "max_iter"
             break
-        if nu * mu <= float(tol) * max(1.0, float(np.sum(weight * (v - centre) ** 2))):
+        if nu * mu <= float(tol) * max(1.0, problem.distance(v)):
             break
         mu *= _MU_FACTOR
-    if status != "converged":
-        warnings.warn(
-            f"the consistent fit stopped after {steps} Newton steps before its tolerance; the result is "
-            "consistent but may not be the closest one: raise max_iter or tol",
-            IdentificationWarning,
-            stacklevel=4,
-        )
-    phi_opt = np.zeros(14 * n)
-    phi_opt[act] = c0 + G @ v
-    phi_opt[10 * n + e_idx] = np.maximum(phi_opt[10 * n + e_idx], lb_e)
-    # A link is held at the bound when its constraint carries a multiplier the data feel: the barrier's
-    # multiplier mu (J - eps I)^-1, times the body's size, is the fall of the distance (in squared standard
-    # deviations) per relative loosening of the bound.  The vanishing pull of the unseen directions toward
-    # the start leaves multipliers of order _RHO; the data's are of order one.
+    return _CentralPath(v=v, mu=mu, steps=steps, status=status)
+
+
+def _links_at_bound(problem: _BarrierProblem, start: _SearchStart, path: _CentralPath) -> list[int]:
+    """Phase 4: the 1-based links whose consistency constraint holds the fit.
+
+    A link is held at the bound when its constraint carries a multiplier the data feel: the barrier's
+    multiplier mu (J - eps I)^-1, times the body's size, is the fall of the distance (in squared standard
+    deviations) per relative loosening of the bound.  The vanishing pull of the unseen directions toward
+    the start leaves multipliers of order _RHO; the data's are of order one.
+    """
     at_bound = []
-    Js, _ = bodies(v)
+    Js, _ = problem.bodies(path.v)
     for link, J in enumerate(Js):
-        size = max(float(np.linalg.eigvalsh(J_ref_pd[link]).max()), 1e-6)
+        size = max(float(np.linalg.eigvalsh(start.J_ref_pd[link]).max()), 1e-6)
         # (with a pull toward the description, whose log-det keeps every body off the bound, none is)
-        lam = mu * float(np.linalg.eigvalsh(np.linalg.inv(J - eps_l[link] * np.eye(4))).max())
+        lam = path.mu * float(np.linalg.eigvalsh(np.linalg.inv(J - start.eps_l[link] * np.eye(4))).max())
         if lam * size > _BOUND_FORCE:
             at_bound.append(link + 1)
+    return at_bound
+
+
+def _answer(
+    robot,
+    cols: ColumnSet,
+    start: _SearchStart,
+    phi: NDArray[np.float64],
+    status: str,
+    iterations: int,
+    at_bound: list[int],
+    *,
+    describe: bool,
+    started: float,
+) -> tuple[NDArray[np.float64], dict[str, Any]]:
+    """Phase 4: the bodies nearest the description (unless ``describe`` is False) and the solver's record.
+
+    ``started`` is the :func:`time.perf_counter` reading when the solution began.
+    """
     prior = {}
     if describe:
-        phi_opt, prior = described_bodies(robot, cols, phi_opt, mask=mask, eps=eps_l)
-    return phi_opt, {
+        phi, prior = described_bodies(robot, cols, phi, mask=start.mask, eps=start.eps_l)
+    return phi, {
         "status": status,
-        "iterations": steps,
+        "iterations": iterations,
         "time_s": time.perf_counter() - started,
-        "eps": eps_l.tolist(),
+        "eps": start.eps_l.tolist(),
         "at_bound": at_bound,
         "prior": prior,
     }
-
-
-def _reference_bodies(
-    ref_params: NDArray[np.float64], eps: float | ArrayLike
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Per-link margin and described pseudo-inertia, as the consistent fit and its bodies use them.
-
-    The margin is ``eps``, lowered to half the smallest eigenvalue of a thinner URDF body; the described
-    pseudo-inertia is the URDF's, lifted to at least twice that margin (and 1e-6 of its size).
-
-    Returns
-    -------
-    eps_l : ndarray, shape (n,)
-    J_ref_pd : ndarray, shape (n, 4, 4)
-    """
-    J_ref = pseudo_inertia(np.asarray(ref_params, dtype=np.float64).reshape(-1, 10))
-    eps_in = np.broadcast_to(np.asarray(eps, dtype=np.float64), (len(J_ref),))
-    eps_l = np.empty(len(J_ref))
-    J_pd = np.empty_like(J_ref)
-    for link, J in enumerate(J_ref):
-        w = np.linalg.eigvalsh(J)
-        eps_l[link] = min(float(eps_in[link]), 0.5 * float(w.min())) if w.min() > 0 else float(eps_in[link])
-        J_pd[link] = _project_pd(J, max(1e-6 * max(float(w.max()), 1e-6), 2 * eps_l[link]))
-    return eps_l, J_pd
-
-
-def _add_neg_logdet(M, B_all, coef: float, grad, hess) -> None:
-    """Add the derivatives of ``-coef sum_l log det M_l`` (``dM_l / dv_k = B_all[l, k]``) in place.
-
-    Gradient ``-coef tr(M^-1 B_k)``, Hessian ``coef tr(M^-1 B_k M^-1 B_j)``, batched over the links.
-    """
-    n, nv = B_all.shape[:2]
-    Li = np.linalg.inv(np.linalg.cholesky(M))  # (n, 4, 4), lower triangular
-    T = (Li[:, None] @ B_all @ np.swapaxes(Li, 1, 2)[:, None]).reshape(n, nv, 16)
-    grad -= coef * T[:, :, [0, 5, 10, 15]].sum(axis=(0, 2))
-    Tm = np.ascontiguousarray(T.transpose(1, 0, 2)).reshape(nv, 16 * n)
-    hess += coef * (Tm @ Tm.T)
-
-
-def _newton_direction(hess, grad):
-    """The Newton step ``-hess^-1 grad``, Jacobi-scaled (entries span many decades); least squares if singular."""
-    d = 1.0 / np.sqrt(np.maximum(np.diag(hess), 1e-300))
-    scaled = hess * np.outer(d, d)
-    try:
-        c = scipy.linalg.cho_factor(scaled, check_finite=False)
-        step = -d * scipy.linalg.cho_solve(c, d * grad, check_finite=False)
-        if not np.all(np.isfinite(step)):
-            raise np.linalg.LinAlgError
-    except (np.linalg.LinAlgError, ValueError):
-        step = -d * np.linalg.lstsq(scaled, d * grad, rcond=1e-14)[0]
-    return step
-
-
-def described_bodies(
-    robot,
-    cols: ColumnSet,
-    phi: ArrayLike,
-    *,
-    mask: NDArray[np.bool_] | None = None,
-    eps: float | ArrayLike = EPS,
-    max_iter: int = 200,
-) -> tuple[NDArray[np.float64], dict[str, Any]]:
-    """The bodies nearest the robot's description among those with the same identified parameters.
-
-    Joint torques determine only combinations of the links' standard parameters (the base parameters):
-    in every other direction any body is as good as another for the data, and a vanishing pull toward
-    an arbitrary start used to decide, which could put 60 kg on a 0.65 kg link.  Here the description
-    decides there: among the physical vectors ``phi`` with the same identified parameters (``P phi``
-    fixed, so the prediction of every torque is unchanged to rounding) and ``J_l >= eps_l I``, the one
-    that minimises the entropic divergence of every body from its description,
-
-        sum_l  tr(J_l,ref^-1 J_l) - log det(J_l - eps_l I)     (Lee and Wensing's log-det divergence,
-                                                                with the margin in the log-det)
-
-    plus, for armature and friction in play, ``((e - e_ref) / e_scale)^2`` with a vanishing barrier at
-    their lower bounds.  The divergence is unit-free and treats mass, first and second moments alike:
-    a change of a base parameter that could go into a link's mass or its inertia goes where it is
-    the smaller change relative to that body, and a direction the data do not see stays at the
-    description.  A convex problem in the null-space coordinates, solved by damped Newton steps from
-    the feasible ``phi``.
-
-    Parameters
-    ----------
-    robot : RobotModel
-        The robot; its URDF/DH bodies are the description.
-    cols : ColumnSet
-        The identified parameters.
-    phi : array_like, shape (14 n,)
-        A physical vector with ``J_l - eps_l I`` positive semidefinite.
-    mask : ndarray of bool, shape (p,), optional
-        Identified parameters held fixed (default all).
-    eps : float or array_like
-        Consistency margin per link (kg m^2).
-    max_iter : int
-        Most Newton steps.
-
-    Returns
-    -------
-    phi : ndarray, shape (14 n,)
-        The physical vector with the same identified parameters, nearest the description.
-    info : dict
-        ``iterations``, ``directions`` (how many directions the data leave to the description) and
-        ``divergence`` (the summed divergence before and after).
-    """
-    phi = np.asarray(phi, dtype=np.float64).copy()
-    n = cols.n
-    mask = np.ones(cols.p, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
-    P = cols.P[mask]
-    enabled = cols.enabled_extras & np.any(P[:, 10 * n :] != 0, axis=0)
-    e_idx = np.flatnonzero(enabled)
-    act = np.concatenate([np.arange(10 * n), 10 * n + e_idx])
-    ref = np.concatenate([robot.params, robot.armature * enabled[:n], np.zeros(3 * n)])
-    D = _phi_scale(ref, n)[act]
-    Pa = P[:, act] * D
-    if Pa.size:
-        _, sk, Vkt = np.linalg.svd(Pa, full_matrices=True)
-        rank = int(np.sum(sk > 1e-10 * sk[0])) if sk.size and sk[0] > 0 else 0
-    else:
-        Vkt, rank = np.eye(len(act)), 0
-    N = D[:, None] * Vkt[rank:].T  # phi_a = phi_a,0 + N w keeps P phi
-    info: dict[str, Any] = {"iterations": 0, "directions": int(N.shape[1])}
-    if N.shape[1] == 0:
-        return phi, info
-    eps_l, J_ref_pd = _reference_bodies(robot.params, eps)
-    A = np.linalg.inv(J_ref_pd)  # (n, 4, 4)
-    shift = eps_l[:, None, None] * np.eye(4)
-    kinds = [EXTRA_KINDS[e // n] for e in e_idx]
-    lb = np.array([-np.inf if k == "offset" else 0.0 for k in kinds])
-    e_ref = ref[10 * n + e_idx]
-    e_scale = np.maximum(np.abs(phi[10 * n + e_idx]), 1e-6)
-    e_scale = np.maximum(e_scale, 1e-2 * float(e_scale.max(initial=1e-6)))
-    bounded = np.isfinite(lb)
-    # the start must be strictly inside: nudge extras sitting on their bound
-    e0 = phi[10 * n + e_idx]
-    phi[10 * n + e_idx] = np.where(bounded & (e0 <= lb + 1e-9 * e_scale), lb + 1e-9 * e_scale, e0)
-    base = phi[act].copy()
-    B_all = np.stack([np.einsum("ik,iab->kab", N[10 * link : 10 * link + 10], _E) for link in range(n)])
-    trace_grad = np.einsum("lab,lkba->k", A, B_all)  # the gradient of sum_l tr(A_l J_l): constant
-    Ne = N[10 * n :]
-    kappa = 1e-9  # barrier weight of the extras' bounds (relative to the unit pull)
-
-    def parts(w):
-        pa = base + N @ w
-        return pseudo_inertia(pa[: 10 * n].reshape(n, 10)), pa[10 * n :]
-
-    def value(w):
-        Js, e = parts(w)
-        slack = (e - lb)[bounded]
-        if np.any(slack <= 0):
-            return np.inf
-        out = _EXTRA_PULL * float(np.sum(((e - e_ref) / e_scale) ** 2)) - kappa * float(
-            np.sum(np.log(slack / e_scale[bounded]))
-        )
-        try:
-            L = np.linalg.cholesky(Js - shift)
-        except np.linalg.LinAlgError:
-            return np.inf
-        logdet = 2 * float(np.log(np.diagonal(L, axis1=1, axis2=2)).sum())
-        return out + float(np.einsum("lab,lba->", A, Js)) - logdet
-
-    w = np.zeros(N.shape[1])
-    f = value(w)
-    if not np.isfinite(f):  # the start sits on the margin: nothing safe to move
-        return phi, info
-    f_start = f
-    for step_count in range(1, max_iter + 1):
-        Js, e = parts(w)
-        grad = 2 * _EXTRA_PULL * Ne.T @ ((e - e_ref) / e_scale**2)
-        hess = 2 * _EXTRA_PULL * (Ne.T / e_scale**2) @ Ne
-        slack = (e - lb)[bounded]
-        Nb = Ne[bounded]
-        grad -= kappa * Nb.T @ (1.0 / slack)
-        hess += kappa * (Nb.T / slack**2) @ Nb
-        grad += trace_grad
-        _add_neg_logdet(Js - shift, B_all, 1.0, grad, hess)
-        step = _newton_direction(hess, grad)
-        decrement = float(-grad @ step)
-        info["iterations"] = step_count
-        if decrement <= 1e-10 * max(1.0, abs(f)):
-            break
-        t = 1.0
-        while True:
-            f_new = value(w + t * step)
-            if f_new <= f - 0.25 * t * decrement:
-                break
-            t *= 0.5
-            if t < 1e-12:
-                break
-        if t < 1e-12:
-            break
-        w, f = w + t * step, f_new
-    target = P[:, act] @ base
-    moved = base + N @ w
-    # back onto the affine set exactly (the null space is numerical: rounding of its basis)
-    moved += np.linalg.lstsq(P[:, act], target - P[:, act] @ moved, rcond=None)[0]
-    phi[act] = moved
-    phi[10 * n + e_idx] = np.maximum(phi[10 * n + e_idx], lb)
-    info["divergence"] = {"start": f_start, "end": f}
-    return phi, info
 
 
 def consistent_projection(
@@ -848,59 +690,3 @@ def consistent_projection(
         x[idx[e]] = x_hat[idx[e]] - Hee_inv_Hes @ (xs - x_hat[idx[s]])
         x[idx[s]] = xs
     return x, phi, solver
-
-
-def link_inertials(standard: ArrayLike) -> list[dict[str, Any]]:
-    """Mass, centre of mass and inertia about it of every link, as a URDF ``<inertial>`` takes them.
-
-    Parameters
-    ----------
-    standard : array_like, shape (10 n,)
-        Standard parameters ``[m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz]`` per link, about the
-        link frame's origin (kg, kg m, kg m^2).
-
-    Returns
-    -------
-    list of dict
-        Per link: ``mass`` (kg), ``com`` (m, link frame), ``inertia_com`` ``[ixx, ixy, ixz, iyy, iyz,
-        izz]`` (kg m^2, about the centre of mass, link-frame axes; URDF's order), ``standard`` (the
-        10 values given) and ``min_eigenvalue`` of the pseudo-inertia (kg m^2; > 0: a real body).
-    """
-    p = np.asarray(standard, dtype=np.float64).reshape(-1, 10)
-    out = []
-    for v in p:
-        m = float(v[0])
-        c = v[1:4] / m if m > 0 else np.zeros(3)
-        Io = np.array([[v[4], v[5], v[7]], [v[5], v[6], v[8]], [v[7], v[8], v[9]]])
-        Ic = Io - m * (float(c @ c) * np.eye(3) - np.outer(c, c))
-        out.append(
-            {
-                "mass": m,
-                "com": [float(a) for a in c],
-                "inertia_com": [
-                    float(Ic[0, 0]),
-                    float(Ic[0, 1]),
-                    float(Ic[0, 2]),
-                    float(Ic[1, 1]),
-                    float(Ic[1, 2]),
-                    float(Ic[2, 2]),
-                ],
-                "standard": [float(a) for a in v],
-                "min_eigenvalue": float(np.linalg.eigvalsh(pseudo_inertia(v)).min()),
-            }
-        )
-    return out
-
-
-def is_consistent(params: ArrayLike, tol: float = 0.0) -> NDArray[np.bool_]:
-    """Whether each link's standard parameters have a positive definite pseudo-inertia.
-
-    Parameters
-    ----------
-    params : array_like, shape (10 n,)
-        Standard parameters.
-    tol : float
-        Smallest eigenvalue accepted (kg m^2).
-    """
-    J = pseudo_inertia(np.asarray(params, dtype=np.float64).reshape(-1, 10))
-    return np.array([scipy.linalg.eigvalsh(j).min() > tol for j in J])
