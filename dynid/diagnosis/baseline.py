@@ -40,6 +40,7 @@ __all__ = [
     "ModelStructure",
     "Sample",
     "Side",
+    "StateNoise",
     "check_training_length",
     "crossfit_residual",
     "excess_over_floor",
@@ -49,6 +50,7 @@ __all__ = [
     "sample",
     "side",
     "state_estimation_variance",
+    "state_noise",
 ]
 
 _STATE_FACTOR = 2.0  # state filter cut-off over the parallel filter's in the refit
@@ -457,6 +459,79 @@ def state_estimation_variance(
     tau = prep.filter(np.einsum("mnk,k->mn", _structure_columns(structure, prep.q, prep.dq, prep.ddq), x))
     change = tau[s.rows] - predict(s.X0, x, None, None)
     return mse(change, s.moving) / sigma**2, step
+
+
+STATE_DRAWS = 3
+"""Draws of the angles' error through which a candidate's gain from the state estimation is measured
+(:class:`StateNoise`)."""
+
+
+@dataclass(frozen=True, eq=False)
+class StateNoise:
+    """Draws of the quantised angles' error put through the held-out preparation: what the candidates'
+    columns and the baseline's prediction share of it (errors in the variables).
+
+    The angles are differentiated twice, so their error reaches every column built from the states: the
+    baseline's prediction, whose error is part of the held-out residual, and a candidate's columns.  A
+    candidate whose columns move with that error (second derivatives of the torque: elasticity, backlash)
+    cancels part of the residual's share of it, on held-out data as on training data, with no effect
+    behind it (:func:`dynid.diagnosis.screening.state_gain`).  Each draw moves the held-out angles by a
+    white error uniform within the encoder's step, as :func:`state_estimation_variance` does (the first
+    draw is its draw), and prepares them as the held-out run.
+
+    Attributes
+    ----------
+    sides : list of Side
+        Per draw, the held-out run with its angles moved, with the baseline refit's torque (the
+        candidates' columns are built from it).
+    dX : list of ndarray, shape (m, n, k0)
+        Per draw, the change of the filtered baseline columns at the rows used.
+    """
+
+    sides: list[Side]
+    dX: list[NDArray[np.float64]]
+
+
+def state_noise(
+    structure: ModelStructure, ds: Dataset, s: Sample, x: NDArray[np.float64], *, draws: int = STATE_DRAWS
+) -> StateNoise | None:
+    """The held-out run's draws of the angles' error (:class:`StateNoise`); None when the angles are not
+    quantised or the preparation keeps other rows.
+
+    Parameters
+    ----------
+    structure : ModelStructure
+    ds : Dataset
+        The held-out data as given.
+    s : Sample
+        Its prepared sample (:func:`sample`).
+    x : ndarray, shape (k0,)
+        The baseline refit's coefficients.
+    draws : int
+        Draws, seeded 0, 1, ... (reproducible).
+    """
+    from dataclasses import replace
+
+    from dynid.validation.noise import encoder_step
+
+    step = encoder_step(ds.q)
+    if not np.any(step > 0):
+        return None
+    settings = Preprocessing.from_settings(structure.preprocessing)
+    sides, dX = [], []
+    for seed in range(draws):
+        rng = np.random.default_rng(seed)
+        moved = replace(ds, q=ds.q + rng.uniform(-0.5, 0.5, ds.q.shape) * step[None, :])
+        prep = prepare(moved, settings, n_joints=structure.robot.n)
+        if len(prep.rows) != len(s.prep.rows) or np.any(prep.rows != s.prep.rows):
+            return None
+        X_full = _structure_columns(structure, prep.q, prep.dq, prep.ddq)
+        drawn = Sample(
+            prep=prep, rows=s.rows, y=s.y, X0=prep.filter(X_full)[s.rows], X_full=X_full, moving=s.moving
+        )
+        sides.append(side(drawn, structure, x))
+        dX.append(drawn.X0 - s.X0)
+    return StateNoise(sides=sides, dX=dX)
 
 
 def crossfit_residual(

@@ -28,6 +28,8 @@ nonlinear_viscous         dq_j |dq_j|,  dq_j^3                                 -
 payload                   (absorbed by the base parameters: parametric test)   -
 ========================  ===================================================  ===================
 
+A delay also has a form common to all joints (``delay@all``, :func:`dynid.identify.effect_terms.common_term`): the delay column on
+every joint with one coefficient, so that one lag of the torques against the angles is one candidate.
 ``tau`` is the identified model's predicted torque (the "first fit"); for backlash its links' share,
 which the transmission carries (the motor's armature and friction act before the gear).
 No two candidates on a joint span the same columns: a load friction that differs between driving and
@@ -52,11 +54,13 @@ from dataclasses import dataclass
 
 from dynid.identify.effect_terms import BUILDERS as _BUILDERS  # noqa: F401 (the builders, by effect)
 from dynid.identify.effect_terms import (
+    COMMON_EFFECTS,
     Candidate,
     FeatureSource,
     backlash_grid,
     candidate_columns,
     cogging_grid,
+    common_term,
     stribeck_grid,
     temperature_grid,
 )
@@ -109,6 +113,8 @@ CANDIDATES: dict[str, _Spec] = {
 
 def excitation_hint(cand: Candidate) -> str:
     """Words for the motion that excites a candidate."""
+    if cand.joint is None and cand.effect in COMMON_EFFECTS:
+        return CANDIDATES[cand.effect].excites.replace("of joint {j}", "of every joint")
     j = cand.joint + 1 if cand.joint is not None else (cand.joints[0] + 1 if cand.joints else 1)
     return CANDIDATES[cand.effect].excites.format(j=j)
 
@@ -207,6 +213,11 @@ def enumerate_candidates(
                     grid = [{**g, "motor": 1.0} for g in grid]
                 label = f"{name} on joint {j + 1}"
                 out.append([Candidate(name, j, (j,), g, label) for g in grid])
+            if name in COMMON_EFFECTS and n >= 2:
+                # One cause on every joint (a delay of the torques against the angles) is one candidate
+                # with one parameter beside the per-joint ones: accepted whole, not joint by joint up to
+                # the cap of max_effects.
+                out.append([common_term(name, n)])
         elif name == "base_tilt":
             out.append([Candidate(name, None, tuple(range(n)), {}, "base tilt (gravity direction)")])
         elif name == "coupled_friction" and n >= 2:

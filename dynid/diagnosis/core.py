@@ -25,7 +25,10 @@ Method, in the order it runs:
    invisible to the serial correlation; its covariance is a sandwich over blocks of the training data
    with their lags weighed as the test weighs its block means, so noise correlated beyond a block
    counts), and cross-fitted with the baseline on the training data and the
-   other held-out folds (the same test, block means capped as the excess test's).  Its p-value is the
+   other held-out folds (the same test, block means capped as the excess test's).  On both, what the
+   candidate gains by cancelling the error that differentiating quantised angles leaves in the baseline's
+   prediction and in its own columns (errors in the variables, measured on draws of the encoder's error:
+   :func:`dynid.diagnosis.screening.state_gain`) is taken off its gain and closure first.  Its p-value is the
    smaller of the two, doubled, then corrected for the many candidates in two families at half the
    level each: Holm across all of them, and Holm across the ``screen_top`` that the training data alone
    rank first (the Wald test of their columns on the training residual, which the held-out noise does
@@ -220,6 +223,7 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
     tr = bl.side(tr_sample, structure, base.x)
     ho = bl.side(ho_sample, structure, base.x)
     state_var, _ = bl.state_estimation_variance(structure, heldout, ho_sample, base.x, sigma)
+    state = bl.state_noise(structure, heldout, ho_sample, base.x)
     train_noise = _training_noise(tr)
     # Does the training refit's residual repeat across the training periods?  Evidence on the training
     # run alone (a lack-of-fit test against the pure error of its replicates); no floor enters.
@@ -234,7 +238,14 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
     del tr_sample, ho_sample  # their full-rate columns are no longer needed
     held = bl.heldout_baseline(model, heldout, ho, base.x, sigma)
     ctx = Context(
-        tr=tr, ho=ho, sigma=sigma, block=block, mask=ho.moving, min_delay=float(np.median(np.diff(heldout.t)))
+        tr=tr,
+        ho=ho,
+        sigma=sigma,
+        block=block,
+        mask=ho.moving,
+        min_delay=float(np.median(np.diff(heldout.t))),
+        state=state,
+        alpha=settings.alpha,
     )
     # The baseline cross-fitted on the held-out folds: the excess test's residual
     # (:func:`~dynid.diagnosis.baseline.crossfit_residual`) and the first round's cross-fitted footing.

@@ -29,6 +29,7 @@ from dynid.exceptions import UsageError
 
 __all__ = [
     "BUILDERS",
+    "COMMON_EFFECTS",
     "EFFECT_GRIDS",
     "TAU_EFFECTS",
     "TIME_EFFECTS",
@@ -39,6 +40,7 @@ __all__ = [
     "candidate_columns",
     "coefficient_names",
     "cogging_grid",
+    "common_term",
     "effect_from_dict",
     "effect_to_dict",
     "effect_values",
@@ -202,9 +204,12 @@ class Candidate:
 
     @property
     def key(self) -> str:
-        """Effect and joint(s), e.g. ``stribeck@3`` or ``coupled_friction@5+6``."""
+        """Effect and joint(s), e.g. ``stribeck@3``, ``coupled_friction@5+6`` or ``delay@all`` (one delay
+        common to every joint, :data:`COMMON_EFFECTS`)."""
         if self.joint is None and len(self.joints) == 0:
             return self.effect
+        if self.joint is None and self.effect in COMMON_EFFECTS:
+            return f"{self.effect}@all"
         if self.joint is not None:
             return f"{self.effect}@{self.joint + 1}"
         return f"{self.effect}@" + "+".join(str(j + 1) for j in self.joints)
@@ -384,11 +389,31 @@ def _backlash(src, c):
 
 
 def _delay(src, c):
+    if c.joint is None:  # one delay common to the joints (one column, one coefficient)
+        out = np.zeros((src.m, src.n, 1))
+        for j in c.joints:
+            out[:, j, 0] = _delay(src, Candidate(c.effect, j, (j,), c.hyper))[:, j, 0]
+        return out
     j = c.joint
     tau = src.tau_pred[:, j]
     if "exact" in c.hyper:  # refit: tau(t - d) - tau(t)
         return _on_joint(src, j, [np.interp(src.t - c.hyper["d"], src.t, tau) - tau])
     return _on_joint(src, j, [src.derivative(tau, 1)])
+
+
+def common_term(name: str, n: int, hyper: dict[str, float] | None = None) -> Candidate:
+    """The form of a per-joint effect common to all ``n`` joints: one parameter shared by every joint
+    (:data:`COMMON_EFFECTS`; ``delay@all`` in an effect list).
+
+    One cause on every joint (the torques' timestamps against the angles') then reads as one finding with
+    one parameter, not as a per-joint effect on each joint.  A common drive gain has no such form: it
+    scales every base parameter alike, which re-identification absorbs (the parameter-change test sees it).
+    """
+    if name not in COMMON_EFFECTS:
+        raise UsageError(
+            f"the effect '{name}' has no form common to all joints; those that do: {', '.join(COMMON_EFFECTS)}"
+        )
+    return Candidate(name, None, tuple(range(n)), dict(hyper or {}), f"{name} common to all joints")
 
 
 def _drive_gain(src, c):
@@ -484,6 +509,9 @@ TIME_EFFECTS = ("temperature", "delay", "elasticity", "backlash")
 
 _DELAYS_S = (0.0005, 0.001, 0.002, 0.004, 0.008, 0.016)  # grid of the delay's refit form (s)
 _WHOLE_ARM = ("base_tilt",)
+COMMON_EFFECTS = ("delay",)
+"""Per-joint effects that also have a form common to all joints, one parameter for the arm
+(:func:`common_term`; written ``NAME@all``)."""
 _PAIR = ("coupled_friction",)
 _COEF_NAMES = {
     "offset": ("fo",),
@@ -500,7 +528,7 @@ _COEF_NAMES = {
     "coupled_friction": ("fc", "fv"),
     "nonlinear_viscous": ("fv2", "fv3"),
 }
-_ITEM = re.compile(r"^(?P<name>[a-z_]+)(@(?P<joints>[0-9+\-]+))?(:(?P<hyper>.+))?$")
+_ITEM = re.compile(r"^(?P<name>[a-z_]+)(@(?P<joints>[0-9+\-]+|all))?(:(?P<hyper>.+))?$")
 
 
 def coefficient_names(term: Candidate, width: int) -> tuple[str, ...]:
@@ -651,7 +679,14 @@ def parse_effect_terms(spec: str | Sequence[str] | None, n: int) -> tuple[Candid
         if name == "delay" and hyper:
             hyper["exact"] = 1.0
         joints_text = match["joints"]
-        if name in _WHOLE_ARM:
+        if joints_text == "all" and name not in _WHOLE_ARM:
+            if name not in COMMON_EFFECTS:
+                raise UsageError(
+                    f"the effect '{item}' has no form common to all joints (those that do: "
+                    f"{', '.join(COMMON_EFFECTS)}); give its joints as J or J-K"
+                )
+            terms = [common_term(name, n, hyper)]
+        elif name in _WHOLE_ARM:
             if joints_text:
                 raise UsageError(f"the effect '{name}' acts on the whole arm; give it without @JOINTS")
             terms = [Candidate(name, None, tuple(range(n)), hyper, "base tilt (gravity direction)")]
