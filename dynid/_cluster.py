@@ -126,7 +126,8 @@ def cluster_client(
     Raises
     ------
     UsageError
-        The packages are missing, ``workers`` is below 1, or no scheduler answers at ``scheduler``.
+        The packages are missing, ``workers`` is below 1, no scheduler answers at ``scheduler``, or it
+        has no worker.
 
     Notes
     -----
@@ -179,6 +180,14 @@ def cluster_client(
             "running scheduler (tcp://HOST:8786) or leave --scheduler out to use a local cluster."
         ) from None
     with client:
+        try:  # a scheduler without workers would hold every task (or a scatter) until its own timeout
+            client.wait_for_workers(1, timeout=timeout)
+        except (OSError, TimeoutError):
+            raise UsageError(
+                f"the Dask scheduler at '{scheduler}' has no worker (none joined within {timeout}); start "
+                f"workers on it (dask worker {client.scheduler.address}), or leave --scheduler out to use a "
+                "local cluster."
+            ) from None
         yield client
 
 

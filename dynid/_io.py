@@ -14,9 +14,11 @@ numbers, paths to text, non-finite floats to ``null`` (JSON has no NaN).
 from __future__ import annotations
 
 import contextlib
+import glob
 import json
 import math
 import os
+import re
 import shutil
 import tempfile
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -109,9 +111,31 @@ def file_mode(path: str | os.PathLike[str]) -> int:
     path = Path(path)
     if path.is_file():
         return path.stat().st_mode & 0o777
+    return 0o666 & ~_umask()
+
+
+def _umask() -> int:
     umask = os.umask(0)
     os.umask(umask)
-    return 0o666 & ~umask
+    return umask
+
+
+def _remove_orphans(path: Path) -> None:
+    """Remove the temporary folders of ``path`` that a killed run left: those named by a process that is gone.
+
+    :func:`atomic_dir` names its temporary folder ``.NAME.PID.XXXX.tmp``; one whose process still runs
+    (a concurrent run writing the same folder) is left alone.
+    """
+    for stale in path.parent.glob(f".{glob.escape(path.name)}.*.tmp"):
+        named = re.fullmatch(r"(\d+)\.[^.]+\.tmp", stale.name[len(path.name) + 2 :])
+        if named is None or not stale.is_dir() or stale.is_symlink():
+            continue
+        try:
+            os.kill(int(named[1]), 0)
+        except ProcessLookupError:
+            shutil.rmtree(stale, ignore_errors=True)
+        except OSError:  # another user's process: alive
+            continue
 
 
 def _check_folder(path: Path) -> None:
@@ -209,7 +233,8 @@ def atomic_dir(path: str | os.PathLike[str]) -> Iterator[Path]:
     Yields
     ------
     Path
-        The temporary folder (created empty, beside ``path``, named ``.NAME.XXXX.tmp``).
+        The temporary folder (created empty with the mode a plain ``mkdir`` gives, beside ``path``, named
+        ``.NAME.PID.XXXX.tmp``; such folders of a run that was killed are removed by the next one).
 
     Raises
     ------
@@ -221,8 +246,10 @@ def atomic_dir(path: str | os.PathLike[str]) -> Iterator[Path]:
     cwd, target = os.path.realpath(Path.cwd()), os.path.realpath(path)
     if cwd == target or cwd.startswith(target.rstrip(os.sep) + os.sep):
         raise ValueError(f"the folder '{path}' holds the current folder and cannot be replaced; write elsewhere.")
-    work = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp"))
+    _remove_orphans(path)
+    work = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp"))
     try:
+        os.chmod(work, 0o777 & ~_umask())  # the mode a plain mkdir gives, not mkdtemp's private 0700
         yield work
         if path.exists():
             shutil.rmtree(path)

@@ -17,6 +17,7 @@ half written.
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import re
 import signal
@@ -187,9 +188,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"dynid {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:  # a file the system refuses after the checks (a race, a full disk)
-        where = f" '{exc.filename}'" if exc.filename else ""
+        if exc.filename:
+            what = f"cannot use '{exc.filename}'"
+        elif exc.errno in (errno.ENOSPC, errno.EDQUOT):  # a write to an open file names none
+            what = "cannot write its files"
+        else:
+            what = "the system refused an operation"
         print(
-            f"dynid {args.command}: error: cannot use{where}: {exc.strerror or exc}; check the path, its "
+            f"dynid {args.command}: error: {what}: {exc.strerror or exc}; check the path, its "
             "permissions and the free space, then run the command again",
             file=sys.stderr,
         )

@@ -555,3 +555,256 @@ def test_angles_far_beyond_the_limits_are_warned_about(work: Path, capsys: pytes
     with pytest.warns(DataWarning, match=pattern):
         load_dataset(path, robot=load_robot("ur5"))
     assert_warned(_validate(work, path), pattern, capsys)
+
+
+# ---------------------------------------------------------------------- 8. the fuzz's remaining cases
+def test_a_replaced_folder_gets_the_umask_mode_and_a_killed_runs_leftovers_go(tmp_path: Path) -> None:
+    """export-c, fleet and the compiled cache write through atomic_dir: the folder is 0777 less the umask
+    (not mkdtemp's 0700), and a temporary folder a killed run left (its process gone) is removed, one of a
+    run still going is not."""
+    import subprocess
+    import sys
+
+    from dynid._io import atomic_dir
+
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    orphan = tmp_path / f".c.{int(gone.stdout)}.abcd1234.tmp"
+    live = tmp_path / f".c.{os.getpid()}.efgh5678.tmp"
+    other = tmp_path / ".c.12.x.ijkl9012.tmp"  # the folder 'c.12' of another output: not c's
+    for d in (orphan, live, other):
+        d.mkdir()
+    old = os.umask(0o027)
+    try:
+        with atomic_dir(tmp_path / "c") as work:
+            (work / "f.txt").write_text("x")
+    finally:
+        os.umask(old)
+    assert (tmp_path / "c" / "f.txt").read_text() == "x"
+    assert (tmp_path / "c").stat().st_mode & 0o777 == 0o750
+    assert not orphan.exists() and live.is_dir() and other.is_dir()
+
+
+def test_export_c_into_a_symbolic_link_is_refused_before_any_work(tmp_path: Path, capsys) -> None:
+    (tmp_path / "real").mkdir()
+    (tmp_path / "link").symlink_to(tmp_path / "real")
+    assert_refused(
+        ["export-c", "--robot", "ur5", "--out", str(tmp_path / "link")],
+        tmp_path,
+        r"--out '.*link' is a symbolic link \(to '.*real'\), but the folder is replaced as a whole, link included; "
+        r"give the folder itself: --out .*real\.$",
+        capsys,
+    )
+
+
+def test_a_scheduler_without_workers_is_named(tmp_path: Path) -> None:
+    """Before: a scatter waited, then 'cannot use: No valid workers found; check the path ... free space'."""
+    distributed = pytest.importorskip("distributed")
+    from dynid._cluster import cluster_client
+
+    with distributed.LocalCluster(n_workers=0, dashboard_address=":0", silence_logs=40) as cluster:
+        address = cluster.scheduler_address
+        with pytest.raises(UsageError, match=rf"the Dask scheduler at '{address}' has no worker \(none joined "
+                                             rf"within 1s\); start workers on it \(dask worker tcp://"):  # fmt: skip
+            with cluster_client(address, timeout="1s"):
+                pass
+
+
+def _bag(path: Path, source: Path, *, one_stamp: bool) -> None:
+    pytest.importorskip("rosbags.rosbag2", reason="ROS 2 recordings are read with rosbags")
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    from dynid.data.files import load_dataset
+
+    store = get_typestore(Stores.LATEST)
+    types, kind = store.types, "sensor_msgs/msg/JointState"
+    ds = load_dataset(source, 6).slice_time(0.0, 0.2)
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conn = writer.add_connection("/joint_states", kind, typestore=store)
+        for k in range(ds.m):
+            ns = 1_700_000_000_000_000_000 + (0 if one_stamp else round(ds.t[k] * 1e9))
+            stamp = types["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
+            msg = types[kind](header=types["std_msgs/msg/Header"](stamp=stamp, frame_id=""),
+                              name=list(load_robot("ur5").joint_names), position=ds.q[k].copy(),
+                              velocity=np.zeros(0), effort=ds.tau[k].copy())  # fmt: skip
+            writer.write(conn, ns + k, store.serialize_cdr(msg, kind))
+
+
+def test_a_bag_whose_stamps_are_all_equal_is_refused_as_such(work: Path, capsys) -> None:
+    """Before: 'a dataset needs at least 2 samples; got 1'."""
+    _bag(work / "bag", work / "V.csv", one_stamp=True)
+    assert_refused(
+        _validate(work, str(work / "bag")),
+        work,
+        r"bag: the 201 JointState messages on /joint_states all carry one stamp \(1\.7e\+09 s\), so they make 1 "
+        r"sample, not a run in time; record with a driver that stamps each message",
+        capsys,
+    )
+
+
+def test_a_bag_with_broken_metadata_is_one_line(work: Path, capsys) -> None:
+    """Before: the YAML parser's eight lines, pointer and all."""
+    pytest.importorskip("rosbags.rosbag2", reason="ROS 2 recordings are read with rosbags")
+    (work / "bag").mkdir()
+    (work / "bag" / "metadata.yaml").write_text("rosbag2_bagfile_information:\n  version: [unclosed\n\t: x\n")
+    assert_refused(
+        _validate(work, str(work / "bag")),
+        work,
+        r"bag could not be read as a ROS 2 recording \(ReaderError: .*metadata\.yaml.*\); give a rosbag2 folder",
+        capsys,
+    )
+
+
+def test_comment_lines_above_the_header_are_comments(base: Path, tmp_path: Path) -> None:
+    """Before: a first line '# recorded on arm 3' was called 'separated by spaces'."""
+    from dynid.data.files import load_dataset
+
+    text = (base / "V.csv").read_text()
+    (tmp_path / "c.csv").write_text("# recorded on arm 3\n# 2024-05-01\n" + text)
+    np.testing.assert_array_equal(load_dataset(tmp_path / "c.csv", 6).tau, load_dataset(base / "V.csv", 6).tau)
+    header, body = text.split("\n", 1)
+    (tmp_path / "h.csv").write_text(f"# {header}\n{body}")
+    with pytest.raises(DataError, match=r"^h\.csv has its header commented out \('# t,q_1,.*'\), so its first "
+                                         r"line holds numbers; remove the '#'"):  # fmt: skip
+        load_dataset(tmp_path / "h.csv", 6)
+    (tmp_path / "o.csv").write_text("# nothing but a note\n")
+    with pytest.raises(DataError, match=r"^o\.csv holds only comment lines; a dataset CSV starts with a header"):
+        load_dataset(tmp_path / "o.csv", 6)
+
+
+def test_a_trajectory_too_fast_to_sample_is_named(work: Path, capsys) -> None:
+    """Before: 'a dataset needs at least 2 samples; got 1', blaming the data."""
+    assert_refused(
+        _simulate(work, _trajectory(work, "F.json", base_freq=1e6)),
+        work,
+        r"the run lasts 3e-06 s, 3 period\(s\) of the trajectory '.*F\.json' at its base frequency 1e\+06 Hz, 1 "
+        r"sample at 1000 Hz, but a dataset needs at least 2; give a trajectory whose period spans many samples",
+        capsys,
+    )
+
+
+def test_an_mjcf_template_of_another_joint_count_is_named(work: Path, capsys) -> None:
+    """Before: 'params of the robot 'ur5' has shape (10,); expected (60,) for 6 joints'."""
+    pytest.importorskip("mujoco", reason="MJCF templates are read with MuJoCo")
+    (work / "one.xml").write_text(
+        '<mujoco model="one"><worldbody><body name="l1"><joint name="j1" type="hinge" axis="0 0 1" range="-1 1"/>'
+        '<geom type="sphere" size="0.1" mass="1"/></body></worldbody></mujoco>'
+    )
+    argv = ["export", "--model", str(work / "M.json"), "--format", "mjcf", "--template", str(work / "one.xml"),
+            "--out", str(work / "o.xml")]  # fmt: skip
+    assert_refused(
+        argv,
+        work,
+        r"the template '.*one\.xml' has 1 joint\(s\) \(j1\), but the model's robot 'ur5' has 6 \(shoulder_pan_joint, "
+        r".*\); give the MJCF of the robot the model was identified for",
+        capsys,
+    )
+
+
+def test_diagnose_effects_with_joints_say_the_name_alone(work: Path, capsys) -> None:
+    """Before: 'unknown effect 'stribeck@3''."""
+    assert_refused(
+        _diagnose(work, str(work / "D.csv"), str(work / "V.csv"), "--effects", "offset,stribeck@3"),
+        work,
+        r"--effects names the effect 'stribeck@3' with joints or a value, but the diagnosis tests each candidate on "
+        r"every joint and tunes its values on the data; give the name alone: --effects stribeck$",
+        capsys,
+    )
+
+
+def test_a_recording_shorter_than_the_filters_transient_names_no_missing_option(work: Path, capsys) -> None:
+    """Before: '... leaves 0 of run 0 (59 samples); trim less' (validate has no trim option)."""
+    (work / "short.csv").write_text("".join((work / "V.csv").read_text().splitlines(keepends=True)[:60]))
+    assert_refused(
+        _validate(work, str(work / "short.csv")),
+        work,
+        r"trimming \d+ samples from both ends leaves 0 of run 0 \(59 samples\); give a recording of at least \d+ "
+        r"samples a run \(the trim cuts the low-pass filter's transient",
+        capsys,
+    )
+
+
+def test_the_fleets_own_output_is_no_recording(tmp_path: Path) -> None:
+    """Before: an --out inside the pattern had its drift.csv read as a recording on the next run."""
+    from dynid.fleet.recordings import find_recordings
+
+    for name in ("arm/0.csv", "arm/1.csv", "arm/out/drift.csv", "arm/out/fleet.csv"):
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text("t\n")
+    found = find_recordings(str(tmp_path / "**" / "*.csv"), out=tmp_path / "arm" / "out")
+    assert [os.path.basename(r.path) for r in found] == ["0.csv", "1.csv"]
+
+
+FOLDER_INPUTS = [
+    ("trajectory", lambda f: _simulate(f, str(f / "sub")), r"--trajectory '.*sub' is a folder; give the file itself\."),
+    ("model", lambda f: ["validate", "--model", str(f / "sub"), "--data", str(f / "V.csv")],
+     r"--model '.*sub' is a folder; give the file itself\."),
+    ("transmission", lambda f: ["identify", "--robot", "ur5", "--data", str(f / "D.csv"), "--transmission",
+                                str(f / "sub"), "--out", str(f / "OUT.json")],
+     r"--transmission '.*sub' is a folder; give the file itself\."),
+    ("data", lambda f: _validate(f, str(f / "sub")),
+     r"sub is a folder; give the path of a \.csv or \.npz dataset file \(a ROS 2 rosbag2 folder holds a "
+     r"metadata\.yaml\)"),
+    ("manifest", lambda f: ["fleet", "--robot", "ur5", "--data", str(f / "*.csv"), "--manifest", str(f / "sub"),
+                            "--serial", "--out", str(f / "fleet")],
+     r"the manifest '.*sub' is a folder; give a CSV file with the columns path, robot, time\."),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(("make", "pattern"), [c[1:] for c in FOLDER_INPUTS], ids=[c[0] for c in FOLDER_INPUTS])
+def test_a_folder_given_for_a_file_is_called_a_folder(work: Path, capsys, make, pattern: str) -> None:
+    """Before: 'does not exist', 'no model file at', 'unknown extension '''."""
+    (work / "sub").mkdir()
+    assert_refused(make(work), work, pattern, capsys)
+
+
+def test_a_build_on_a_full_disk_says_so(tmp_path: Path, monkeypatch) -> None:
+    """Before: a minute of compiling, then 22 to 60 lines of compiler output and never 'no space'."""
+    import shutil as shutil_module
+
+    from dynid.symbolic import build
+
+    usage = shutil_module.disk_usage(tmp_path)
+    assert build.full_disk("compiling x", tmp_path) is None or usage.free < build.LOW_SPACE
+    monkeypatch.setattr(build.shutil, "disk_usage", lambda p: usage._replace(free=300 * 1024))
+    err = build.full_disk("compiling libdynid_ur5.so", tmp_path / "not" / "made")
+    where = re.escape(str(tmp_path))
+    assert re.fullmatch(rf"compiling libdynid_ur5\.so failed: no space left on the disk of '{where}' "
+                        r"\(0\.293 MB free, 100 MB needed\); free space there, or set DYNID_CACHE_DIR to a folder on "
+                        r"a disk with room, and run again", str(err))  # fmt: skip
+
+
+def test_a_full_disk_met_while_writing_says_so(monkeypatch, capsys) -> None:
+    """A write to an open file fails without a file name: the line said 'cannot use: No space left on device'."""
+    import errno
+
+    from dynid.commands import info
+
+    def full(args):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(info, "run", full)
+    assert main(["info", "--robot", "ur5"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == ("dynid info: error: cannot write its files: No space left on device; check the path, its "
+                   "permissions and the free space, then run the command again")  # fmt: skip
+
+
+def test_a_demo_that_fails_removes_the_folder_it_made(tmp_path: Path, monkeypatch, capsys) -> None:
+    """Before: a demo stopped by a full disk left a half-filled folder behind."""
+    import errno
+
+    import dynid.demo
+
+    def stops(out, **_):
+        Path(out).mkdir()
+        (Path(out) / "excitation.json").write_text("{}")
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(dynid.demo, "run_demo", stops)
+    assert main(["demo", "--quick", "--out", str(tmp_path / "demo")]) == 2
+    assert "No space left on device" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+    (tmp_path / "kept").mkdir()  # a folder that was there before stays
+    assert main(["demo", "--quick", "--out", str(tmp_path / "kept")]) == 2
+    assert (tmp_path / "kept").is_dir()

@@ -457,6 +457,11 @@ def _check_one(out: Output) -> None:
     if out.folder:
         if path.exists() and not path.is_dir():
             raise UsageError(f"--{option} '{path}' is a file; give a folder.")
+        if out.replace and path.is_symlink():
+            raise UsageError(
+                f"--{option} '{path}' is a symbolic link (to '{os.readlink(path)}'), but the folder is replaced "
+                f"as a whole, link included; give the folder itself: --{option} {os.path.realpath(path)}."
+            )
     else:
         if out.suffixes and path.suffix.lower() not in out.suffixes:
             what = f" ({out.hint})" if out.hint else ""
@@ -483,10 +488,11 @@ def check_outputs(
 ) -> None:
     """Check every output of a command before any work starts; the one output-path check of dynid.
 
-    An output is refused when its extension is not one it may have, when a folder is given for a file
-    (or a file for a folder), when its folder does not exist or cannot be written (a temporary file is
-    created there and removed), when it would overwrite an input of the same command (or, for a folder
-    that is replaced, hold one), and when two outputs would write the same file.
+    An input that is a folder where a file is read (any but a dataset, which may be a rosbag2 folder)
+    is refused.  An output is refused when its extension is not one it may have, when a folder is given
+    for a file (or a file for a folder), when its folder does not exist or cannot be written (a temporary
+    file is created there and removed), when it would overwrite an input of the same command (or, for a
+    folder that is replaced, hold one), and when two outputs would write the same file.
 
     Parameters
     ----------
@@ -508,6 +514,8 @@ def check_outputs(
         values = [value] if isinstance(value, str | os.PathLike) else list(value)
         for item in values:
             files.extend((option, Path(p)) for p in (model_files(item) if option in _MODEL_INPUTS else (item,)))
+            if option not in _DATA_INPUTS and Path(item).is_dir():  # a dataset may be a rosbag2 folder
+                raise UsageError(f"--{option} '{item}' is a folder; give the file itself.")
     for out in given:
         _check_one(out)
         for option, source in files:
@@ -539,3 +547,4 @@ def check_outputs(
 
 
 _MODEL_INPUTS = ("model", "compare")
+_DATA_INPUTS = ("data", "heldout", "reference")

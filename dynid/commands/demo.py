@@ -7,6 +7,7 @@ prints the summary table and writes ``--json``.
 from __future__ import annotations
 
 import argparse
+import shutil
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -66,7 +67,13 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(
             f"--json '{json_path}' is one of the files the demo writes in --out '{out}'; give another name."
         )
-    result = run_demo(out, quick=args.quick, seed=args.seed, progress=_show)
+    made = not out.exists()
+    try:
+        result = run_demo(out, quick=args.quick, seed=args.seed, progress=_show)
+    except BaseException:  # a full disk, an interrupt: a folder this run made is not left half filled
+        if made:
+            shutil.rmtree(out, ignore_errors=True)
+        raise
     _print_summary(result)
     if json_path is not None:
         write_json(json_path, result.figures)

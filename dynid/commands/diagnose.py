@@ -107,6 +107,13 @@ def run(args: argparse.Namespace) -> int:
     effects = EFFECT_NAMES
     if args.effects:
         effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
+        placed = next((e for e in effects if "@" in e or ":" in e), None)
+        if placed is not None:
+            name = placed.split("@")[0].split(":")[0]
+            raise UsageError(
+                f"--effects names the effect '{placed}' with joints or a value, but the diagnosis tests each "
+                f"candidate on every joint and tunes its values on the data; give the name alone: --effects {name}"
+            )
     if not 0 < args.alpha < 1:
         raise UsageError(f"--alpha is {args.alpha}; give a probability between 0 and 1, e.g. 0.05.")
     if args.max_effects < 0:

@@ -135,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
                 f"dynid fleet needs the package {module}, which is not installed; install it with "
                 f"{install_hint('fleet')}."
             )
-    recordings = find_recordings(args.data, args.manifest)
+    recordings = find_recordings(args.data, args.manifest, out=args.out)
     check_outputs(
         [output("out", args.out, folder=True, replace=True, marker="summary.json"), output("json", args.json, (".json",))],
         {"data": [r.path for r in recordings], "manifest": args.manifest, "robot": robot_file(args)},

@@ -14,6 +14,7 @@ refused, naming the rows.  In detail:
 
 * encoding: UTF-8 text (a byte-order mark is skipped); a binary file is refused;
 * separator: commas (a file separated by semicolons, tabs or spaces is refused, naming the separator);
+  lines starting with ``#`` are comments, above the header as in the body;
 * values: numbers, finite (the first bad cell is named by column and row);
 * time: seconds, strictly increasing; a median step of :data:`MAX_TIME_STEP` (1 s) or more is refused
   as time in milliseconds or finer units;
@@ -30,12 +31,12 @@ refused, naming the rows.  In detail:
 
 from __future__ import annotations
 
-import io
+import codecs
 import json
 import os
 import warnings
 import zipfile
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -94,32 +95,47 @@ def _check_extension(path: Path) -> str:
 _SEPARATORS = {";": "semicolons", "\t": "tabs", "|": "vertical bars"}
 
 
-def _read_text(path: Path) -> str:
-    """Text of a CSV file: UTF-8, a byte-order mark skipped; a :class:`DataError` for a binary file."""
-    raw = path.read_bytes()
-    if raw.startswith(b"PK\x03\x04"):
+def _check_text(path: Path) -> None:
+    """A :class:`DataError` for a file that is not UTF-8 text (a zip archive, zero bytes, another encoding)."""
+    with path.open("rb") as fh:
+        head = fh.read(65536)
+    if head.startswith(b"PK\x03\x04"):
         raise DataError(
             f"{path.name} is a zip archive, not comma-separated text; if it is an .npz dataset, name it .npz"
         )
-    if b"\x00" in raw[:65536]:
+    if b"\x00" in head:
         raise DataError(
             f"{path.name} is a binary file (it holds zero bytes), not comma-separated text; give a CSV "
             "text file with a header t,q_1..q_n,tau_1..tau_n"
         )
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as err:
-        raise DataError(
-            f"{path.name} is not UTF-8 text (byte 0x{raw[err.start]:02x} at offset {err.start}); give a "
-            "comma-separated text file in UTF-8 (or ASCII) with a header t,q_1..q_n,tau_1..tau_n"
-        ) from None
-    return text
 
 
-def _first_bad_line(lines: list[str], width: int) -> str:
+def _not_utf8(path: Path) -> DataError:
+    """The refusal of a file that does not decode as UTF-8, naming the first bad byte (read a block at a time)."""
+    decoder = codecs.getincrementaldecoder("utf-8")()
+    offset = 0
+    with path.open("rb") as fh:
+        while block := fh.read(1 << 20):
+            try:
+                decoder.decode(block)
+            except UnicodeDecodeError as err:
+                at = offset + err.start
+                return DataError(
+                    f"{path.name} is not UTF-8 text (byte 0x{block[err.start]:02x} at offset {at}); give a "
+                    "comma-separated text file in UTF-8 (or ASCII) with a header t,q_1..q_n,tau_1..tau_n"
+                )
+            offset += len(block)
+    return DataError(f"{path.name} is not UTF-8 text; give a comma-separated text file in UTF-8 (or ASCII)")
+
+
+def _first_bad_line(lines: Iterable[str], width: int) -> str:
     """Where the body of a CSV first fails to hold ``width`` comma-separated numbers (for the message)."""
-    for number, line in enumerate(lines[1:], start=2):
-        if not line.strip():
+    header = True
+    for number, line in enumerate(lines, start=1):
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        if header:
+            header = False
             continue
         cells = line.split(",")
         if len(cells) != width:
@@ -134,11 +150,44 @@ def _first_bad_line(lines: list[str], width: int) -> str:
 
 
 def _read_csv(path: Path) -> dict[str, NDArray[np.float64]]:
-    text = _read_text(path)
-    lines = text.splitlines()
-    if not lines or not lines[0].strip():
-        raise DataError(f"{path.name} is empty; a dataset CSV starts with a header line t,q_1,...,tau_n")
-    header = lines[0]
+    """The columns of a dataset CSV, read a block of lines at a time (memory in the numbers, not the text)."""
+    _check_text(path)
+    try:
+        with path.open(encoding="utf-8-sig", newline="") as fh:
+            header = fh.readline().rstrip("\r\n")
+            comment = ""
+            while header.lstrip().startswith("#"):  # comment lines above the header, as loadtxt skips below
+                comment, header = header, fh.readline().rstrip("\r\n")
+            names = _csv_names(path, header, comment)
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", UserWarning)  # numpy warns on an empty body; handled below
+                    table = np.loadtxt(fh, delimiter=",", dtype=np.float64, ndmin=2)
+            except ValueError:
+                with path.open(encoding="utf-8-sig", newline="") as again:
+                    where = _first_bad_line(again, len(names))
+                raise DataError(
+                    f"{path.name} could not be read as numbers ({where}); every line after the header needs "
+                    f"{len(names)} comma-separated numbers"
+                ) from None
+    except UnicodeDecodeError:
+        raise _not_utf8(path) from None
+    if table.size == 0:
+        raise DataError(f"{path.name} has a header but no data rows; record or export the samples")
+    if table.shape[1] != len(names):
+        raise DataError(
+            f"{path.name} has {len(names)} names in its header but {table.shape[1]} values a row; "
+            "make the header and the rows agree"
+        )
+    return {name: table[:, k] for k, name in enumerate(names)}
+
+
+def _csv_names(path: Path, header: str, comment: str = "") -> list[str]:
+    """The column names of a CSV header line, or a :class:`DataError` saying what the line is instead
+    (``comment``: the last comment line above it, if any)."""
+    if not header.strip():
+        what = "holds only comment lines" if comment else "is empty"
+        raise DataError(f"{path.name} {what}; a dataset CSV starts with a header line t,q_1,...,tau_n")
     if "," not in header:
         found = next((name for sep, name in _SEPARATORS.items() if sep in header), None)
         if found is None and len(header.split()) > 1:
@@ -154,6 +203,11 @@ def _read_csv(path: Path) -> dict[str, NDArray[np.float64]]:
     except ValueError:
         pass
     else:
+        if "," in comment:
+            raise DataError(
+                f"{path.name} has its header commented out ('{comment.strip()[:40]}'), so its first line holds "
+                "numbers; remove the '#' (np.savetxt(..., comments='') writes the header without it)"
+            )
         raise DataError(
             f"{path.name} has no header: its first line holds numbers; add a first line naming "
             "the columns t,q_1..q_n,tau_1..tau_n"
@@ -161,24 +215,7 @@ def _read_csv(path: Path) -> dict[str, NDArray[np.float64]]:
     duplicates = sorted({name for name in names if names.count(name) > 1})
     if duplicates:
         raise DataError(f"{path.name} names column '{duplicates[0]}' twice; give each column once")
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)  # numpy warns on an empty body; handled below
-            table = np.loadtxt(io.StringIO(text), delimiter=",", dtype=np.float64, ndmin=2, skiprows=1)
-    except ValueError:
-        where = _first_bad_line(lines, len(names))
-        raise DataError(
-            f"{path.name} could not be read as numbers ({where}); every line after the header needs "
-            f"{len(names)} comma-separated numbers"
-        ) from None
-    if table.size == 0:
-        raise DataError(f"{path.name} has a header but no data rows; record or export the samples")
-    if table.shape[1] != len(names):
-        raise DataError(
-            f"{path.name} has {len(names)} names in its header but {table.shape[1]} values a row; "
-            "make the header and the rows agree"
-        )
-    return {name: table[:, k] for k, name in enumerate(names)}
+    return names
 
 
 def _read_npz(path: Path) -> tuple[dict[str, NDArray[np.float64]], dict[str, Any]]:
@@ -533,17 +570,17 @@ def load_dataset(
             ds.check_joints(n_joints, name)
         ds = _check_units(ds, path.name, degrees)
         return ds if robot is None else _check_robot(ds, robot, path.name)
+    if path.is_dir():  # before the extension: a folder has none to speak of
+        raise DataError(
+            f"{path} is a folder; give the path of a .csv or .npz dataset file (a ROS 2 rosbag2 folder holds "
+            "a metadata.yaml)"
+        )
     suffix = _check_extension(path)
     if robot is not None:
         n_joints = robot.n if n_joints is None else n_joints
         robot_name = robot.name if robot_name is None else robot_name
     if not path.exists():
         raise DataError(f"no dataset file at {path}; check the path")
-    if path.is_dir():
-        raise DataError(
-            f"{path} is a folder; give the path of a .csv or .npz dataset file (a ROS 2 rosbag2 folder holds "
-            "a metadata.yaml)"
-        )
     if not path.is_file():  # a device (/dev/zero), a FIFO or a socket: reading it may never end
         raise DataError(
             f"{path} is not a regular file but a device, pipe or socket, which dynid does not read (it may "

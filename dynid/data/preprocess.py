@@ -661,8 +661,9 @@ def kept_rows(
     if not pieces:
         r, run, left = short[0]
         raise DataError(
-            f"trimming {trim_samples} samples from both ends leaves {left} of run {r} "
-            f"({run.stop - run.start} samples); trim less"
+            f"trimming {trim_samples} samples from both ends leaves {left} of run {r} ({run.stop - run.start} "
+            f"samples); give a recording of at least {2 * trim_samples + 2} samples a run (the trim cuts the "
+            "low-pass filter's transient; calling preprocess(), give a smaller trim)"
         )
     if short:
         listed = ", ".join(f"{r} ({run.stop - run.start} samples)" for r, run, _ in short)

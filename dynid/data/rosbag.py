@@ -233,9 +233,10 @@ def read_rosbag(
     except DataError:
         raise
     except (*errors, OSError, KeyError, ValueError) as err:
+        said = (str(err).strip().splitlines() or ["-"])[0]  # a YAML error's first line: no pointer lines
         raise DataError(
-            f"{name} could not be read as a ROS 2 recording ({type(err).__name__}: {err}); give a rosbag2 "
-            "folder (with metadata.yaml) or an .mcap file written by ros2 bag record"
+            f"{name} could not be read as a ROS 2 recording ({type(err).__name__}: {said}); "
+            "give a rosbag2 folder (with metadata.yaml) or an .mcap file written by ros2 bag record"
         ) from None
 
     if not stamps and maps:
@@ -294,6 +295,12 @@ def read_rosbag(
         notes.append(f"{_count(meta['dropped_repeats'], 'message')} repeating an earlier stamp dropped")
         ns, q, tau = ns[keep], q[keep], tau[keep]
         dq = None if dq is None else dq[keep]
+    if len(ns) < 2:
+        raise DataError(
+            f"{name}: the {len(keep)} JointState messages on {chosen} all carry one stamp "
+            f"({ns[0] * 1e-9:.9g} s), so they make 1 sample, not a run in time; record with a driver that stamps "
+            "each message (a driver that leaves the stamps at zero is read by the bag's receive times)"
+        )
     meta["t0_ns"] = int(ns[0])
     t = (ns - ns[0]).astype(np.float64) * 1e-9
     try:

@@ -117,7 +117,8 @@ def _read_manifest(manifest: str | os.PathLike[str]) -> dict[str, tuple[str, str
     """Real path -> (robot, time, line) of each row of a manifest, its rows checked."""
     path = Path(manifest)
     if not path.is_file():
-        raise UsageError(f"the manifest '{path}' does not exist; give a CSV file with the columns path, robot, time.")
+        what = "is a folder" if path.is_dir() else "does not exist"
+        raise UsageError(f"the manifest '{path}' {what}; give a CSV file with the columns path, robot, time.")
     try:
         with open(path, encoding="utf-8-sig", newline="") as f:
             rows = list(csv.DictReader(f))
@@ -156,7 +157,9 @@ def _read_manifest(manifest: str | os.PathLike[str]) -> dict[str, tuple[str, str
     return out
 
 
-def find_recordings(pattern: str, manifest: str | os.PathLike[str] | None = None) -> list[Recording]:
+def find_recordings(
+    pattern: str, manifest: str | os.PathLike[str] | None = None, *, out: str | os.PathLike[str] | None = None
+) -> list[Recording]:
     """The recordings a glob pattern matches, each with its robot and time, in (robot, time) order.
 
     Parameters
@@ -166,6 +169,9 @@ def find_recordings(pattern: str, manifest: str | os.PathLike[str] | None = None
     manifest : str or path-like, optional
         CSV file with the columns ``path``, ``robot``, ``time`` (see the module's docstring); without it
         robot and time come from the path.
+    out : str or path-like, optional
+        The folder the fleet run writes: what the pattern matches inside it (an earlier run's
+        ``drift.csv``) is no recording.
 
     Returns
     -------
@@ -181,6 +187,9 @@ def find_recordings(pattern: str, manifest: str | os.PathLike[str] | None = None
     paths = _expand(str(pattern))
     if manifest is not None:  # a manifest beside its recordings is no recording
         paths = [p for p in paths if os.path.realpath(p) != os.path.realpath(manifest)]
+    if out is not None:  # nor is the run's own output folder, when the pattern reaches into it
+        inside = os.path.realpath(out).rstrip(os.sep) + os.sep
+        paths = [p for p in paths if not os.path.realpath(p).startswith(inside)]
     if not paths:
         raise UsageError(
             f"no recording matches '{pattern}'; give a glob pattern that matches .csv, .npz or .mcap files or "

@@ -231,6 +231,21 @@ def simulate(
             f"control ticks, beyond the {MAX_TICKS:,} that one run holds in memory; give at most "
             f"{(MAX_TICKS - 1) / control_rate:g} s, and simulate a longer experiment as several runs."
         )
+    if round(duration * control_rate) < stride:
+        cause = (
+            f", {duration * trajectory.base_freq:g} period(s) of {source} at its base frequency "
+            f"{trajectory.base_freq:g} Hz"
+            if isinstance(trajectory, FourierTrajectory) and trajectory.base_freq * stride / control_rate > 0.5
+            else ""  # a period shorter than two samples: the trajectory is at fault, not the duration
+        )
+        fix = (
+            "give a trajectory whose period spans many samples (dynid excite designs e.g. 0.1 Hz)"
+            if cause
+            else f"give a duration of at least {stride / control_rate:g} s"
+        )
+        raise UsageError(
+            f"the run lasts {duration:g} s{cause}, 1 sample at {rate:g} Hz, but a dataset needs at least 2; {fix}."
+        )
     if substeps is not None and (int(substeps) != substeps or substeps < 1):
         raise UsageError(f"substeps is {substeps}; give a whole number >= 1.")
     for label, value in (("seed", seed), ("truth seed", truth_seed)):

@@ -337,7 +337,14 @@ def _export_into_mjcf(model, fmt, out: Path, template: Path, model_name, referen
     if not template.is_file():
         raise UsageError(f"the template '{template}' does not exist; give the robot's MuJoCo .xml")
     robot = model.robot
-    reference = robot.with_params(load_robot(template).params)
+    described = load_robot(template)
+    if described.n != robot.n:
+        raise UsageError(
+            f"the template '{template}' has {described.n} joint(s) ({', '.join(described.joint_names[:10])}), but "
+            f"the model's robot '{robot.name}' has {robot.n} ({', '.join(robot.joint_names[:10])}); give the MJCF "
+            "of the robot the model was identified for"
+        )
+    reference = robot.with_params(described.params)
     params = simulator_parameters(model, reference, reference_weight=reference_weight)
     shares = None
     if heldout is not None:

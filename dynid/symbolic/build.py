@@ -38,6 +38,7 @@ __all__ = [
     "cache_dir",
     "file_lock",
     "find_compiler",
+    "full_disk",
     "generator_is_built",
     "generator_path",
     "robot_function_dir",
@@ -194,17 +195,49 @@ def build_jobs() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def _compiler_failed(what: str, proc_out: str, code: int) -> GeneratorError:
+#: Below this much free space a failed build is put down to the full disk, not to the compiler: the
+#: generator alone is about 13 MB, and its objects take more while it is built.
+LOW_SPACE = 100 * 2**20
+
+
+def full_disk(what: str, folder: Path) -> GeneratorError | None:
+    """The error of a build that failed on a disk with no room (less than :data:`LOW_SPACE` free at ``folder``
+    or its nearest existing parent), in one sentence; None when there is room (the build failed otherwise)."""
+    place = Path(folder)
+    while not place.exists() and place != place.parent:
+        place = place.parent
+    try:
+        free = shutil.disk_usage(place).free
+    except OSError:
+        return None
+    if free >= LOW_SPACE:
+        return None
+    return GeneratorError(
+        f"{what} failed: no space left on the disk of '{place}' ({free / 2**20:.3g} MB free, {LOW_SPACE // 2**20} MB "
+        "needed); free space there, or set DYNID_CACHE_DIR to a folder on a disk with room, and run again"
+    )
+
+
+def _compiler_failed(what: str, proc_out: str, code: int, folder: Path | None = None) -> GeneratorError:
+    full = None if folder is None else full_disk(what, folder)
+    if full is not None:
+        return full
     tail = "\n".join(proc_out.strip().splitlines()[-15:])
     return GeneratorError(f"{what} failed (exit {code}); the compiler said:\n{tail}")
 
 
 def _run_parallel(
-    commands: list[tuple[str, list[str]]], what: str, expected: str, jobs: int, progress: Progress | None
+    commands: list[tuple[str, list[str]]],
+    what: str,
+    expected: str,
+    jobs: int,
+    progress: Progress | None,
+    folder: Path | None = None,
 ) -> None:
     """Run the named commands, ``jobs`` at a time; report each one done and the elapsed time every 4 s.
 
-    The first failure stops the others and raises :class:`GeneratorError` with the compiler's last lines.
+    The first failure stops the others and raises :class:`GeneratorError` with the compiler's last lines
+    (or, when ``folder``'s disk is full, saying so: :func:`full_disk`).
     """
     start = time.monotonic()
     if progress:
@@ -242,7 +275,7 @@ def _run_parallel(
             output = log.read()
             log.close()
             if proc.returncode != 0:
-                raise _compiler_failed(f"{what} ({name})", output, proc.returncode)
+                raise _compiler_failed(f"{what} ({name})", output, proc.returncode, folder)
             finished[0] += 1
             if progress and len(commands) > 1:
                 progress(
@@ -279,6 +312,9 @@ def generator_path(progress: Progress | None = stderr_progress) -> Path:
         compiler = find_compiler("c++")
         prefix, casadi_dir = _prefixes()
         lib_dirs = [prefix / "lib", casadi_dir]
+        full = full_disk("building the symbolic generator", folder)
+        if full is not None:  # said now, not after a minute of compiling
+            raise full
         folder.mkdir(parents=True, exist_ok=True)
         objects = folder / f"objects.tmp{os.getpid()}"
         objects.mkdir(exist_ok=True)
@@ -318,8 +354,9 @@ def generator_path(progress: Progress | None = stderr_progress) -> Path:
                 "this environment",
                 jobs,
                 progress,
+                folder,
             )
-            _run_parallel([("link", link_cmd)], "linking the symbolic generator", "a few seconds", 1, None)
+            _run_parallel([("link", link_cmd)], "linking the symbolic generator", "a few seconds", 1, None, folder)
             os.replace(tmp, exe)
         finally:
             tmp.unlink(missing_ok=True)
@@ -353,7 +390,7 @@ def robot_function_dir(
                 [str(exe), str(work / "robot.spec"), str(work)], capture_output=True, text=True
             )
             if proc.returncode != 0:
-                raise GeneratorError(
+                raise full_disk("generating the robot's functions", work) or GeneratorError(
                     f"the symbolic generator could not build this robot: {proc.stderr.strip()}; "
                     "check the robot description."
                 )

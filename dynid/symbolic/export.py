@@ -34,7 +34,7 @@ from dynid._io import atomic_dir, dumps_json
 from dynid.exceptions import GeneratorError, UsageError
 from dynid.symbolic._export.loader import CompiledLibrary
 from dynid.symbolic.base import BaseParameters, base_parameters
-from dynid.symbolic.build import Progress, cache_dir, file_lock, find_compiler, stderr_progress
+from dynid.symbolic.build import Progress, cache_dir, file_lock, find_compiler, full_disk, stderr_progress
 from dynid.symbolic.functions import RobotFunctions, robot_functions
 from dynid.symbolic.robot import RobotModel
 
@@ -185,6 +185,9 @@ def _compile(folder: Path, stem: str, progress: Progress | None) -> Path:
     proc = subprocess.run(cmd, cwd=folder, capture_output=True, text=True, check=False)
     if proc.returncode != 0:
         tmp.unlink(missing_ok=True)
+        full = full_disk(f"compiling {lib.name}", folder)
+        if full is not None:
+            raise full
         tail = "\n".join(proc.stderr.strip().splitlines()[-10:])
         raise GeneratorError(f"the C compiler failed on {stem}.c (exit {proc.returncode}):\n{tail}")
     os.replace(tmp, lib)
