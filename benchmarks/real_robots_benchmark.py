@@ -175,7 +175,7 @@ def spring_check(robot, full, train_end: float, held: tuple[float, float], cutof
     system = build_system(robot, full, friction=True, armature=True)
     prep = system.prepared
     rows = prep.rows
-    Z = system.data_matrix()[rows]
+    Z = system.data_matrix()  # the kept rows
     n, p = system.n, system.p
     t = prep.t[rows]
     trim = float(prep.settings["trim_s"])

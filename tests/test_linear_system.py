@@ -297,3 +297,75 @@ def test_shared_systems_are_built_once_and_change_no_result(ur5, monkeypatch):
     np.testing.assert_array_equal(shared.predict(run), alone.predict(run))
     build_system(ur5, run)  # outside the block: built again
     assert builds[id(run)] == 2
+
+
+# ---------------------------------------------------------------------------- long recordings
+@pytest.fixture(scope="module")
+def filtered_run(ur5):
+    """20 s at 1 kHz, angles only, noisy torque: the filter, the differentiation and the trim all act."""
+    rng = np.random.default_rng(41)
+    cols = column_set(ur5)
+    x = true_parameters(cols, rng)
+    ds = synthetic_dataset(
+        cols, x, random_fourier(ur5, rng, base_freq=0.1, periods=2), rate=1000, rng=rng, noise=0.2,
+        with_derivatives=False,
+    )  # fmt: skip
+    return cols, x, ds
+
+
+def test_a_long_recording_is_filtered_a_block_at_a_time_with_the_same_result(ur5, filtered_run, monkeypatch):
+    """Past FULL_RATE_BYTES the data matrix is filled and filtered in blocks widened by the filter's
+    margin and only the kept rows are held: the same system as the whole-recording pass, to rounding."""
+    from dynid.identify import linear_system
+
+    _, _, ds = filtered_run
+    whole = build_system(ur5, ds)
+    monkeypatch.setattr(linear_system, "FULL_RATE_BYTES", 1 << 20)  # 1 MB: blocks of about 3,000 samples
+    blocks = build_system(ur5, ds)
+    assert blocks.Z.shape == whole.Z.shape == (whole.m, len(whole.z_joint))
+    scale = np.abs(whole.Z).max(axis=0)
+    assert np.max(np.abs(blocks.Z - whole.Z) / scale) < 1e-9
+    # the ends of the recording and every block boundary inside it agree, not only the bulk
+    assert np.max(np.abs(blocks.Z[:50] - whole.Z[:50]) / scale) < 1e-9
+    np.testing.assert_allclose(
+        OLS(robot=ur5).fit(blocks).params_, OLS(robot=ur5).fit(whole).params_, rtol=1e-7, atol=1e-9
+    )
+
+
+def test_a_recording_beyond_the_memory_budget_is_identified_on_one_sample_in_D(ur5, filtered_run, monkeypatch):
+    """Over KEPT_BYTES the kept rows are thinned (states and filter at full rate), said in the model's notes
+    and recorded as its decimation; the estimate moves by a fraction of its standard deviation, and the
+    standard deviations grow as the information kept shrinks."""
+    from dynid.identify import linear_system
+    from dynid.identify.model import identify
+
+    cols, _, ds = filtered_run
+    options = {"method": "ols", "friction": "linear", "gmm": "off", "physical": False}
+    pre = Preprocessing(cutoff=20.0)
+    full = identify(ur5, ds, preprocessing=pre, **options)
+    assert full.preprocessing["decimate"] == 1 and "decimate_rule" not in full.preprocessing
+    c = int(cols.pattern.sum()) + ur5.n
+    budget = full.info["n_samples"] * c * 8 // 4 + 1  # a quarter of what the kept rows take
+    monkeypatch.setattr(linear_system, "KEPT_BYTES", budget)
+    thin = identify(ur5, ds, preprocessing=pre, **options)
+    D = thin.preprocessing["decimate"]
+    assert D == 4 and abs(thin.info["n_samples"] * D - full.info["n_samples"]) <= 2 * D
+    assert f"one sample in {D}" in thin.info["notes"][0] and "--decimate" in thin.info["notes"][0]
+    std = np.sqrt(np.diag(full.cov))
+    assert np.max(np.abs(thin.params - full.params) / std) < 1.0
+    assert np.median(np.sqrt(np.diag(thin.cov)) / std) == pytest.approx(1.0, abs=0.25)
+    # the decimation is the model's: a held-out recording is scored on the same grid
+    assert thin.prepare(ds).m == thin.info["n_samples"]
+
+
+def test_thinning_never_takes_the_decimated_rate_below_the_filters_band(ur5, filtered_run) -> None:
+    from dynid.identify.linear_system import thinned_for_memory
+
+    _, _, ds = filtered_run
+    prep = prepare(ds, Preprocessing(cutoff=40.0))
+    same = thinned_for_memory(prep, 100, budget=prep.m * 100 * 8)
+    assert same is prep
+    thin = thinned_for_memory(prep, 100, budget=1000)  # would need D in the thousands
+    assert thin.settings["decimate"] == 10  # 1 kHz / 10 = 100 Hz = 2.5 x the 40 Hz cut-off
+    assert "2.5 times the 40 Hz cut-off" in thin.settings["decimate_rule"]
+    assert np.all(np.diff(thin.rows) >= 10)

@@ -946,4 +946,4 @@ def preprocess(
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DataWarning)  # already checked on ds
         full = Dataset(ds.t, q, tau, dq=dq, ddq=ddq, meta=meta)
-    return full.select_rows(rows)
+    return full if len(rows) == full.m else full.select_rows(rows)  # every row kept: no copy of it all

@@ -462,6 +462,8 @@ def linear_torque(
         xe = x[nb : columns.p - k_eff]
         used = xe != 0
         if used.any():
-            E = columns.extra_columns(dq, ddq)
-            out += (E[:, used] * xe[used]) @ columns.extra_weights[:, used].T
+            weights = columns.extra_weights[:, used].T
+            for a in range(0, m, CHUNK_SAMPLES):  # a block at a time: the columns of a long run are large
+                s = slice(a, min(a + CHUNK_SAMPLES, m))
+                out[s] += (columns.extra_columns(dq[s], ddq[s])[:, used] * xe[used]) @ weights
     return out

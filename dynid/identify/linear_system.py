@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
+import math
 from collections.abc import Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
@@ -42,7 +43,7 @@ from numpy.typing import NDArray
 from dynid._threads import JOINT_THREADS, single_blas_thread
 from dynid.data.dataset import Dataset
 from dynid.data.preparation import AUTO_CUTOFF_HZ, Prepared, Preprocessing, prepare, still_joints
-from dynid.data.preprocess import filter_order, filter_padding, filtfilt_rows
+from dynid.data.preprocess import filter_order, filter_padding, filtfilt_rows, kept_rows
 from dynid.exceptions import DataError, IdentificationError, ShapeError
 from dynid.identify._qr import r_factor
 from dynid.identify.columns import (
@@ -80,6 +81,12 @@ RANK_TOL = 1e-10
 """Relative singular value (of the column-normalised weighted regressor) below which a direction of
 the parameters counts as not excited by the data."""
 _FILTER_COLUMNS = 16  # columns of Z filtered at once (16 x 360,000 samples: 46 MB of temporaries)
+KEPT_BYTES = 256 * 2**20
+"""The data matrix's budget at the kept rows: a longer recording is identified on one sample in ``D``
+(:func:`thinned_for_memory`)."""
+FULL_RATE_BYTES = 512 * 2**20
+"""A data matrix at full rate up to this size is filled and filtered whole; a longer recording's is built
+a block at a time, only its kept rows held (see :func:`_kept_data_matrix`)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -126,8 +133,8 @@ class LinearSystem:
         Joint row (0-based) of each column of ``Z``.
     z_param : ndarray of int, shape (c,)
         Identified parameter of each column of ``Z``; -1 for the torque columns.
-    Z : ndarray, shape (M, c) or None
-        The (filtered) data matrix at full rate, kept until :meth:`release` for per-sample residuals.
+    Z : ndarray, shape (m, c) or None
+        The (filtered) data matrix at the kept rows, kept until :meth:`release` for per-sample residuals.
     derived : dict
         Arrays taken from ``Z`` by the later layers, kept for reuse until :meth:`release` (e.g. the
         refined parameters' columns per joint, which both refinements of a default identification use).
@@ -264,7 +271,7 @@ class LinearSystem:
 
     # -------------------------------------------------------------- per-sample values
     def data_matrix(self) -> NDArray[np.float64]:
-        """The (filtered) data matrix ``Z`` at full rate, (M, c); an error once released."""
+        """The (filtered) data matrix ``Z`` at the kept rows, (m, c); an error once released."""
         if self.Z is None:
             raise IdentificationError(
                 "the data matrix of this system was released; per-sample values need it: build the system "
@@ -277,7 +284,7 @@ class LinearSystem:
         Z = self.data_matrix()
         cols = np.flatnonzero(self.z_param < 0)
         order = np.argsort(self.z_joint[cols])
-        return Z[np.ix_(self.prepared.rows, cols[order])]  # (Z[rows] would copy all of Z first)
+        return np.ascontiguousarray(Z[:, cols[order]])
 
     def predict(self, x: NDArray[np.float64], mask: NDArray[np.bool_] | None = None) -> NDArray[np.float64]:
         """``W x`` at the kept rows (N m), (m, n), with the regressor treated like the torque.
@@ -291,19 +298,25 @@ class LinearSystem:
         """
         Z = self.data_matrix()
         C = self._model_map(x, mask)
-        rows = self.prepared.rows
-        out = np.empty((len(rows), self.n))
-        for a in range(0, len(rows), CHUNK_SAMPLES):
-            out[a : a + CHUNK_SAMPLES] = Z[rows[a : a + CHUNK_SAMPLES]] @ C
+        out = np.empty((Z.shape[0], self.n))
+        for a in range(0, Z.shape[0], CHUNK_SAMPLES):
+            out[a : a + CHUNK_SAMPLES] = Z[a : a + CHUNK_SAMPLES] @ C
         return out
 
 
 def _fill_Z(
-    columns: ColumnSet, prepared: Prepared, z_cols: list[tuple[int, int]], effect_values=None
+    columns: ColumnSet,
+    prepared: Prepared,
+    z_cols: list[tuple[int, int]],
+    effect_values=None,
+    span: slice | None = None,
 ) -> NDArray[np.float64]:
-    """The data matrix at full rate, (M, c): regressor entries (joint, parameter) then torques."""
+    """The data matrix at full rate, (M, c), or over the samples ``span`` only: regressor entries
+    (joint, parameter) then torques."""
     robot, nb, n = columns.robot, columns.n_base, columns.n
-    M = len(prepared.t)
+    span = slice(0, len(prepared.t)) if span is None else span
+    q, dq, ddq = prepared.q[span], prepared.dq[span], prepared.ddq[span]
+    M = len(q)
     c = len(z_cols) + n
     Z = np.empty((M, c))
     link = [(k, j * nb + pi) for k, (j, pi) in enumerate(z_cols) if pi < nb]
@@ -314,24 +327,20 @@ def _fill_Z(
     effect = [(k, j, pi - p_extra) for k, (j, pi) in enumerate(z_cols) if pi >= p_extra]
     for a in range(0, M, CHUNK_SAMPLES):
         s = slice(a, min(a + CHUNK_SAMPLES, M))
-        Yb = compiled_base_regressor(robot, prepared.q[s], prepared.dq[s], prepared.ddq[s])
+        Yb = compiled_base_regressor(robot, q[s], dq[s], ddq[s])
         Z[s, link_z] = Yb.reshape(Yb.shape[0], -1)[:, link_flat]
     if extra:
-        E = columns.extra_columns(prepared.dq, prepared.ddq)
+        E = columns.extra_columns(dq, ddq)
         weights = columns.extra_weights
         for k, j, e in extra:
             Z[:, k] = E[:, e] * weights[j, e]
     for k, j, e in effect:
-        Z[:, k] = effect_values[:, j, e]
-    Z[:, len(z_cols) :] = prepared.tau
+        Z[:, k] = effect_values[span, j, e]
+    Z[:, len(z_cols) :] = prepared.tau[span]
     return Z
 
 
-def _filter_in_place(Z: NDArray[np.float64], prepared: Prepared) -> None:
-    """Low-pass every column of Z in place with the torque's filter, run by run."""
-    sos = prepared.sos
-    if sos is None:
-        return
+def _check_runs(prepared: Prepared, sos: NDArray[np.float64]) -> None:
     pad = filter_padding(sos)
     for r, run in enumerate(prepared.runs):
         if run.stop - run.start <= pad:
@@ -339,6 +348,15 @@ def _filter_in_place(Z: NDArray[np.float64], prepared: Prepared) -> None:
                 f"run {r} has {run.stop - run.start} samples, too short for an order-{filter_order(sos)} zero-phase "
                 f"filter (needs more than {pad}); drop that run or record longer"
             )
+
+
+def _filter_in_place(Z: NDArray[np.float64], prepared: Prepared, runs: Sequence[slice] | None = None) -> None:
+    """Low-pass every column of Z in place with the torque's filter, run by run."""
+    sos = prepared.sos
+    if sos is None:
+        return
+    _check_runs(prepared, sos)
+    for run in prepared.runs if runs is None else runs:
 
         def chunk(a: int, run: slice = run) -> None:
             cols = slice(a, min(a + _FILTER_COLUMNS, Z.shape[1]))
@@ -349,12 +367,119 @@ def _filter_in_place(Z: NDArray[np.float64], prepared: Prepared) -> None:
             list(pool.map(chunk, range(0, Z.shape[1], _FILTER_COLUMNS)))
 
 
-def _qr_rows(Z: NDArray[np.float64], rows: NDArray[np.intp]) -> NDArray[np.float64]:
-    """R factor (c x c) of ``Z[rows]`` by blocked Householder QR (one block in memory at a time)."""
+def _kept_data_matrix(
+    columns: ColumnSet, prepared: Prepared, z_cols: list[tuple[int, int]], effect_values=None
+) -> NDArray[np.float64]:
+    """The filtered data matrix at the kept rows, (m, c).
+
+    A recording whose full-rate matrix fits :data:`FULL_RATE_BYTES` is filled and filtered whole,
+    then its kept rows are moved to the front in place and the rest let go.  A longer one is filled
+    and filtered a block of samples at a time, each block widened by :func:`filter_margin` on both
+    sides inside its run (a zero-phase filter's response has died out to rounding beyond it), and
+    only the block's kept rows are written: memory in the kept rows, not in the recording's length.
+    """
+    rows, M, c = prepared.rows, len(prepared.t), len(z_cols) + columns.n
+    sos = prepared.sos
+    if M * c * 8 <= FULL_RATE_BYTES or sos is None:
+        if sos is None and rows.size < M:  # nothing to filter: only the kept rows are evaluated
+            Z = np.empty((len(rows), c))
+            for a in range(0, len(rows), CHUNK_SAMPLES):
+                r = rows[a : a + CHUNK_SAMPLES]
+                block = _fill_Z(columns, prepared, z_cols, effect_values, slice(int(r[0]), int(r[-1]) + 1))
+                Z[a : a + len(r)] = block[r - r[0]]
+            return Z
+        Z = _fill_Z(columns, prepared, z_cols, effect_values)
+        _filter_in_place(Z, prepared)
+        for a in range(0, len(rows), CHUNK_SAMPLES):  # rows[i] >= i: a block never reads what was moved
+            r = rows[a : a + CHUNK_SAMPLES]
+            Z[a : a + len(r)] = Z[r]
+        Z.resize((len(rows), c), refcheck=False)  # nothing else refers to Z: the tail is let go
+        return Z
+    _check_runs(prepared, sos)
+    margin = filter_margin(prepared)
+    block = max(4 * margin, FULL_RATE_BYTES // (16 * 8 * c))
+    Z = np.empty((len(rows), c))
+    for run in prepared.runs:
+        for a in range(run.start, run.stop, block):
+            b = min(a + block, run.stop)
+            lo, hi = np.searchsorted(rows, [a, b])
+            if lo == hi:
+                continue
+            span = slice(max(run.start, a - margin), min(run.stop, b + margin))
+            part = _fill_Z(columns, prepared, z_cols, effect_values, span)
+            _filter_in_place(part, prepared, [slice(0, len(part))])
+            Z[lo:hi] = part[rows[lo:hi] - span.start]
+    return Z
+
+
+def thinned_for_memory(prepared: Prepared, c: int, budget: int | None = None) -> Prepared:
+    """The prepared samples with one kept in ``D``, when their data matrix would exceed the budget.
+
+    A recording of half an hour at 1 kHz holds two million samples: their data matrix (``c`` columns,
+    172 for a 6-joint arm with friction and armature) would take 2.75 GB.  After the low-pass the
+    torque carries nothing above the cut-off, and its noise is correlated over about
+    ``fs / (2 cutoff)`` samples, so one sample in ``D`` (the least ``D`` that fits the budget, the
+    decimated rate kept above 2.5 times the highest cut-off) holds nearly the same information; the
+    standard deviations count the samples kept (:attr:`Prepared.noise_correlation`).  The states and
+    the filter stay at the full rate (the derivatives are taken there).  Unchanged under the budget.
+
+    Parameters
+    ----------
+    prepared : Prepared
+        The prepared recording (its ``decimate`` setting 1).
+    c : int
+        Columns of the data matrix.
+    budget : int, optional
+        Bytes (default :data:`KEPT_BYTES`).
+
+    Returns
+    -------
+    Prepared
+        With ``rows`` thinned, ``settings["decimate"]`` the factor and ``settings["decimate_rule"]`` the
+        sentence that says why; or ``prepared`` itself.
+    """
+    budget = KEPT_BYTES if budget is None else budget
+    size = prepared.m * c * 8
+    if size <= budget:
+        return prepared
+    settings = prepared.settings
+    D = math.ceil(size / budget)
+    band = max((f for f in (settings["cutoff_hz"], settings["state_cutoff_hz"]) if f is not None), default=None)
+    limit = "" if band is None else f", {prepared.fs / D / band:.3g} times the {band:.4g} Hz cut-off"
+    if band is not None and D > int(0.4 * prepared.fs / band):
+        D = max(1, int(0.4 * prepared.fs / band))
+        limit = (
+            f", 2.5 times the {band:.4g} Hz cut-off: no fewer samples keep the filtered torque's band, so the "
+            f"matrix takes {size / D / 2**30:.2g} GB; split the recording to use less"
+        )
+    if D < 2:
+        return prepared
+    trim = math.ceil(settings["trim_s"] * prepared.fs - 1e-9)
+    rows = kept_rows(prepared.runs, decimate=D, trim_samples=trim)
+    rule = (
+        f"identified on one sample in {D} ({prepared.fs / D:.4g} Hz{limit}): the {prepared.m:,} samples' data "
+        f"matrix would take {size / 2**30:.2g} GB, more than the {budget / 2**20:.0f} MB dynid holds; "
+        "--decimate N chooses the factor"
+    )
+    return replace(prepared, rows=rows, settings={**settings, "decimate": D, "decimate_rule": rule})
+
+
+def filter_margin(prepared: Prepared) -> int:
+    """Samples beyond which the prepared torque filter's zero-phase response has died out to rounding.
+
+    ``40 fs / cutoff``: the order-5 Butterworth's slowest pole decays by ``exp(-2 pi 0.31 cutoff t)``,
+    below 1e-30 after ``40 / cutoff`` seconds (:attr:`Prepared.noise_correlation` uses the same span).
+    """
+    cutoff = prepared.settings["cutoff_hz"]
+    return int(np.ceil(40 * prepared.fs / cutoff)) + 64 if cutoff else 0
+
+
+def _qr_rows(Z: NDArray[np.float64]) -> NDArray[np.float64]:
+    """R factor (c x c) of ``Z`` by blocked Householder QR (one block in memory at a time)."""
     c = Z.shape[1]
     R = np.zeros((0, c))
-    for a in range(0, len(rows), CHUNK_SAMPLES):
-        block = np.vstack([R, Z[rows[a : a + CHUNK_SAMPLES]]])
+    for a in range(0, Z.shape[0], CHUNK_SAMPLES):
+        block = np.vstack([R, Z[a : a + CHUNK_SAMPLES]])
         R = r_factor(block, overwrite=True)[:c]
     if R.shape[0] < c:
         R = np.vstack([R, np.zeros((c - R.shape[0], c))])
@@ -452,6 +577,9 @@ def build_system(
 def _build(robot, data, preprocessing, friction, armature, effects, keep_samples) -> LinearSystem:
     prepared = prepare(data, preprocessing, n_joints=robot.n)
     columns = column_set(robot, friction=friction, armature=armature)
+    if (preprocessing or Preprocessing()).decimate == 1:
+        c = int(columns.pattern.sum()) + robot.n + (0 if effects is None else robot.n * len(effects.names))
+        prepared = thinned_for_memory(prepared, c)
     values = None
     if effects is not None and len(effects.names):
         values = np.asarray(effects.values, dtype=np.float64)
@@ -469,10 +597,9 @@ def _build(robot, data, preprocessing, friction, armature, effects, keep_samples
             f"record more than {p // n + 1} samples (in practice at least {10 * p // n}), or trim/decimate less"
         )
     z_cols = [(j, k) for k in range(p) for j in range(n) if columns.pattern[j, k]]
-    Z = _fill_Z(columns, prepared, z_cols, values)
-    _filter_in_place(Z, prepared)
+    Z = _kept_data_matrix(columns, prepared, z_cols, values)
     with single_blas_thread():
-        R_Z = _qr_rows(Z, prepared.rows)
+        R_Z = _qr_rows(Z)
     z_joint = np.array([j for j, _ in z_cols] + list(range(n)), dtype=np.intp)
     z_param = np.array([k for _, k in z_cols] + [-1] * n, dtype=np.intp)
     return LinearSystem(

@@ -56,6 +56,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynid._io import atomic_path, dumps_json, to_jsonable
+from dynid._memory import give_back
 from dynid._progress import say
 from dynid._threads import single_blas_thread
 from dynid.data.dataset import Dataset
@@ -717,7 +718,7 @@ class ThreeLayerModel:
         rows = prep.rows
         info: dict[str, Any] = {
             "n_samples": len(rows),
-            "notes": list(est.notes_),
+            "notes": [*([prep.settings["decimate_rule"]] if "decimate_rule" in prep.settings else []), *est.notes_],
             "reference": prep.reference,
         }
         if self._prior is not None:
@@ -808,6 +809,10 @@ class ThreeLayerModel:
             )
             weight = choose_prior(self.robot, system)
             system.release()
+            if "decimate_rule" in system.prepared.settings:  # past the memory budget: not held through the
+                forget_shared(data)  # cross-validation (the final fit builds it again)
+            del system  # its full-rate states too
+            give_back()
         half = replace(weight, weight=0.5 * weight.weight) if isinstance(weight, PriorChoice) else weight
         cv_data, cv_pre = data, self.preprocessing
         pre = self.preprocessing or Preprocessing()
@@ -830,6 +835,7 @@ class ThreeLayerModel:
             candidates(self.friction, self.gmm),
         )
         say(f"pipeline: {choice.reason}")
+        give_back()
         chosen = self._with(
             method=choice.method, friction=choice.friction, gmm=choice.gmm, reference_weight=weight
         ).fit(data)

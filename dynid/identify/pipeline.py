@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from dynid._memory import give_back
 from dynid._progress import advance, stage
 from dynid.exceptions import DynidError
 from dynid.identify.linear_system import sharing_systems
@@ -232,6 +233,8 @@ def choose_pipeline(make, data, options: list[tuple[str, str, str | int]]) -> Pi
                                 total[i] += _score(model, halves[b])
                         except DynidError:
                             failed[i] = True  # a candidate a half cannot support (too few samples) is out
+                        model = None
+                        give_back()  # each fit's freed memory returned before the next one
                     done += 1
                     advance(done)
     mse = np.where(failed[:, None], np.nan, total / 2)

@@ -152,10 +152,9 @@ def _extras_precision(cols: ColumnSet, H: NDArray[np.float64], scale: float) -> 
 
 def _block_moments(system) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
     """Per block and joint, the (p+1) x (p+1) moment matrix of ``[W_j, tau_j]`` over the block's rows."""
-    Z = system.data_matrix()
-    rows = system.prepared.rows
+    Z = system.data_matrix()  # the kept rows, in time order
     p, n = system.p, system.n
-    edges = np.linspace(0, len(rows), FOLDS + 1).round().astype(int)
+    edges = np.linspace(0, Z.shape[0], FOLDS + 1).round().astype(int)
     reg = system.z_param >= 0
     T = []
     for j in range(n):
@@ -166,10 +165,9 @@ def _block_moments(system) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
         T.append(Tj)
     M = np.zeros((FOLDS, n, p + 1, p + 1))
     for b in range(FOLDS):
-        r = rows[edges[b] : edges[b + 1]]
         G = np.zeros((Z.shape[1], Z.shape[1]))
-        for a in range(0, len(r), 4096):
-            chunk = Z[r[a : a + 4096]]
+        for a in range(edges[b], edges[b + 1], 4096):
+            chunk = Z[a : min(a + 4096, edges[b + 1])]
             G += chunk.T @ chunk
         for j in range(n):
             M[b, j] = T[j].T @ G @ T[j]

@@ -152,8 +152,7 @@ class _Columns:
     """Per joint, the refined parameters' columns at the kept rows: (indices into the mask, (m, k))."""
 
     def __init__(self, system: LinearSystem, mask: NDArray[np.bool_]) -> None:
-        Z = system.data_matrix()
-        rows = system.prepared.rows
+        Z = system.data_matrix()  # the kept rows
         self.sel = np.flatnonzero(mask)
         where = -np.ones(system.p, dtype=np.intp)
         where[self.sel] = np.arange(len(self.sel))
@@ -162,9 +161,9 @@ class _Columns:
             cols = np.flatnonzero((system.z_joint == j) & (system.z_param >= 0))
             cols = cols[mask[system.z_param[cols]]]
             self.idx.append(where[system.z_param[cols]])
-            self.W.append(Z[np.ix_(rows, cols)])
+            self.W.append(np.ascontiguousarray(Z[:, cols]))
             t = np.flatnonzero((system.z_joint == j) & (system.z_param < 0))[0]
-            self.tau.append(Z[rows, t])
+            self.tau.append(np.ascontiguousarray(Z[:, t]))
 
     def torque(self, x_sel: NDArray[np.float64]) -> NDArray[np.float64]:
         return np.column_stack([W @ x_sel[i] for W, i in zip(self.W, self.idx, strict=True)])
