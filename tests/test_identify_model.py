@@ -393,6 +393,12 @@ def test_a_model_identified_from_a_relative_urdf_path_loads_from_another_folder(
     again = load_model("../M.json")
     np.testing.assert_array_equal(again.params, model.params)
     assert again.robot.key == robot.key
+    text = (tmp_path / "x" / "ur5.urdf").read_text()
+    edited = text.replace('<mass value="3.7"/>', '<mass value="3.9"/>', 1)
+    assert edited != text
+    (tmp_path / "x" / "ur5.urdf").write_text(edited)  # the same arm, its shoulder's mass edited
+    with pytest.raises(ModelFileError, match=r"identified on the description 'x/ur5.urdf', which has changed since"):
+        load_model("../M.json")
     (tmp_path / "x" / "ur5.urdf").unlink()  # gone everywhere: one sentence naming what to give
     with pytest.raises(ModelFileError, match=r"cannot be loaded here .*give the robot it was identified for"):
         load_model("../M.json")

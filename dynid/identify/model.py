@@ -1489,6 +1489,7 @@ def load_model(path: str | os.PathLike[str], robot=None) -> IdentifiedModel:
         raise ModelFileError(
             f"{name} is not a readable dynid model file ({type(err).__name__}: {err}); write it again with 'dynid identify'"
         ) from None
+    recorded = robot is None
     if robot is None:
         from dynid.symbolic.robot import load_robot
 
@@ -1500,6 +1501,13 @@ def load_model(path: str | os.PathLike[str], robot=None) -> IdentifiedModel:
             raise ModelFileError(
                 f"{name} records a transmission that does not fit its robot ({err})"
             ) from None
+    changed = robot.key != info_robot.get("key") and (robot.name, robot.n) == (info_robot.get("name"), info_robot.get("n"))
+    if recorded and changed:  # the description the model names, edited since
+        raise ModelFileError(
+            f"{name} was identified on the description '{info_robot.get('source')}', which has changed since (its "
+            f"bodies, joints, armature or tool frame: key {robot.key} now, {info_robot.get('key')} then); identify again "
+            "on the description as it is, or restore the file the model was identified on"
+        )
     if robot.key != info_robot.get("key") or robot.n != info_robot.get("n"):
         raise ModelFileError(
             f"{name} was identified for the robot '{info_robot.get('name')}' ({info_robot.get('n')} joints, key "

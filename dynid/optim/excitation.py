@@ -165,6 +165,7 @@ Progress = Callable[[str], None]
 # command's one line.  The tracker is started with this interpreter's -W options: this one silences its
 # warnings alone.  It still unlinks whatever did leak.
 _QUIET_TRACKER = "ignore::UserWarning:joblib.externals.loky.backend.resource_tracker"
+_IDLE_WORKER_S = 10  # a process pool's workers wait this long for work before they leave
 
 
 def _parallel(n_jobs: int, backend: str | None):
@@ -174,6 +175,8 @@ def _parallel(n_jobs: int, backend: str | None):
 
     if _QUIET_TRACKER not in sys.warnoptions:
         sys.warnoptions.append(_QUIET_TRACKER)
+    if backend in (None, "loky"):  # idle workers leave after 10 s, not loky's 300 s: a killed design's too
+        return joblib.Parallel(n_jobs=n_jobs, backend=backend, idle_worker_timeout=_IDLE_WORKER_S)
     return joblib.Parallel(n_jobs=n_jobs, backend=backend)
 
 
