@@ -443,7 +443,6 @@ def state_estimation_variance(
     (variance, step) : tuple of ndarray, shape (n,)
         Mean squared torque change over the moving rows in noise variances, and the step (rad) per joint.
     """
-    from dataclasses import replace
 
     from dynid.validation.noise import encoder_step
 
@@ -451,14 +450,25 @@ def state_estimation_variance(
     step = encoder_step(ds.q)
     if not np.any(step > 0):
         return np.zeros(n), step
-    rng = np.random.default_rng(seed)
-    moved = replace(ds, q=ds.q + rng.uniform(-0.5, 0.5, ds.q.shape) * step[None, :])
-    prep = prepare(moved, Preprocessing.from_settings(structure.preprocessing), n_joints=n)
-    if len(prep.rows) != len(s.prep.rows) or np.any(prep.rows != s.prep.rows):
+    prep = _moved_angles(structure, ds, s, step, seed)
+    if prep is None:
         return np.zeros(n), step
     tau = prep.filter(np.einsum("mnk,k->mn", _structure_columns(structure, prep.q, prep.dq, prep.ddq), x))
     change = tau[s.rows] - predict(s.X0, x, None, None)
     return mse(change, s.moving) / sigma**2, step
+
+
+def _moved_angles(structure: ModelStructure, ds: Dataset, s: Sample, step: NDArray[np.float64], seed: int):
+    """The held-out run prepared with its angles moved by a white error uniform within ``step`` (seeded),
+    or None when the preparation keeps other rows than ``s``."""
+    from dataclasses import replace
+
+    rng = np.random.default_rng(seed)
+    moved = replace(ds, q=ds.q + rng.uniform(-0.5, 0.5, ds.q.shape) * step[None, :])
+    prep = prepare(moved, Preprocessing.from_settings(structure.preprocessing), n_joints=structure.robot.n)
+    if len(prep.rows) != len(s.prep.rows) or np.any(prep.rows != s.prep.rows):
+        return None
+    return prep
 
 
 STATE_DRAWS = 3
@@ -510,20 +520,16 @@ def state_noise(
     draws : int
         Draws, seeded 0, 1, ... (reproducible).
     """
-    from dataclasses import replace
 
     from dynid.validation.noise import encoder_step
 
     step = encoder_step(ds.q)
     if not np.any(step > 0):
         return None
-    settings = Preprocessing.from_settings(structure.preprocessing)
     sides, dX = [], []
     for seed in range(draws):
-        rng = np.random.default_rng(seed)
-        moved = replace(ds, q=ds.q + rng.uniform(-0.5, 0.5, ds.q.shape) * step[None, :])
-        prep = prepare(moved, settings, n_joints=structure.robot.n)
-        if len(prep.rows) != len(s.prep.rows) or np.any(prep.rows != s.prep.rows):
+        prep = _moved_angles(structure, ds, s, step, seed)
+        if prep is None:
             return None
         X_full = _structure_columns(structure, prep.q, prep.dq, prep.ddq)
         drawn = Sample(
