@@ -86,7 +86,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "chosen from the spectra of q and torque, at least 20 Hz without dq; the summary says how)",
     )
     parser.add_argument(
-        "--decimate", default=1, type=int, metavar="N", help="keep one sample in N after filtering"
+        "--decimate",
+        default=1,
+        type=int,
+        metavar="N",
+        help="keep one sample in N after filtering (default 1; a recording too long for memory is thinned, and says so)",
     )
     parser.add_argument(
         "--rounds",

@@ -459,7 +459,7 @@ def thinned_for_memory(prepared: Prepared, c: int, budget: int | None = None) ->
     rule = (
         f"identified on one sample in {D} ({prepared.fs / D:.4g} Hz{limit}): the {prepared.m:,} samples' data "
         f"matrix would take {size / 2**30:.2g} GB, more than the {budget / 2**20:.0f} MB dynid holds; "
-        "--decimate N chooses the factor"
+        "--decimate N (N > 1) chooses another factor"
     )
     return replace(prepared, rows=rows, settings={**settings, "decimate": D, "decimate_rule": rule})
 
