@@ -748,6 +748,8 @@ FOLDER_INPUTS = [
     ("manifest", lambda f: ["fleet", "--robot", "ur5", "--data", str(f / "*.csv"), "--manifest", str(f / "sub"),
                             "--serial", "--out", str(f / "fleet")],
      r"the manifest '.*sub' is a folder; give a CSV file with the columns path, robot, time\."),
+    ("robot", lambda f: ["identify", "--robot", str(f / "sub"), "--data", str(f / "D.csv"), "--out", str(f / "OUT.json")],
+     r"--robot '.*sub' is a folder; give the robot's description file itself \(a \.urdf, .*or a built-in name"),
 ]  # fmt: skip
 
 

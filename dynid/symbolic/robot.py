@@ -157,6 +157,15 @@ def load_robot(
                     f"the table '{path}' has one tool frame, '{model.tool_name}', not '{tool}'; leave out "
                     "--tool, or name the frame in the table's [tool] section (name = ...)."
                 )
+        elif path.is_dir():
+            found = sorted(
+                str(f) for pattern in ("*.urdf", "*/*.urdf", "*.toml", "*.xml") for f in path.glob(pattern)
+            )[:3]
+            inside = f" (in it: {', '.join(found)})" if found else ""
+            raise RobotModelError(
+                f"--robot '{text}' is a folder{inside}; give the robot's description file itself (a .urdf, a "
+                f"MuJoCo .xml or a modified-DH .toml) or a built-in name ({', '.join(BUILTIN_ROBOTS)})."
+            )
         else:
             raise RobotModelError(
                 f"unknown robot '{text}'; give a built-in name ({', '.join(BUILTIN_ROBOTS)}), a .urdf file, a "
