@@ -526,6 +526,33 @@ def test_without_a_model_a_robot_is_needed(small):
         diagnose(None, train, held)
 
 
+# ---------------------------------------------------------------------------- report
+def test_the_report_names_the_samples_its_error_figures_leave_out():
+    """The decomposition's figures leave the samples near zero speed out: the report says which (their share
+    from the gap map's stiction row), why, what the residual is there, and the model's RMS on the rest."""
+    from dynid.diagnosis.report import _left_out_html
+
+    speed = [
+        {"label": "stiction |dq| < 2 % of max", "count": 40, "excess": 15.0},
+        {"label": "low speed < 30 %", "count": 400, "excess": 1.1},
+    ]
+    result = SimpleNamespace(
+        joint_names=["a", "b"],
+        settings={"samples_heldout": 1000},
+        gap_map={"joints": [{"speed": speed}, {"speed": [{**speed[0], "count": 80, "excess": None}]}]},
+    )
+    text = _left_out_html(result, {"mse_model": [0.09, 4e-6]})
+    assert "slower than 2 % of its top speed (4-8 % of the held-out samples, by joint)" in text
+    assert "Coulomb friction changes sign there" in text
+    assert "in noise variances, joint 1 15 (the gap map&#x27;s stiction row)" in text
+    assert "as RMS on the samples kept, joint 1 0.3, joint 2 0.002 N m" in text
+    assert "a validation report&#x27;s RMS counts every sample" in text
+    # another stick fraction than the gap map's stiction row: no share from that row
+    other = SimpleNamespace(**{**vars(result), "settings": {"samples_heldout": 1000, "stick_fraction": 0.05}})
+    text = _left_out_html(other, {"mse_model": [0.09, 4e-6]})
+    assert "slower than 5 % of its top speed." in text and "stiction row" not in text
+
+
 # ---------------------------------------------------------------------------- command line
 @pytest.mark.slow
 def test_the_command_writes_json_and_a_self_contained_report(tmp_path, small, capsys):
@@ -556,6 +583,10 @@ def test_the_command_writes_json_and_a_self_contained_report(tmp_path, small, ca
     html = (tmp_path / "R.html").read_text()
     assert html.count("data:image/png;base64,") >= 4 and "<script" not in html
     assert "Verdict" in html and "verdict:" in capsys.readouterr().out
+    # the samples the error figures leave out, the reversal rows and the whiteness flag, in words
+    assert "Samples left out: where a joint moves slower than 2 % of its top speed" in html
+    assert "no effect behind them: there Coulomb friction changes sign" in html
+    assert "The verdict does not use it" in html
 
 
 def test_the_command_refuses_a_report_in_a_missing_folder_before_any_work(tmp_path, capsys):

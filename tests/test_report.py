@@ -21,6 +21,8 @@ from dynid.exceptions import UsageError
 from dynid.identify.model import load_model
 from dynid.validation import plots
 from dynid.validation.report import (
+    NEAR_ZERO_SPEED,
+    _near_zero_speed_note,
     check_report_path,
     format_number,
     gmm_changed,
@@ -205,6 +207,10 @@ def test_report_without_gmm_or_consistent_fit_says_so(case, tmp_path):
     assert len(doc.images) == len(FIGURES)
     assert "no model here has a GMM layer" in report.html
     assert "No model here carries physically consistent link parameters" in report.html
+    # the RMS without the samples near zero speed, the gap diagnosis's figure for this model, is named
+    moving = np.abs(ols.dq) >= NEAR_ZERO_SPEED * np.abs(ols.dq).max(axis=0)
+    rms = np.sqrt(np.sum(np.where(moving, ols.residual**2, 0.0), axis=0) / moving.sum(axis=0))
+    assert f"the RMS of &#x27;OLS&#x27; is joint 1 {format_number(rms[0])}, " in report.html
     path = report.write(tmp_path / "ols.html")
     assert path.read_text(encoding="utf-8") == report.html
 
@@ -238,6 +244,28 @@ def test_html_report_cannot_be_written_as_pdf_unless_rendered_so(case, tmp_path)
     ):
         report.write(tmp_path / "R.pdf")
     assert not list(tmp_path.iterdir())
+
+
+def test_the_error_figure_without_the_samples_near_zero_speed_is_named():
+    """The RMS counts every sample; the note names the samples near zero speed, why they spike (Coulomb friction's
+    sign change) and the RMS without them (the gap diagnosis's figure)."""
+    from types import SimpleNamespace
+
+    t = np.linspace(0.0, 10.0, 1001)
+    dq = np.column_stack([np.sin(t), 2.0 * np.cos(t)])
+    residual = np.full_like(dq, 0.1)
+    still = np.abs(dq) < NEAR_ZERO_SPEED * np.abs(dq).max(axis=0)
+    assert still.any(axis=0).all()
+    residual[still] = 5.0  # a spike at every velocity reversal
+    result = SimpleNamespace(residual=residual, dq=dq, n=2, label="fit")
+    note = _near_zero_speed_note(result)
+    # every sample: far above 0.1; without the samples near zero speed: exactly 0.1
+    assert np.all(np.sqrt(np.mean(residual**2, axis=0)) > 0.5)
+    assert "the RMS of &#x27;fit&#x27; is joint 1 0.1, joint 2 0.1 N m" in note
+    share = 100.0 * still.mean(axis=0)
+    assert f"({format_number(share.min(), 2)}-{format_number(share.max(), 2)} % of the samples here" in note
+    assert "Coulomb friction changes sign" in note and "dynid diagnose" in note
+    assert _near_zero_speed_note(SimpleNamespace(residual=np.zeros((0, 2)), dq=np.zeros((0, 2)), n=2)) == ""
 
 
 def test_format_number():

@@ -29,6 +29,29 @@ def _table(headers: list[str], rows: list[list[Any]], text_columns: int = 1) -> 
     return html_table(headers, rows, text_columns=text_columns, digits=3)
 
 
+REVERSAL_TEXT = (
+    "The stiction row (near zero speed) and the row within 50 ms of a velocity reversal can stand far above 1 "
+    "with no effect behind them: there Coulomb friction changes sign, a step of twice its level, which the model "
+    "places by the estimated velocity and the low-pass filter smooths, so the predicted and the measured step "
+    "rarely line up to the millisecond and each reversal leaves a short spike in the residual.  Few samples "
+    "fall in those bins, so the spikes dominate them.  The samples near zero speed are left out of the error "
+    "figures and the excess test for that reason; effects that act at reversals (Stribeck friction, backlash) "
+    "are tested as candidates (the ranking below), and the verdict rests on those tests, not on these bars."
+)
+"""What the gap map's stiction and reversal rows mean when no effect is behind them (its caption)."""
+WHITENESS_TEXT = (
+    "White: whether the residual is uncorrelated from one sample to the next (a Ljung-Box test on 20 lags of "
+    "the residual decimated to about 50 Hz; 'no' where p < 0.05).  A residual compared after a low-pass filter, "
+    "from a model whose parameters were fitted, is correlated in time even with no unmodelled effect, and on a "
+    "run of thousands of samples the p-value of that correlation is tiny (1e-10 or less is common): it says "
+    "the residual is not white, not how large it is or what causes it.  The verdict does not use it: it rests "
+    "on the held-out excess test (whose block statistics allow for the correlation) and on the candidates' "
+    "tests.  The delay and cogging flags are screens in the same way: each points at a candidate (a delay, "
+    "cogging) that the ranking tests on the held-out data; a delay flag on a curve that is flat across the "
+    "lags (as a parameter error gives) is no delay."
+)
+"""What the global flags mean for the verdict (the text under their table)."""
+
 LABEL_PT = 8.0
 """Smallest text in the figures (pt): at the 110 dpi of their PNG, scaled to a 1280 px page, about 11 px."""
 GAP_ROW_IN = 0.14
@@ -112,7 +135,7 @@ def diagnosis_figures(result) -> list[tuple[str, str, bytes]]:
             "Gap map",
             "Held-out residual of the re-identified model: mean squared residual over the noise variance in each "
             "bin (1, dashed: at the noise floor), 90 % moving-block bootstrap intervals; frequency bands against "
-            "the filtered noise spectrum.",
+            "the filtered noise spectrum.  " + REVERSAL_TEXT,
             figure_png(fig),
         )
     )
@@ -132,7 +155,8 @@ def diagnosis_figures(result) -> list[tuple[str, str, bytes]]:
     out.append(
         (
             "Held-out error per joint",
-            "Mean squared torque error on the held-out data (filtered like the model's data): the model as given, "
+            "Mean squared torque error on the held-out data (filtered like the model's data, samples near zero "
+            "speed left out): the model as given, "
             "its base parameters identified again, with the accepted effects added, and the measured noise floor.",
             figure_png(fig),
         )
@@ -157,7 +181,10 @@ def diagnosis_figures(result) -> list[tuple[str, str, bytes]]:
         (
             "Held-out residual",
             "Torque residual over time before and after adding the accepted effects; the grey band is +-2 "
-            "standard deviations of the noise floor.",
+            "standard deviations of the noise floor.  Short spikes at velocity reversals are usually Coulomb "
+            "friction's "
+            "sign change placed a few milliseconds off (see the gap map); the samples near zero speed are left "
+            "out of the error figures and the excess test.",
             figure_png(fig),
         )
     )
@@ -281,6 +308,57 @@ def _refit_html(refit: dict[str, Any], joint_names) -> str:
     )
 
 
+def _stiction_row(joint_map: dict[str, list[dict[str, Any]]]) -> dict[str, Any] | None:
+    """The gap map's row of the samples near zero speed (None if it has none)."""
+    rows = joint_map.get("speed", [])
+    return next((r for r in rows if str(r.get("label", "")).startswith("stiction")), None)
+
+
+def _left_out_html(result, dec: dict[str, Any]) -> str:
+    """Which held-out samples the error figures leave out, why, and how they relate to a validation report's.
+
+    The diagnosis scores each joint on the samples where it moves (faster than ``stick_fraction`` of its top
+    speed); a validation report's RMS counts every sample, so for the same model it is larger by what the
+    samples near zero speed add.
+    """
+    from dynid.diagnosis.settings import DiagnosisSettings
+
+    n = len(result.joint_names)
+    frac = float(result.settings.get("stick_fraction", DiagnosisSettings().stick_fraction))
+    total = result.settings.get("samples_heldout")
+    rms = np.sqrt(np.maximum(np.asarray(dec["mse_model"], dtype=float), 0.0))
+    shares, spikes = [], []
+    for j in range(n):
+        row = _stiction_row(result.gap_map["joints"][j])
+        # The gap map's stiction row is the 2 % of the top speed: the left-out samples at the default only.
+        if row is None or not total or not math.isclose(frac, 0.02):
+            continue
+        shares.append(100.0 * row["count"] / total)
+        if row.get("excess") is not None:
+            spikes.append(f"joint {j + 1} {format_number(row['excess'], 2)}")
+    share = (
+        f" ({format_number(min(shares), 2)}-{format_number(max(shares), 2)} % of the held-out samples, by joint)"
+        if shares
+        else ""
+    )
+    there = (
+        "; on them the re-identified model's mean squared residual is, in noise variances, "
+        + ", ".join(spikes)
+        + " (the gap map's stiction row)"
+        if spikes
+        else ""
+    )
+    figures = ", ".join(f"joint {j + 1} {format_number(float(rms[j]), 4)}" for j in range(n))
+    text = (
+        f"Samples left out: where a joint moves slower than {100 * frac:g} % of its top speed{share}. Coulomb "
+        "friction changes sign there (sticking, reversals), a step the model places a few milliseconds off, "
+        f"which leaves short spikes that say nothing of an unmodelled effect{there}. The model as given has, "
+        f"as RMS on the samples kept, {figures} N m: a validation report's RMS counts every sample and is "
+        "larger for the same model by what the samples near zero speed add."
+    )
+    return f"<p>{html.escape(text)}</p>"
+
+
 def _floor_free_html(doc: dict[str, Any], joint_names) -> list[str]:
     """The two checks that do not rest on the floor, per joint: the runs' agreement on the parameters and the
     training run's misfit across its periods."""
@@ -396,8 +474,12 @@ def render_diagnosis_html(
     )
     parts.append(
         f"<p>Noise floor: {html.escape(result.noise.detail)}. Closure overall: {format_number(dec['closure_overall'], 3)}. "
-        "MSE on the filtered held-out torque, samples near zero speed left out (sticking).</p>"
+        "MSE on the filtered held-out torque, samples near zero speed left out (sticking). Excess: the "
+        "re-identified model's MSE over the noise variance (in noise variances: the square of an RMS / noise); "
+        "less its share from parameter uncertainty it is what the excess test ran on, the figure the summary "
+        "gives.</p>"
     )
+    parts.append(_left_out_html(result, dec))
     rem = doc.get("remainder")
     if rem is not None:
         parts.append("<h3>What a state model still predicts (a check that does not rest on the floor)</h3>")
@@ -500,6 +582,7 @@ def render_diagnosis_html(
             rows,
         )
     )
+    parts.append(f"<p>{html.escape(WHITENESS_TEXT)}</p>")
     if result.notes:
         parts.append(
             "<h2>Notes</h2><ul>" + "".join(f"<li>{html.escape(x)}</li>" for x in result.notes) + "</ul>"

@@ -495,12 +495,16 @@ def verdict_text(d: Diagnosis) -> str:
     if d.verdict == ["none"]:
         lines.append(
             f"No significant gap: the re-identified model's held-out error is {ratio:.2f} times the noise floor "
-            f"(p = {d.excess['p_value']:.2g})."
+            f"(p = {d.excess['p_value']:.2g}; mean squared error over the noise variance, samples near zero speed "
+            "left out)."
         )
         lines.extend(_sensitivity_text(d))
     elif d.verdict == ["unexplained"]:
         if d.excess["significant"]:
-            evidence = f"the held-out error is {ratio:.2f} times the noise floor (significant)"
+            evidence = (
+                f"the held-out error is {ratio:.2f} times the noise floor (significant; mean squared error over "
+                "the noise variance, samples near zero speed left out)"
+            )
         else:
             parts = []
             for doc, what in (
