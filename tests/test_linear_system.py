@@ -369,3 +369,17 @@ def test_thinning_never_takes_the_decimated_rate_below_the_filters_band(ur5, fil
     assert thin.settings["decimate"] == 10  # 1 kHz / 10 = 100 Hz = 2.5 x the 40 Hz cut-off
     assert "2.5 times the 40 Hz cut-off" in thin.settings["decimate_rule"]
     assert np.all(np.diff(thin.rows) >= 10)
+
+
+def test_unfiltered_data_beyond_the_budget_evaluate_the_kept_rows_only(ur5, exact_data, monkeypatch):
+    """Measured derivatives, no filter: the thinned system is the one built on every D-th sample."""
+    from dynid.identify import linear_system
+
+    _, _, _, ds = exact_data
+    whole = build_system(ur5, ds)
+    monkeypatch.setattr(linear_system, "KEPT_BYTES", whole.Z.nbytes // 3 + 1)
+    thin = build_system(ur5, ds)
+    D = thin.prepared.settings["decimate"]
+    assert D == 3 and thin.prepared.settings["cutoff_hz"] is None
+    np.testing.assert_array_equal(thin.Z, whole.Z[::D][: thin.m])
+    np.testing.assert_allclose(OLS(robot=ur5).fit(thin).params_, OLS(robot=ur5).fit(whole).params_, rtol=1e-8, atol=1e-8)

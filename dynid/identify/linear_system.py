@@ -309,10 +309,10 @@ def _fill_Z(
     prepared: Prepared,
     z_cols: list[tuple[int, int]],
     effect_values=None,
-    span: slice | None = None,
+    span: slice | NDArray[np.intp] | None = None,
 ) -> NDArray[np.float64]:
-    """The data matrix at full rate, (M, c), or over the samples ``span`` only: regressor entries
-    (joint, parameter) then torques."""
+    """The data matrix at full rate, (M, c), or at the samples ``span`` only (a range, or rows when
+    nothing is filtered): regressor entries (joint, parameter) then torques."""
     robot, nb, n = columns.robot, columns.n_base, columns.n
     span = slice(0, len(prepared.t)) if span is None else span
     q, dq, ddq = prepared.q[span], prepared.dq[span], prepared.ddq[span]
@@ -385,8 +385,7 @@ def _kept_data_matrix(
             Z = np.empty((len(rows), c))
             for a in range(0, len(rows), CHUNK_SAMPLES):
                 r = rows[a : a + CHUNK_SAMPLES]
-                block = _fill_Z(columns, prepared, z_cols, effect_values, slice(int(r[0]), int(r[-1]) + 1))
-                Z[a : a + len(r)] = block[r - r[0]]
+                Z[a : a + len(r)] = _fill_Z(columns, prepared, z_cols, effect_values, r)
             return Z
         Z = _fill_Z(columns, prepared, z_cols, effect_values)
         _filter_in_place(Z, prepared)
