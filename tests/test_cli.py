@@ -117,6 +117,17 @@ def test_the_installed_command_runs():
     assert "Traceback" not in run.stderr
 
 
+def test_python_m_dynid_is_the_command():
+    """``python -m dynid`` (dynid/__main__.py) runs the same command line, exit code included."""
+    run = subprocess.run([sys.executable, "-m", "dynid", "--help"], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.startswith("usage: dynid ")
+    assert "identify" in run.stdout and "diagnose" in run.stdout
+    run = subprocess.run([sys.executable, "-m", "dynid", "no-such-command"], capture_output=True, text=True)
+    assert run.returncode == 2
+    assert "Traceback" not in run.stderr
+
+
 @pytest.mark.slow
 def test_demo_runs_what_exists(tmp_path, capsys):
     figures = tmp_path / "demo.json"

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import REPO
+from tests.conftest import REPO
 
 DOCS = REPO / "docs"
 EXAMPLES = REPO / "examples"

@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 
 import pytest
-from conftest import REPO
+from tests.conftest import REPO
 
 README = REPO / "README.md"
 

@@ -78,7 +78,7 @@ _PHASE_WINDOWS = 8  # phase windows per period when the data are periodic
 _FLOOR_QUANTILE = 0.01  # the density gate is 1 above this quantile of the training inputs' density
 # The gate's density has the components' input spreads this many times wider.  Measured on the identification
 # benchmark (a new trajectory over the same workspace, slightly beyond the training angles of joint 4) and on
-# tests/test_physical_layers.py (a motion 0.1-3 rad beyond them): held-out RMS of joint 4 0.100 N m at 2,
+# tests/identify/test_physical_layers.py (a motion 0.1-3 rad beyond them): held-out RMS of joint 4 0.100 N m at 2,
 # 0.070 at 3, 0.049 at 4, 0.051 at 6 (0.051 without the gate); the correction 3 rad away below 5 % of its
 # size inside at 2, 4 and 6.  A lower floor quantile (0.001, or the least training density) gave 0.076.
 _GATE_WIDTH = 4.0
@@ -111,7 +111,7 @@ def fit_gaussian_mixture(
     The same algorithm as scikit-learn's (one k-means start with the same seed, the same M-step with
     ``reg_covar`` on the diagonal, the same stop on the change of the mean log-likelihood) with all
     components at once in stacked arrays.  Its parameters equal scikit-learn's 1.9 to rounding (at most
-    1.3e-14 apart on standardised data, with the same iteration counts; tests/test_identify_gmr.py
+    1.3e-14 apart on standardised data, with the same iteration counts; tests/identify/test_gmr.py
     checks 1e-11); it takes a fifth of the time on the small fits dynid makes (4,000 samples of 2-3
     coordinates: about 70 % of scikit-learn's time was its per-component loops and input checks).
 

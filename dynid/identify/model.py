@@ -144,7 +144,7 @@ to the joint fit's, for a share past :data:`TAKEOVER_SHARE` to put the physical 
 
 Measured: the whole TX40 recording, at most 1.07 (the joint fit bought nothing for the torque its mixture
 moved); the paper reproduction's ripple, 1.17 on the joint past the share and 1.7-2.4 on the others; a
-1 N m position bump on every joint of a UR5 (tests/test_physical_layers.py), 1.4-3.1."""
+1 N m position bump on every joint of a UR5 (tests/identify/test_physical_layers.py), 1.4-3.1."""
 FORMAT = "dynid-model"
 VERSION = 3
 """Model file version: 2 adds effect terms and a coupled transmission; 3 the links' consistent standard

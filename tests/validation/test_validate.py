@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from validation_cases import PERIOD, simulated_case
+from tests.validation.cases import PERIOD, simulated_case
 
 from dynid.cli import main
 from dynid.data.dataset import Dataset

@@ -37,7 +37,7 @@ from dynid.data.dataset import Dataset
 from dynid.data.preprocess import preprocess
 from dynid.exceptions import DataError
 
-DATA = Path(os.environ.get(ENV_VAR) or Path(__file__).resolve().parents[2] / "shared" / "data")
+DATA = Path(os.environ.get(ENV_VAR) or Path(__file__).resolve().parents[3] / "shared" / "data")
 skip_without_data = pytest.mark.skipif(
     not DATA.is_dir(), reason=f"the real recordings are not at {DATA} (../shared/data)"
 )

@@ -16,7 +16,7 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import REPO
+from tests.conftest import REPO
 
 from dynid.cli import main
 from dynid.commands import fleet as fleet_command

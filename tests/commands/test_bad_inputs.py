@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import DH_TABLE, assert_refused, snapshot
+from tests.conftest import DH_TABLE, assert_refused, snapshot
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 

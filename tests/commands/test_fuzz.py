@@ -1,7 +1,7 @@
 """The cases of issue 39's fuzz (hangs, crashes, memory, tracebacks, bad input that exited 0), held as a table.
 
 Each case is a command line on a folder of inputs with a pre-existing output; the contract is that of
-``tests/test_bad_inputs.py``: exit code 2, one line on stderr naming what was expected, no traceback,
+``tests/commands/test_bad_inputs.py``: exit code 2, one line on stderr naming what was expected, no traceback,
 every file of the folder byte-identical and nothing added.  Cases that need the environment (a matplotlib
 backend, a file-descriptor limit, dynid's cache) follow the table.
 """
@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import DH_TABLE, assert_refused, snapshot
+from tests.conftest import DH_TABLE, assert_refused, snapshot
 
 from dynid.cli import main
 from dynid.exceptions import CacheWarning, DataError, RobotModelError, UsageError

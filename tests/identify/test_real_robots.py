@@ -18,7 +18,7 @@ import pytest
 from dynid.identify.consistent import pseudo_inertia
 
 pytestmark = pytest.mark.realdata
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def _script(name: str):

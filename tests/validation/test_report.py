@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from matplotlib.figure import Figure
-from validation_cases import simulated_case
+from tests.validation.cases import simulated_case
 
 from dynid.cli import main
 from dynid.data.files import load_dataset

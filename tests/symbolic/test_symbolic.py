@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import DATA
+from tests.conftest import DATA
 
 from dynid.exceptions import CompilerNotFoundError
 from dynid.symbolic import load_robot, robot_functions

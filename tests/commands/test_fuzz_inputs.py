@@ -1,6 +1,6 @@
 """Bad inputs that exited 0 silently, held: each is now one sentence and exit 2, or a one-line warning.
 
-The contract is that of ``tests/test_bad_inputs.py``: a refusal is exit code 2, one line on stderr naming
+The contract is that of ``tests/commands/test_bad_inputs.py``: a refusal is exit code 2, one line on stderr naming
 what was expected, what came and the fix, no traceback, every file of the folder byte-identical and
 nothing added.  Where the data cannot tell (a period the recording is too short to confirm, a torque
 channel stuck over part of a run, angles somewhat past the limits, a model scored on its own training
@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import DH_TABLE
-from conftest import assert_refused as _assert_refused
+from tests.conftest import DH_TABLE
+from tests.conftest import assert_refused as _assert_refused
 
 from dynid.cli import main
 from dynid.exceptions import DataError, DataWarning, ModelFileError, RobotModelError, UsageError

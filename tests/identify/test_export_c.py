@@ -11,7 +11,7 @@ import warnings
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import DATA
+from tests.conftest import DATA
 
 from dynid.exceptions import GeneratorError, IdentificationWarning, UsageError
 from dynid.symbolic import base_parameters, load_robot, robot_functions

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import DATA
+from tests.conftest import DATA
 
 from dynid.exceptions import ShapeError
 from dynid.symbolic import base_parameters, load_robot, robot_functions

@@ -296,7 +296,7 @@ def test_the_benchmark_counts_what_an_effect_adds_over_its_effect_free_twin() ->
     from pathlib import Path
 
     bench = runpy.run_path(
-        str(Path(__file__).resolve().parents[1] / "benchmarks" / "field_diagnosis_benchmark.py"),
+        str(Path(__file__).resolve().parents[2] / "benchmarks" / "field_diagnosis_benchmark.py"),
         run_name="dynid_benchmark",
     )
     cases = bench["build_cases"](["ur5"], [1, 2], 1, effects=["stribeck"], levels=(1.0,), unknown_levels=())

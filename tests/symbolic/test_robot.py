@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import DATA
+from tests.conftest import DATA
 
 from dynid.exceptions import RobotModelError, ShapeError
 from dynid.symbolic.robot import BUILTIN_ROBOTS, load_robot, mdh_placement, standard_from_com

@@ -194,7 +194,7 @@ def test_a_modified_dh_table_gets_a_urdf_of_its_own(tmp_path):
     pytest.importorskip("mujoco", reason="the MJCF export needs mujoco (pip install dynid[mujoco])")
     from dynid.symbolic import load_robot
 
-    robot = load_robot(Path(__file__).resolve().parent / "data" / "rrpr_mdh.toml")
+    robot = load_robot(Path(__file__).resolve().parents[1] / "fixtures" / "rrpr_mdh.toml")
     path, _ = _identified(robot, tmp_path, "rrpr")
     model = load_model(path)
     for fmt, name in (("urdf", "rrpr.urdf"), ("mjcf", "rrpr.xml")):

@@ -14,7 +14,7 @@ from dynid.identify.model import identify, load_model, save_model
 from dynid.sim.synthetic import random_fourier, synthetic_dataset, true_parameters
 from dynid.symbolic.robot import load_robot, load_transmission
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).resolve().parents[1] / "fixtures"
 COUPLING = "[transmission]\ncoupled = [[2, 4, 0.5]]\n"  # motor 4 also turns by half of joint 2
 
 
