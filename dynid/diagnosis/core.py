@@ -350,6 +350,8 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
             "measured_excess_tol": settings.measured_excess_tol,
             "block_seconds": settings.block_seconds,
             "screen_top": settings.screen_top,
+            "stick_fraction": settings.stick_fraction,
+            "confound_deg": settings.confound_deg,
             "samples_train": int(tr.y.shape[0]),
             "samples_heldout": int(ho.y.shape[0]),
             "weight_passes": base.passes,

@@ -6,7 +6,7 @@ back-driven, gravity load, acceleration, joint angle modulo a gear period, time 
 frequency band.  The excess of a bin is ``mean(r^2) / sigma^2`` (1 = at the noise floor), with a
 moving-block bootstrap interval.  Three global flags complete it: whiteness (Ljung-Box), the
 cross-correlation of the residual with the predicted torque over +-50 ms (a delay: a maximum inside
-the window, never one on its edge), and the angle-domain spectrum (cogging).
+the window that stands above the zero-lag value, never one on its edge or on a flat curve), and the angle-domain spectrum (cogging).
 """
 
 from __future__ import annotations
@@ -223,15 +223,19 @@ def _frequency_bins(r, sigma2, fs, filter_gain, noise_signal, j) -> list[dict[st
 def _xcorr(r, tau, fs, block) -> dict[str, Any]:
     """Cross-correlation of the residual with the predicted torque over +-50 ms.
 
-    Flagged when its largest magnitude exceeds the threshold at a non-zero lag inside the window; on the
-    window's edge (``at_edge``) the correlation rises monotonically toward a longer lag, which is no delay.
+    Flagged when its largest magnitude exceeds the threshold at a non-zero lag inside the window, and
+    stands above the zero-lag value by more than the threshold too (``rise``). On the window's edge
+    (``at_edge``) the correlation rises monotonically toward a longer lag, which is no delay; a curve that
+    is flat across the lags (a residual in proportion to a slow torque, as a parameter error gives) has
+    its largest value anywhere, wherever the noise puts it, and is no delay either. A delay makes the
+    residual follow the torque's change, so its correlation moves away from the zero-lag value.
     """
     L = max(1, round(0.05 * fs))
     a = r - r.mean()
     b = tau - tau.mean()
     da, db = float(np.sqrt(a @ a)), float(np.sqrt(b @ b))
     if da == 0 or db == 0:
-        return {"lag_ms": 0.0, "rho": 0.0, "threshold": None, "at_edge": False, "flag": False}
+        return {"lag_ms": 0.0, "rho": 0.0, "threshold": None, "at_edge": False, "rise": 0.0, "flag": False}
     lags = np.arange(-L, L + 1)
     rho = np.array(
         [
@@ -246,12 +250,14 @@ def _xcorr(r, tau, fs, block) -> dict[str, Any]:
     # A peak on the window's edge is no peak: the correlation still grows beyond the window (a slope, as a
     # slow residual against a slow torque gives), and a delay would show as a maximum inside it.
     at_edge = k in (0, lags.size - 1)
+    rise = abs(float(rho[k] - rho[L]))  # rho[L] is the zero lag
     return {
         "lag_ms": float(1000.0 * lags[k] / fs),
         "rho": float(rho[k]),
         "threshold": thr,
         "at_edge": bool(at_edge),
-        "flag": bool(abs(rho[k]) > thr and lags[k] != 0 and not at_edge),
+        "rise": rise,
+        "flag": bool(abs(rho[k]) > thr and lags[k] != 0 and not at_edge and rise > thr),
         "curve": {"lag_ms": (1000.0 * lags / fs).tolist(), "rho": rho.tolist()},
     }
 

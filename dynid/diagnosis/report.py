@@ -25,6 +25,20 @@ from dynid.validation.html_page import check_report_path, figure_html, format_nu
 __all__ = ["diagnosis_figures", "refit_rows", "render_diagnosis_html", "write_diagnosis_report"]
 
 
+
+def _delay_word(d: dict[str, Any]) -> str:
+    """The delay flag in a word or three, saying why a large correlation is not flagged."""
+    if d["flag"]:
+        return "yes"
+    thr = d.get("threshold")
+    if thr is None or abs(d["rho"]) <= thr or d["lag_ms"] == 0:
+        return "no"
+    if d.get("at_edge"):
+        return "no (peak on the window's edge)"
+    if d.get("rise", thr + 1.0) <= thr:
+        return "no (flat across the lags)"
+    return "no"
+
 def _table(headers: list[str], rows: list[list[Any]], text_columns: int = 1) -> str:
     return html_table(headers, rows, text_columns=text_columns, digits=3)
 
@@ -47,8 +61,9 @@ WHITENESS_TEXT = (
     "the residual is not white, not how large it is or what causes it.  The verdict does not use it: it rests "
     "on the held-out excess test (whose block statistics allow for the correlation) and on the candidates' "
     "tests.  The delay and cogging flags are screens in the same way: each points at a candidate (a delay, "
-    "cogging) that the ranking tests on the held-out data; a delay flag on a curve that is flat across the "
-    "lags (as a parameter error gives) is no delay."
+    "cogging) that the ranking tests on the held-out data.  A delay is flagged only where the curve peaks "
+    "inside the window and rises above its zero-lag value by more than the threshold: a curve flat across "
+    "the lags (a parameter error on a slow torque) or climbing to the window's edge is no delay."
 )
 """What the global flags mean for the verdict (the text under their table)."""
 
@@ -239,7 +254,7 @@ def diagnosis_figures(result) -> list[tuple[str, str, bytes]]:
         (
             "Residual-torque cross-correlation",
             "Correlation of the residual with the predicted torque shifted by +-50 ms; a peak beyond the dashed "
-            "threshold at a non-zero lag points to a delay.",
+            "threshold at a non-zero lag, and above the zero-lag value by as much, points to a delay.",
             figure_png(fig),
         )
     )
@@ -560,7 +575,7 @@ def render_diagnosis_html(
                 "yes" if w["white"] else "no",
                 d["lag_ms"],
                 d["rho"],
-                "yes" if d["flag"] else ("no (peak on the window's edge)" if d.get("at_edge") else "no"),
+                _delay_word(d),
                 c.get("peak_ratio"),
                 c.get("peak"),
                 "yes" if c.get("flag") else "no",

@@ -475,6 +475,15 @@ def test_heldout_data_without_a_noise_estimate_is_refused(small):
         diagnose(model, train, one)
 
 
+def test_the_settings_that_shape_the_figures_are_recorded(small):
+    """The stick fraction decides which samples the error figures leave out; the report reads it back."""
+    model, train, held = small
+    d = diagnose(model, train, held, max_samples=1500, max_effects=1, stick_fraction=0.05, effects=("delay",))
+    saved = d.to_dict()["settings"]
+    assert saved["stick_fraction"] == 0.05 and saved["confound_deg"] == 15.0
+    assert saved["effects"] == ["delay"]
+
+
 @pytest.mark.slow
 def test_a_floor_from_the_spectrum_makes_the_verdict_provisional(ur5, small):
     model, train, held = small

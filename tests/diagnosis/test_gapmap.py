@@ -182,6 +182,43 @@ def test_a_correlation_rising_to_the_window_edge_is_not_a_delay(ur5):
     assert delay["at_edge"]
 
 
+def test_a_correlation_flat_across_the_lags_is_not_a_delay(ur5):
+    """A residual in proportion to a slow predicted torque (a parameter error) correlates with it about
+    equally at every lag of the window; a lag (24 ms) puts the largest value inside the window,
+    above the threshold.  The curve does not rise from its zero-lag value, so it is no delay (issue 37:
+    joint 4 of the demo was flagged on such a curve)."""
+    rng = np.random.default_rng(38)
+    t = np.arange(0.0, 24.0, 1.0 / FS)
+    m, n = t.size, 6
+    w = 2 * math.pi * 0.25 * (1.0 + 0.1 * np.arange(n))
+    q = np.sin(np.outer(t, w))
+    dq = w * np.cos(np.outer(t, w))
+    ddq = -(w**2) * q
+    slow = np.sin(2 * math.pi * 0.3 * t) + 0.5 * np.sin(2 * math.pi * 0.5 * t + 1.0)
+    tau_pred = np.tile(slow[:, None], (1, n))
+    residual = 0.05 * rng.standard_normal((m, n)) * SIGMA
+    residual[:, 0] += 0.5 * np.interp(t - 0.024, t, slow)
+    result = gap_map(
+        t=t,
+        q=q,
+        dq=dq,
+        ddq=ddq,
+        tau=tau_pred + residual,
+        tau_pred=tau_pred,
+        residual=residual,
+        noise=NoiseFloor(std=SIGMA.copy(), method="periods", detail="constructed"),
+        block=25,
+        robot=ur5,
+    )
+    delay = result["flags"]["delay"][0]
+    rho = np.asarray(delay["curve"]["rho"])
+    assert np.ptp(rho) < delay["threshold"]  # flat: the whole curve within one threshold
+    assert abs(delay["rho"]) > delay["threshold"]  # and high
+    assert delay["lag_ms"] < 0 and not delay["at_edge"]  # a peak inside, at a non-zero lag
+    assert delay["rise"] < delay["threshold"]
+    assert not delay["flag"]
+
+
 @pytest.mark.parametrize("top", [3.0, 12.0, 30.0, 80.0, 300.0, 5000.0, 1e7])
 def test_gap_map_panel_text_is_legible_and_its_log_ticks_do_not_touch(top):
     """Issue 38: every label at 8 pt or more (>= 11 px in the report); two to six numbered x ticks, apart."""
