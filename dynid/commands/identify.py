@@ -87,10 +87,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--decimate",
-        default=1,
+        default=None,
         type=int,
         metavar="N",
-        help="keep one sample in N after filtering (default 1; a recording too long for memory is thinned, and says so)",
+        help="keep one sample in N after filtering (default: every sample, but a recording too long for memory is "
+        "thinned, and says so; 1 keeps every sample whatever the memory)",
     )
     parser.add_argument(
         "--rounds",
@@ -241,7 +242,7 @@ def run(args: argparse.Namespace) -> int:
         method=args.method,
         friction=args.friction,
         gmm=args.gmm,
-        preprocessing=Preprocessing(cutoff=args.cutoff, decimate=args.decimate),
+        preprocessing=Preprocessing(cutoff=args.cutoff, decimate=1 if args.decimate is None else args.decimate, thin=args.decimate is None),
         reference_weight=args.reference_weight,
         rounds=args.rounds,
         gmm_mode=args.gmm_mode,

@@ -59,6 +59,11 @@ class Preprocessing:
         Butterworth order (5 in the paper); run forward and backward.
     decimate : int
         Keep one sample in ``decimate`` after filtering.
+    thin : bool
+        With ``decimate`` 1 (default True): a recording whose data matrix would not fit the memory dynid
+        holds is identified on one sample in ``D`` (:func:`dynid.identify.linear_system.thinned_for_memory`,
+        the model file says so).  False keeps every sample whatever it costs (``--decimate 1`` on the
+        command line).
     trim : float or None
         Time (s) dropped at both ends of each run (filter transients).  Default ``5 / cutoff`` (the
         lower of the two cut-offs; 0 without a filter): the edge transient of a zero-phase filter on
@@ -77,6 +82,7 @@ class Preprocessing:
     state_cutoff: float | Literal["auto"] | None = "auto"
     order: int = 5
     decimate: int = 1
+    thin: bool = True
     trim: float | None = None
     parallel: bool = True
     velocity: Literal["auto", "measured", "differentiate"] = "auto"

@@ -576,7 +576,8 @@ def build_system(
 def _build(robot, data, preprocessing, friction, armature, effects, keep_samples) -> LinearSystem:
     prepared = prepare(data, preprocessing, n_joints=robot.n)
     columns = column_set(robot, friction=friction, armature=armature)
-    if (preprocessing or Preprocessing()).decimate == 1:
+    pre = preprocessing or Preprocessing()
+    if pre.decimate == 1 and pre.thin:
         c = int(columns.pattern.sum()) + robot.n + (0 if effects is None else robot.n * len(effects.names))
         prepared = thinned_for_memory(prepared, c)
     values = None

@@ -170,7 +170,6 @@ COMMAND_DEFAULTS = {
         "gmm_mode": (identify, "gmm_mode"),
         "reference_weight": (identify, "reference_weight"),
         "cutoff": (Preprocessing, "cutoff"),
-        "decimate": (Preprocessing, "decimate"),
     },
     fleet_command: {
         **{f: (FleetSettings, f) for f in ("method", "friction", "gmm", "cutoff", "holdout", "diagnose", "degrees")},
@@ -223,6 +222,29 @@ def test_command_defaults_are_the_librarys(module) -> None:
 def test_identify_command_flags_default_to_the_librarys() -> None:
     parser = _parser(identify_command)
     assert parser.get_default("unconstrained") is (not _library_default(identify, "physical"))
+    # no --decimate: the library's every sample, thinned only past the memory budget; --decimate 1: never
+    assert parser.get_default("decimate") is None
+    assert _field_defaults(Preprocessing)["decimate"] == 1 and _field_defaults(Preprocessing)["thin"] is True
+
+
+@pytest.mark.parametrize(("argv", "expected"), [([], Preprocessing()), (["--decimate", "1"], Preprocessing(thin=False))])
+def test_identify_command_passes_the_decimation_on(ur5, tmp_path, monkeypatch, argv, expected) -> None:
+    """No --decimate is the library's default (thinned past the memory budget); --decimate 1 keeps all."""
+    from dynid.cli import main
+    from dynid.sim.simulator import write_simulation
+
+    run = simulate(ur5, random_fourier(ur5, np.random.default_rng(0)), duration=0.2, seed=1, friction="linear")
+    data, _ = write_simulation(run, tmp_path / "D.csv")
+    seen = {}
+
+    def recorder(robot, dataset, **kwargs):
+        seen.update(kwargs)
+        raise KeyboardInterrupt  # stop before the fit: the keywords are what is tested
+
+    monkeypatch.setattr(identify_model, "identify", recorder)
+    main(["identify", "--robot", "ur5", "--data", str(data), "--out", str(tmp_path / "M.json"), *argv])
+    assert seen["preprocessing"] == expected
+    assert not (tmp_path / "M.json").exists()
 
 
 def test_simulate_command_friction_choices_are_the_truth_kinds() -> None:

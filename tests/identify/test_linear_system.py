@@ -356,6 +356,10 @@ def test_a_recording_beyond_the_memory_budget_is_identified_on_one_sample_in_D(u
     assert np.median(np.sqrt(np.diag(thin.cov)) / std) == pytest.approx(1.0, abs=0.25)
     # the decimation is the model's: a held-out recording is scored on the same grid
     assert thin.prepare(ds).m == thin.info["n_samples"]
+    # thin=False (the command line's --decimate 1) keeps every sample whatever the budget
+    kept = identify(ur5, ds, preprocessing=dataclasses.replace(pre, thin=False), **options)
+    assert kept.preprocessing["decimate"] == 1 and kept.info["n_samples"] == full.info["n_samples"]
+    np.testing.assert_array_equal(kept.params, full.params)
 
 
 def test_thinning_never_takes_the_decimated_rate_below_the_filters_band(ur5, filtered_run) -> None:
