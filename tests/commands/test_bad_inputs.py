@@ -21,7 +21,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from tests.conftest import DH_TABLE, assert_refused, snapshot
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
@@ -29,6 +28,7 @@ from dynid.cli import main
 from dynid.data.files import load_dataset
 from dynid.exceptions import DataError, DataWarning, DynidError, RobotModelError, RobotModelWarning
 from dynid.symbolic.robot import check_inertias, check_simulable, load_robot
+from tests.conftest import DH_TABLE, assert_refused, snapshot
 
 ROWS = 1100  # 1.1 s at 1 kHz: enough for identify's trimming, small enough to be quick
 

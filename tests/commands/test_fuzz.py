@@ -18,11 +18,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from tests.conftest import DH_TABLE, assert_refused, snapshot
 
 from dynid.cli import main
 from dynid.exceptions import CacheWarning, DataError, RobotModelError, UsageError
 from dynid.symbolic.robot import load_robot
+from tests.conftest import DH_TABLE, assert_refused, snapshot
 
 ROWS = 1100
 

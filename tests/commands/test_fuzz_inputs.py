@@ -26,12 +26,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from tests.conftest import DH_TABLE
-from tests.conftest import assert_refused as _assert_refused
 
 from dynid.cli import main
 from dynid.exceptions import DataError, DataWarning, ModelFileError, RobotModelError, UsageError
 from dynid.symbolic.robot import load_robot
+from tests.conftest import DH_TABLE
+from tests.conftest import assert_refused as _assert_refused
 
 
 def assert_refused(argv, folder, pattern, capsys):

@@ -11,11 +11,11 @@ import warnings
 import numpy as np
 import pinocchio as pin
 import pytest
-from tests.conftest import DATA
 
 from dynid.exceptions import GeneratorError, IdentificationWarning, UsageError
 from dynid.symbolic import base_parameters, load_robot, robot_functions
 from dynid.symbolic.export import CompiledLibrary, compiled_functions, export_c
+from tests.conftest import DATA
 
 
 @pytest.fixture(

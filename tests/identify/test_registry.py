@@ -16,7 +16,6 @@ import sys
 
 import numpy as np
 import pytest
-from tests.conftest import REPO
 
 from dynid.cli import main
 from dynid.commands import fleet as fleet_command
@@ -30,6 +29,7 @@ from dynid.identify.model import identify, load_model, save_model
 from dynid.identify.registry import CONSTRAINED_METHODS, ESTIMATORS, FRICTION_MODELS, method_names
 from dynid.sim.synthetic import random_fourier, synthetic_dataset, true_parameters
 from dynid.simmodel.parameters import simulator_parameters
+from tests.conftest import REPO
 
 KV2 = np.array([0.8, 1.5, 0.6, 0.3, 0.2, 0.1])  # N m s^2/rad^2 per joint of the UR5
 

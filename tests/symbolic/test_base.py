@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from tests.conftest import DATA
 
 from dynid.exceptions import ShapeError
 from dynid.symbolic import base_parameters, load_robot, robot_functions
+from tests.conftest import DATA
 
 
 @pytest.fixture(scope="module", params=["ur5", "panda", str(DATA / "rpr.urdf"), str(DATA / "rrpr_mdh.toml")])

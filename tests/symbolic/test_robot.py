@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pinocchio as pin
 import pytest
-from tests.conftest import DATA
 
 from dynid.exceptions import RobotModelError, ShapeError
 from dynid.symbolic.robot import BUILTIN_ROBOTS, load_robot, mdh_placement, standard_from_com
+from tests.conftest import DATA
 
 
 @pytest.mark.parametrize(("name", "n"), [("ur5", 6), ("ur10", 6), ("panda", 7)])

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from tests.conftest import DATA
 
 from dynid.exceptions import CompilerNotFoundError
 from dynid.symbolic import load_robot, robot_functions
 from dynid.symbolic.build import find_compiler
+from tests.conftest import DATA
 
 ROBOTS = ["ur5", "panda", str(DATA / "rpr.urdf"), str(DATA / "rrpr_mdh.toml")]
 

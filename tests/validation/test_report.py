@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 from matplotlib.figure import Figure
-from tests.validation.cases import simulated_case
 
 from dynid.cli import main
 from dynid.data.files import load_dataset
@@ -30,6 +29,7 @@ from dynid.validation.report import (
     render_report,
 )
 from dynid.validation.validate import nominal_model, validate
+from tests.validation.cases import simulated_case
 
 VOID = {"meta", "img", "br", "hr", "link", "input", "col", "source", "area", "base", "wbr"}
 FIGURES = ("methods", "torque", "friction")

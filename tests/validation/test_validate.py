@@ -11,7 +11,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from tests.validation.cases import PERIOD, simulated_case
 
 from dynid.cli import main
 from dynid.data.dataset import Dataset
@@ -29,6 +28,7 @@ from dynid.validation.validate import (
     validate,
     write_predictions,
 )
+from tests.validation.cases import PERIOD, simulated_case
 
 
 @pytest.fixture(scope="module")
