@@ -102,6 +102,31 @@ def _links_by_parent(root: ET.Element) -> dict[str, list[ET.Element]]:
     return out
 
 
+
+def _motion_axes(model) -> list[np.ndarray]:
+    """Each joint's motion in its own frame (6-vectors, linear then angular), from Pinocchio's joint model.
+
+    A revolute joint about ``a`` gives ``(0, a)``, a prismatic one ``(a, 0)``, whether Pinocchio holds the
+    axis in the joint's type (``RZ``) or in the joint (unaligned): the one form that compares both.
+    """
+    import pinocchio as pin
+
+    data = model.createData()
+    q = pin.neutral(model)
+    pin.computeJointJacobians(model, data, q)
+    out = []
+    for k in range(1, model.njoints):
+        J = pin.getJointJacobian(model, data, k, pin.ReferenceFrame.LOCAL)
+        out.append(np.asarray(J[:, model.joints[k].idx_v], dtype=float).copy())
+    return out
+
+
+def _axis_words(motion: np.ndarray) -> str:
+    """A joint's motion as words: 'revolute about (0, 0, 1)'."""
+    angular = bool(np.abs(motion[3:]).max() > np.abs(motion[:3]).max())
+    axis = motion[3:] if angular else motion[:3]
+    return f"{'revolute' if angular else 'prismatic'} about ({', '.join(f'{v:.4g}' for v in axis)})"
+
 def match_template(root: ET.Element, path: str | Path, robot) -> TemplateMatch:
     """Match a template URDF to a robot model: names, order and kinematics.
 
@@ -147,6 +172,7 @@ def match_template(root: ET.Element, path: str | Path, robot) -> TemplateMatch:
             f"the template '{path}' orders its joints {', '.join(list(reduced.names)[1:])}; the model has "
             f"{', '.join(robot.joint_names)}; give the URDF of the robot the model was identified for"
         )
+    axes = _motion_axes(reduced), _motion_axes(robot.pin_model)
     for i, joint in enumerate(robot.joints):
         M = reduced.jointPlacements[i + 1]
         turned = float(np.abs(np.asarray(M.rotation) - joint.rotation).max())
@@ -163,6 +189,14 @@ def match_template(root: ET.Element, path: str | Path, robot) -> TemplateMatch:
                 f"the joint '{joint.name}' sits elsewhere in the template '{path}' than in the model (placement "
                 f"differs by {off:.3g}): the template describes another robot; give the URDF the model was "
                 "identified for, or one with the same kinematics"
+            )
+        about = float(np.abs(axes[0][i] - axes[1][i]).max())
+        if about > max(_KINEMATIC_TOL, 1.01 * SNAP_RAD):
+            kind = "turns" if joint.revolute else "slides"
+            raise UsageError(
+                f"the joint '{joint.name}' {kind} about another axis in the template '{path}' than in the model "
+                f"(template {_axis_words(axes[0][i])}, model {_axis_words(axes[1][i])}): the template describes "
+                "another robot; give the URDF the model was identified for, or one with the same kinematics"
             )
     n = robot.n
     share = np.zeros(10 * n)
@@ -362,7 +396,11 @@ def write_urdf(
             root.insert(at + offset, el)
     for old in [c for c in list(root) if c.tag is ET.Comment and "dynid export" in (c.text or "")]:
         root.remove(old)
-    root.insert(0, ET.Comment(comment))
+    # XML forbids '--' inside a comment and a comment ending in '-' (a joint name or option may hold them)
+    text = comment
+    while "--" in text:
+        text = text.replace("--", "- -")
+    root.insert(0, ET.Comment(text + " " if text.endswith("-") else text))
     ET.indent(root, space="  ")
     return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 
