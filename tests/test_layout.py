@@ -86,6 +86,12 @@ IMPORTED_BY = {
 }
 
 PART_OF = {
+    "dynid.data.filters": "dynid.data.preprocess",
+    "dynid.data.resampling": "dynid.data.preprocess",
+    "dynid.data.rows": "dynid.data.preprocess",
+    "dynid.sim.effect_classes": "dynid.sim.effects",
+    "dynid.sim.scales": "dynid.sim.effects",
+    "dynid.sim.truth_friction": "dynid.sim.effects",
     "dynid._lazy": "dynid.identify",
     "dynid._memory": "dynid.identify.pipeline",
     "dynid.identify.bodies": "dynid.identify.consistent",

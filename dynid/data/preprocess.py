@@ -22,22 +22,36 @@ and to every column of the regressor, so that ``filtered(tau) = filtered(Y) @ p`
 On long data (hundreds of thousands of samples, a regressor of a gigabyte) :func:`parallel_filter` filters
 a few columns at a time and writes only the rows kept (or filters in place with ``inplace=True``), so the
 memory needed stays close to the size of the result.
+
+The steps live in modules of their own, whose names this module re-exports (import them from here or
+from there): :mod:`dynid.data.cutoff` (the cut-off chosen from the data), :mod:`dynid.data.resampling`
+(uniform grids, gaps), :mod:`dynid.data.filters` (the zero-phase filter's design) and
+:mod:`dynid.data.rows` (runs, trimming, decimation).  This module filters data run by run
+(:func:`lowpass`, :func:`parallel_filter`), differentiates (:func:`central_difference`) and holds the
+whole path (:func:`preprocess`).
 """
 
 from __future__ import annotations
 
-import functools
-import itertools
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.interpolate import CubicSpline
-from scipy.signal import butter, sosfilt, sosfilt_zi
 
+from dynid.data.cutoff import BANDWIDTH_FACTOR, SIGNAL_DB, choose_cutoff
 from dynid.data.dataset import Dataset
+from dynid.data.filters import butter_sos, filter_order, filter_padding, filtfilt_rows
+from dynid.data.resampling import (
+    GAP_SECONDS,
+    GAP_STEPS,
+    MIN_PIECE_SAMPLES,
+    ResampleMethod,
+    resample,
+    resample_uniform,
+)
+from dynid.data.rows import as_runs, decimate, kept_rows, trim, whole_samples
 from dynid.exceptions import DataError, DataWarning
 
 __all__ = [
@@ -52,6 +66,7 @@ __all__ = [
     "decimate",
     "filter_order",
     "filter_padding",
+    "filtfilt_rows",
     "kept_rows",
     "lowpass",
     "parallel_filter",
@@ -61,417 +76,11 @@ __all__ = [
     "trim",
 ]
 
-ResampleMethod = Literal["linear", "cubic"]
-_METHODS = ("linear", "cubic")
 #: Number of float64 values filtered at once (about 32 MB); bounds the filter's temporary memory.
 _CHUNK_VALUES = 4_000_000
 
 
-# ---------------------------------------------------------------------- cut-off from the data
-BANDWIDTH_FACTOR = 10.0
-"""The cut-off :func:`choose_cutoff` chooses is at least this many times the motion's bandwidth."""
-SIGNAL_DB = 30.0
-"""How far (dB) above its high-frequency noise floor a spectrum counts as signal in :func:`choose_cutoff`."""
-
-
-def _signal_edge(x: NDArray[np.float64], fs: float) -> tuple[float, float]:
-    """Median over columns of the highest frequency (Hz) at which the spectrum of ``x`` stands
-    :data:`SIGNAL_DB` above its noise floor (the median of the upper half of the band), and the
-    frequency below which 99.9 % of its power lies."""
-    from scipy.signal import welch
-
-    m = len(x)
-    nper = int(max(16, min(m // 4, round(2.0 * fs))))
-    f, P = welch(x, fs=fs, nperseg=nper, axis=0, detrend="linear")
-    floor = np.median(P[f >= fs / 4], axis=0)
-    edges, bands = [], []
-    for j in range(P.shape[1]):
-        total = P[1:, j].sum()
-        if not np.isfinite(total) or total <= 0:
-            continue  # a still joint says nothing
-        cum = np.cumsum(P[1:, j]) / total
-        bands.append(float(f[1:][np.searchsorted(cum, 0.999)]))
-        above = np.flatnonzero(P[1:, j] > 10 ** (SIGNAL_DB / 10) * max(floor[j], 1e-300))
-        edges.append(float(f[1:][above.max()]) if len(above) else float(f[1]))
-    if not edges:
-        return float("nan"), float("nan")
-    return float(np.median(edges)), float(np.max(bands))
-
-
-def choose_cutoff(ds: Dataset, *, upper: float) -> tuple[float, dict[str, Any]]:
-    """A low-pass cut-off (Hz) for torque and regressor, chosen from the recording itself.
-
-    The filter should pass every frequency at which the data carry information and stop the rest:
-
-    - the motion: the highest frequency at which the spectrum of ``q`` stands :data:`SIGNAL_DB` above
-      its own noise floor (encoder noise, quantisation), median over the joints; above it the
-      differentiated ``ddq`` is noise;
-    - the torque: the same edge of the torque's spectrum; vibration and drive noise that no motion
-      explains sit below it only where they are stronger than the motion's torque.
-
-    The cut-off is the higher of the two edges (nothing that either signal carries is cut), at least
-    :data:`BANDWIDTH_FACTOR` times the motion's bandwidth (99.9 % of the power of ``q``) and at most
-    ``upper``.  The floor keeps the harmonics of the nonlinear dynamics (products of sines of the
-    angles, the sign switch of Coulomb friction), which separate friction from the link columns.
-
-    Measured on the real recordings (identified on the first part, scored on the rest, see
-    ``benchmarks/real_robots_benchmark.py``): the Panda's q stands 30 dB above its floor up to 4.5 Hz,
-    its torque up to 5 Hz, its bandwidth is 1.5 Hz; the TX40's q up to 52 Hz.  On the Panda, cut-offs
-    of 6-12 Hz gave the lowest error of the whole model, but its physical layers alone then lost up to
-    36 % against OLS with linear friction on some joints; from 15 Hz (ten times the bandwidth) they
-    did not (the TX40: best from 40 Hz, both ways).
-
-    Parameters
-    ----------
-    ds : Dataset
-        The recording (uniform stamps; resample first otherwise).
-    upper : float
-        Largest cut-off allowed (Hz).
-
-    Returns
-    -------
-    cutoff : float
-        The cut-off (Hz).
-    details : dict
-        ``motion_hz`` (edge of q), ``torque_hz`` (edge of tau), ``bandwidth_hz`` (99.9 % of q's power),
-        ``rule`` (one sentence).
-    """
-    fs = 1.0 / ds.dt
-    motion, bandwidth = _signal_edge(np.asarray(ds.q, dtype=np.float64), fs)
-    torque, _ = _signal_edge(np.asarray(ds.tau, dtype=np.float64), fs)
-    if not np.isfinite(motion):
-        return float(upper), {
-            "motion_hz": None,
-            "torque_hz": None,
-            "bandwidth_hz": None,
-            "rule": f"no joint moves: the largest cut-off, {upper:g} Hz",
-        }
-    chosen = max(motion, torque if np.isfinite(torque) else motion, BANDWIDTH_FACTOR * bandwidth)
-    cutoff = float(min(chosen, upper))
-    rule = (
-        f"from the data: q carries signal up to {motion:.3g} Hz, the torque up to {torque:.3g} Hz "
-        f"(30 dB above their noise floors), the motion's bandwidth is {bandwidth:.3g} Hz (the cut-off is at "
-        f"least {BANDWIDTH_FACTOR:g} times that)" + (f"; capped at {upper:g} Hz" if chosen > upper else "")
-    )
-    return cutoff, {
-        "motion_hz": motion,
-        "torque_hz": torque if np.isfinite(torque) else None,
-        "bandwidth_hz": bandwidth,
-        "rule": rule,
-    }
-
-
-# ---------------------------------------------------------------------- resampling
-def resample_uniform(
-    t: ArrayLike,
-    y: ArrayLike,
-    *,
-    dt: float | None = None,
-    method: ResampleMethod = "linear",
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Interpolate irregularly stamped samples onto a uniform time grid.
-
-    Rows whose stamp repeats the previous one are dropped (the first is kept).
-
-    Parameters
-    ----------
-    t : array_like, shape (m,)
-        Time stamps (s), non-decreasing.
-    y : array_like, shape (m, ...)
-        Samples; time along axis 0.
-    dt : float, optional
-        Grid step (s).  Default: the median step of the stamps.
-    method : {"linear", "cubic"}
-        Linear interpolation, or a not-a-knot cubic spline (smooth signals, fine stamps).
-
-    Returns
-    -------
-    t_new : ndarray, shape (k,)
-        ``t[0] + dt * arange(k)``, the last point not after ``t[-1]``.
-    y_new : ndarray, shape (k, ...)
-        Interpolated samples.
-
-    Raises
-    ------
-    DataError
-        Stamps that go backwards, non-finite stamps, fewer than 2 distinct stamps, a bad ``dt`` or method.
-    """
-    if method not in _METHODS:
-        raise DataError(f"method must be 'linear' or 'cubic'; got {method!r}; pick one of those")
-    t = np.asarray(t, dtype=np.float64).ravel()
-    y = np.asarray(y, dtype=np.float64)
-    if y.shape[:1] != t.shape:
-        rows = y.shape[0] if y.ndim else 0
-        raise DataError(f"y has {rows} rows but t has {len(t)}; give one row per time stamp")
-    if not np.isfinite(t).all():
-        k = int(np.argmax(~np.isfinite(t)))
-        raise DataError(f"t is {t[k]} at row {k}; time stamps must be finite: drop that row")
-    steps = np.diff(t)
-    if (steps < 0).any():
-        k = int(np.argmax(steps < 0))
-        raise DataError(
-            f"t goes backwards at row {k + 1} ({t[k + 1]:.9g} s after {t[k]:.9g} s); "
-            "sort the rows by time before resampling"
-        )
-    keep = np.concatenate(([True], steps > 0))
-    if not keep.all():
-        t, y = t[keep], y[keep]
-    if len(t) < 2:
-        raise DataError(f"resampling needs at least 2 distinct time stamps; got {len(t)}; keep more samples")
-    if dt is None:
-        dt = float(np.median(np.diff(t)))
-    if not (np.isfinite(dt) and dt > 0):
-        raise DataError(f"dt must be a positive number of seconds; got {dt!r}; pass e.g. dt=0.001")
-    k = int(np.floor((t[-1] - t[0]) / dt * (1.0 + 1e-12))) + 1
-    t_new = t[0] + dt * np.arange(k)
-    if method == "linear":
-        i = np.clip(np.searchsorted(t, t_new, side="right") - 1, 0, len(t) - 2)
-        w = ((t_new - t[i]) / (t[i + 1] - t[i])).reshape((-1,) + (1,) * (y.ndim - 1))
-        y_new = y[i] + w * (y[i + 1] - y[i])
-    else:
-        y_new = CubicSpline(t, y, axis=0)(t_new)
-    return t_new, np.asarray(y_new, dtype=np.float64)
-
-
-GAP_STEPS = 10.0
-"""A step between stamps longer than this many median steps (and than :data:`GAP_SECONDS`) is a gap."""
-GAP_SECONDS = 0.1
-"""Shortest gap (s): shorter holes (a late sample of a real-time log) are interpolated across."""
-MIN_PIECE_SAMPLES = 64
-"""Fewest samples of a piece between gaps that :func:`resample` keeps (shorter ones are dropped, with a
-warning): no filter or derivative can use fewer."""
-
-
-def _split_at_gaps(t: NDArray[np.float64], step: float) -> list[slice]:
-    """Row ranges of ``t`` between gaps (steps longer than :data:`GAP_STEPS` steps and :data:`GAP_SECONDS`)."""
-    jumps = np.flatnonzero(np.diff(t) > max(GAP_STEPS * step, GAP_SECONDS)) + 1
-    bounds = [0, *jumps.tolist(), len(t)]
-    return [slice(a, b) for a, b in itertools.pairwise(bounds)]
-
-
-def resample(ds: Dataset, *, dt: float | None = None, method: ResampleMethod = "linear") -> Dataset:
-    """Resample a dataset onto a uniform grid, run by run.
-
-    A gap in the stamps (a step longer than :data:`GAP_STEPS` median steps and :data:`GAP_SECONDS`)
-    is never interpolated across: the run is split there into separate runs, so that filters and
-    derivatives do not cross it, and the samples after it keep their time.  Pieces between gaps with
-    fewer than :data:`MIN_PIECE_SAMPLES` samples are dropped.  Both come with a :class:`DataWarning`.
-
-    Parameters
-    ----------
-    ds : Dataset
-        Data with irregular stamps (e.g. the Panda recording).
-    dt : float, optional
-        Grid step (s); default ``ds.dt`` (the median step).
-    method : {"linear", "cubic"}
-        Interpolation, see :func:`resample_uniform`.
-
-    Returns
-    -------
-    Dataset
-        Uniform data: one grid ``t[0] + dt * k`` over all runs (each run starts one step after the previous
-        ends; a piece after a gap starts at its own first stamp), ``meta["resampled"]`` records ``dt``,
-        ``method``, the rows before and the gaps (start time and length, s).
-
-    Raises
-    ------
-    DataError
-        When no piece between gaps is long enough to keep.
-    """
-    step = ds.dt if dt is None else float(dt)
-    signals = [name for name in ("q", "tau", "dq", "ddq") if getattr(ds, name) is not None]
-    stacked = np.concatenate([getattr(ds, name) for name in signals], axis=1)
-    pieces, times, starts, offset = [], [], [], 0
-    gaps: list[list[float]] = []
-    dropped = 0
-    for run in ds.runs:
-        t_run = ds.t[run]
-        t_start = ds.t[0] + step * offset  # where the run starts on the one grid
-        for piece in _split_at_gaps(t_run, step):
-            if piece.start > 0:
-                before, after = float(t_run[piece.start - 1]), float(t_run[piece.start])
-                gaps.append([before, after - before])
-            if piece.stop - piece.start < MIN_PIECE_SAMPLES:
-                dropped += piece.stop - piece.start
-                continue
-            _, y_new = resample_uniform(t_run[piece], stacked[run][piece], dt=step, method=method)
-            first = t_start + (t_run[piece.start] - t_run[0])
-            if times and first <= times[-1][-1]:
-                first = times[-1][-1] + step
-            pieces.append(y_new)
-            times.append(first + step * np.arange(len(y_new)))
-            starts.append(offset)
-            offset += len(y_new)
-    if gaps:
-        where = ", ".join(f"{length:.3g} s at t = {t0:.6g} s" for t0, length in gaps[:3])
-        warnings.warn(
-            f"the time stamps jump {len(gaps)} time{'s' if len(gaps) > 1 else ''} ({where}"
-            f"{', ...' if len(gaps) > 3 else ''}); the data are split there into separate runs, not "
-            "interpolated across the gap"
-            + (
-                f", and {dropped} samples in pieces shorter than {MIN_PIECE_SAMPLES} samples are dropped"
-                if dropped
-                else ""
-            ),
-            DataWarning,
-            stacklevel=2,
-        )
-    if not pieces:
-        raise DataError(
-            f"the data hold no stretch of at least {MIN_PIECE_SAMPLES} samples between gaps in the time "
-            "stamps; record without gaps"
-        )
-    y_all = np.concatenate(pieces)
-    t_all = np.concatenate(times)
-    meta = {key: value for key, value in ds.meta.items() if key != "run_starts"}
-    meta["resampled"] = {"dt": step, "method": method, "rows_before": ds.m}
-    if gaps:
-        meta["resampled"]["gaps"] = gaps
-    if len(starts) > 1:
-        meta["run_starts"] = starts
-    split = np.split(y_all, np.cumsum([ds.n] * (len(signals) - 1)), axis=1)
-    arrays = dict(zip(signals, split, strict=True))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", DataWarning)  # already checked on ds
-        return Dataset(
-            t_all, arrays["q"], arrays["tau"], dq=arrays.get("dq"), ddq=arrays.get("ddq"), meta=meta
-        )
-
-
 # ---------------------------------------------------------------------- filtering
-def butter_sos(cutoff: float, fs: float, order: int = 5) -> NDArray[np.float64]:
-    """Butterworth low-pass in second-order sections.
-
-    Parameters
-    ----------
-    cutoff : float
-        Cut-off frequency (Hz), ``0 < cutoff < fs / 2``.
-    fs : float
-        Sampling frequency (Hz).
-    order : int
-        Filter order (>= 1).  :func:`scipy.signal.sosfiltfilt` runs it forward and backward, so the
-        magnitude response is squared and the phase is zero.
-
-    Returns
-    -------
-    ndarray, shape (ceil(order / 2), 6)
-    """
-    if not (isinstance(order, int | np.integer) and order >= 1):
-        raise DataError(f"order must be a positive integer; got {order!r}; the default is 5")
-    if not (np.isfinite(fs) and fs > 0):
-        raise DataError(f"fs must be a positive sampling frequency (Hz); got {fs!r}; pass fs=1/ds.dt")
-    if not (np.isfinite(cutoff) and 0 < cutoff < fs / 2):
-        raise DataError(
-            f"cutoff must lie between 0 and the Nyquist frequency {fs / 2:g} Hz of data sampled at "
-            f"{fs:g} Hz; got {cutoff!r} Hz; choose a lower cut-off"
-        )
-    return _butter_sos(float(cutoff), float(fs), int(order)).copy()
-
-
-@functools.lru_cache(maxsize=64)
-def _butter_sos(cutoff: float, fs: float, order: int) -> NDArray[np.float64]:
-    """The design of :func:`butter_sos`, computed once per (cut-off, rate, order).
-
-    A default identification filters about a thousand times with the same filter (the friction shape
-    searches filter their candidates' columns); designing it each time was 9 % of the run.
-    """
-    sos = np.asarray(butter(order, cutoff, btype="low", fs=fs, output="sos"), dtype=np.float64)
-    sos.setflags(write=False)
-    return sos
-
-
-@functools.lru_cache(maxsize=64)
-def _filtfilt_setup(key: bytes, shape: tuple[int, int]) -> tuple[int, NDArray[np.float64]]:
-    """(edge, zi) of :func:`scipy.signal.sosfiltfilt` for the sections ``key`` (its bytes), once per filter.
-
-    ``edge`` is the odd extension it pads each end with by default, ``zi`` (n_sections, 2) its
-    steady-state initial conditions (:func:`scipy.signal.sosfilt_zi`, a linear solve per section:
-    recomputed at every call it was a tenth of the filtering time of a default identification).
-    """
-    sos = np.frombuffer(key, dtype=np.float64).reshape(shape)
-    ntaps = 2 * len(sos) + 1 - min(int((sos[:, 2] == 0).sum()), int((sos[:, 5] == 0).sum()))
-    zi = np.ascontiguousarray(sosfilt_zi(sos), dtype=np.float64)
-    zi.setflags(write=False)
-    return 3 * ntaps, zi
-
-
-def filtfilt_rows(sos: NDArray[np.float64], x: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Zero-phase filter of each row of ``x`` (k, L): :func:`scipy.signal.sosfiltfilt` along the last axis.
-
-    The same arithmetic as ``sosfiltfilt(sos, x, axis=-1)`` with its default odd padding, so the same
-    values to the bit; its setup (padding length, initial conditions) is computed once per filter and
-    time runs along contiguous memory (no transposed copies).
-
-    Parameters
-    ----------
-    sos : ndarray, shape (n_sections, 6)
-        Second-order sections (:func:`butter_sos`).
-    x : ndarray, shape (k, L)
-        Signals, one per row, time along axis 1; ``L`` must exceed the padding (``3 (2 n_sections + 1)``
-        at most).
-
-    Returns
-    -------
-    ndarray, shape (k, L)
-        The filtered signals (a view of a new array, time reversed twice).
-    """
-    sos = np.ascontiguousarray(sos, dtype=np.float64)
-    edge, zi = _filtfilt_setup(sos.tobytes(), sos.shape)
-    k, length = x.shape
-    if length <= edge:
-        raise DataError(
-            f"{length} samples are too short for an order-{filter_order(sos)} zero-phase filter (it pads with {edge}); "
-            "record longer"
-        )
-    ext = np.empty((k, length + 2 * edge))
-    ext[:, edge : edge + length] = x
-    if edge > 0:  # odd extension at both ends (scipy.signal's odd_ext)
-        ext[:, :edge] = 2 * x[:, 0:1] - x[:, edge:0:-1]
-        ext[:, edge + length :] = 2 * x[:, -1:] - x[:, -2 : -(edge + 2) : -1]
-    y = sosfilt(sos, ext, axis=-1, zi=zi[:, None, :] * ext[None, :, 0:1])[0]
-    y = sosfilt(sos, y[:, ::-1], axis=-1, zi=zi[:, None, :] * y[None, :, -1:])[0][:, ::-1]
-    return y[:, edge : edge + length] if edge > 0 else y
-
-
-def filter_padding(sos: NDArray[np.float64]) -> int:
-    """Samples :func:`scipy.signal.sosfiltfilt` pads each end with by default: a run must be longer.
-
-    The ``edge`` of :func:`filtfilt_rows`, one rule for every check before filtering (an odd order's
-    first-order section pads less than ``3 (2 n_sections + 1)``: 18 samples at order 5, not 21).
-
-    Parameters
-    ----------
-    sos : ndarray, shape (n_sections, 6)
-        Second-order sections (:func:`butter_sos`).
-    """
-    sos = np.ascontiguousarray(sos, dtype=np.float64)
-    return _filtfilt_setup(sos.tobytes(), sos.shape)[0]
-
-
-def filter_order(sos: NDArray[np.float64]) -> int:
-    """Order of a filter in second-order sections (its poles: an odd order's last section has one).
-
-    Parameters
-    ----------
-    sos : ndarray, shape (n_sections, 6)
-        Second-order sections (:func:`butter_sos`).
-    """
-    sos = np.asarray(sos, dtype=np.float64)
-    return int(np.sum(sos[:, 4] != 0) + np.sum(sos[:, 5] != 0))
-
-
-def _as_runs(runs: Sequence[slice] | None, m: int) -> list[slice]:
-    if runs is None:
-        return [slice(0, m)]
-    out = []
-    for run in runs:
-        start, stop, step = run.indices(m)
-        if step != 1 or stop <= start:
-            raise DataError(f"runs must be contiguous, non-empty row slices; got {run}; use Dataset.runs")
-        out.append(slice(start, stop))
-    return out
-
-
 def _filter_columns(
     y2: NDArray[np.float64],
     sos: NDArray[np.float64],
@@ -556,7 +165,7 @@ def lowpass(
         raise DataError("y must have a time axis 0; got a scalar; pass an array of shape (m, ...)")
     y2 = arr.reshape(arr.shape[0], -1)
     out2 = y2 if inplace else np.empty_like(y2)
-    _filter_columns(y2, sos, _as_runs(runs, arr.shape[0]), None, out2)
+    _filter_columns(y2, sos, as_runs(runs, arr.shape[0]), None, out2)
     return arr if inplace else out2.reshape(arr.shape)
 
 
@@ -606,7 +215,7 @@ def central_difference(
     arr = np.asarray(y, dtype=np.float64)
     out = np.empty_like(arr)
     need = 3 if derivative == 1 else 4
-    for r, run in enumerate(_as_runs(runs, len(arr))):
+    for r, run in enumerate(as_runs(runs, len(arr))):
         seg = arr[run]
         if len(seg) < need:
             raise DataError(
@@ -618,109 +227,6 @@ def central_difference(
         else:
             out[run] = _second_difference(seg, dt)
     return out
-
-
-# ---------------------------------------------------------------------- row selection
-def kept_rows(
-    runs: Sequence[slice],
-    *,
-    decimate: int = 1,
-    trim_samples: int = 0,
-) -> NDArray[np.intp]:
-    """Row indices kept by trimming each run's ends and then taking every ``decimate``-th sample.
-
-    :func:`preprocess` and :func:`parallel_filter` both select rows with this function, so data and
-    regressor processed with the same settings stay aligned row for row.
-
-    Parameters
-    ----------
-    runs : sequence of slice
-        Row ranges (``Dataset.runs``).
-    decimate : int
-        Keep one sample in ``decimate`` (counted from each run's first kept sample).
-    trim_samples : int
-        Samples dropped at each end of each run.
-
-    Returns
-    -------
-    ndarray of int, shape (k,)
-        A run too short for the trim (a piece after a gap in the stamps) is left out with a
-        :class:`DataWarning`; a :class:`DataError` when no run is long enough.
-    """
-    if not (isinstance(decimate, int | np.integer) and decimate >= 1):
-        raise DataError(f"decimate must be a positive integer; got {decimate!r}; 1 keeps every sample")
-    if trim_samples < 0:
-        raise DataError(f"trim must not be negative; got {trim_samples} samples; pass 0 to keep the ends")
-    pieces, short = [], []
-    for r, run in enumerate(runs):
-        lo, hi = run.start + trim_samples, run.stop - trim_samples
-        if hi - lo < 2:
-            short.append((r, run, max(hi - lo, 0)))
-            continue
-        pieces.append(np.arange(lo, hi, int(decimate)))
-    if not pieces:
-        r, run, left = short[0]
-        raise DataError(
-            f"trimming {trim_samples} samples from both ends leaves {left} of run {r} ({run.stop - run.start} "
-            f"samples); give a recording of at least {2 * trim_samples + 2} samples a run (the trim cuts the "
-            "low-pass filter's transient; calling preprocess(), give a smaller trim)"
-        )
-    if short:
-        listed = ", ".join(f"{r} ({run.stop - run.start} samples)" for r, run, _ in short)
-        warnings.warn(
-            f"run{'s' if len(short) > 1 else ''} {listed} {'are' if len(short) > 1 else 'is'} too short for "
-            f"the {trim_samples} samples trimmed at both ends (the filter's transient) and left out",
-            DataWarning,
-            stacklevel=2,
-        )
-    return np.concatenate(pieces).astype(np.intp)
-
-
-def decimate(ds: Dataset, factor: int) -> Dataset:
-    """Keep every ``factor``-th sample of each run (filter first: this does not low-pass).
-
-    Parameters
-    ----------
-    ds : Dataset
-        Uniform data, already low-passed below ``1 / (2 factor ds.dt)`` Hz.
-    factor : int
-        Decimation factor (>= 1).
-
-    Returns
-    -------
-    Dataset
-        With step ``factor * ds.dt``; ``meta["decimated"]`` multiplied by ``factor``.
-    """
-    out = ds.select_rows(kept_rows(ds.runs, decimate=factor))
-    out.meta["decimated"] = int(ds.meta.get("decimated", 1)) * int(factor)
-    return out
-
-
-def trim(ds: Dataset, seconds: float) -> Dataset:
-    """Drop ``seconds`` (s) at both ends of each run (where a filter's start-up transient lives).
-
-    Parameters
-    ----------
-    ds : Dataset
-        Data.
-    seconds : float
-        Time cut from each end of each run (s, >= 0).
-
-    Returns
-    -------
-    Dataset
-        With ``meta["trimmed_s"]`` increased by ``seconds``.
-    """
-    if not (np.isfinite(seconds) and seconds >= 0):
-        raise DataError(f"trim must be a non-negative number of seconds; got {seconds!r}; pass e.g. 0.1")
-    out = ds.select_rows(kept_rows(ds.runs, trim_samples=_samples(seconds, ds.dt)))
-    out.meta["trimmed_s"] = float(ds.meta.get("trimmed_s", 0.0)) + float(seconds)
-    return out
-
-
-def _samples(seconds: float, dt: float) -> int:
-    """Whole samples covering ``seconds`` (s) at step ``dt`` (s)."""
-    return int(np.ceil(seconds / dt - 1e-9))
 
 
 def _check_decimation(cutoff: float, fs: float, decimate: int) -> None:
@@ -799,9 +305,9 @@ def parallel_filter(
     if Y_arr.ndim == 3 and Y_arr.shape[1] != n:
         raise DataError(f"Y has {Y_arr.shape[1]} joint rows but tau has {n} columns; build Y for {n} joints")
     sos = butter_sos(cutoff, fs, order)
-    run_list = _as_runs(runs, m)
+    run_list = as_runs(runs, m)
     _check_decimation(cutoff, fs, decimate)
-    rows = kept_rows(run_list, decimate=decimate, trim_samples=_samples(trim, 1.0 / fs))
+    rows = kept_rows(run_list, decimate=decimate, trim_samples=whole_samples(trim, 1.0 / fs))
     all_rows = len(rows) == m
     tau_f = np.empty((len(rows), n))
     _filter_columns(np.ascontiguousarray(tau_arr), sos, run_list, None if all_rows else rows, tau_f)
@@ -821,6 +327,74 @@ def _reference(steps: list[str]) -> str:
     if len(steps) == 1:
         return steps[0]
     return ", ".join(steps[:-1]) + " and " + steps[-1]
+
+
+def _check_filter(cutoff: float | None, fs: float, order: int, decimate: int) -> None:
+    """Check the filter settings of :func:`preprocess` before any work (warn, to its caller, of aliasing)."""
+    if cutoff is not None:
+        butter_sos(cutoff, fs, order)  # checks cutoff and order before any work
+        _check_decimation(cutoff, fs, decimate)
+    elif decimate > 1:
+        warnings.warn(
+            f"decimating by {decimate} without a low-pass filter aliases everything above "
+            f"{fs / (2 * decimate):g} Hz; pass a cutoff",
+            DataWarning,
+            stacklevel=3,
+        )
+
+
+def _derivatives(
+    ds: Dataset,
+    q: NDArray[np.float64],
+    filt: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+    *,
+    filtered: bool,
+    velocity: str,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], str, str]:
+    """``dq`` and ``ddq`` of :func:`preprocess` (step 3) from the filtered ``q`` (``filt`` filters a
+    measured signal), and what each is (its ``meta["preprocess"]`` entries)."""
+    step, runs = ds.dt, ds.runs
+    if ds.dq is not None and velocity == "measured":
+        dq = filt(ds.dq)
+        dq_note = "measured" + (", filtered" if filtered else "")
+        derived_from_q = False
+    else:
+        dq = central_difference(q, step, derivative=1, runs=runs)
+        dq_note = "central difference of " + ("filtered q" if filtered else "q")
+        derived_from_q = True
+    if ds.ddq is not None and not derived_from_q:
+        ddq = filt(ds.ddq)
+        ddq_note = "measured" + (", filtered" if filtered else "")
+    elif derived_from_q:
+        ddq = central_difference(q, step, derivative=2, runs=runs)
+        ddq_note = "second difference of " + ("filtered q" if filtered else "q")
+    else:
+        ddq = central_difference(dq, step, derivative=1, runs=runs)
+        ddq_note = "central difference of dq"
+    return dq, ddq, dq_note, ddq_note
+
+
+def _preprocessed_meta(
+    ds: Dataset, info: dict[str, Any], *, resampled: bool, decimate: int, trim_s: float
+) -> dict[str, Any]:
+    """``ds.meta`` with the runs' starts, ``meta["preprocess"] = info`` and the ``meta["reference"]``
+    that says how the torque was treated."""
+    steps = []
+    if resampled:
+        steps.append("resampled")
+    if info["torque_filtered"]:
+        steps.append("filtered")
+    if decimate > 1:
+        steps.append("decimated")
+    if trim_s > 0:
+        steps.append("trimmed")
+    runs = ds.runs
+    meta = {key: value for key, value in ds.meta.items() if key != "run_starts"}
+    if len(runs) > 1:
+        meta["run_starts"] = [run.start for run in runs]
+    meta["preprocess"] = info
+    meta["reference"] = _reference(steps)
+    return meta
 
 
 def preprocess(
@@ -883,16 +457,7 @@ def preprocess(
         ds = resample(ds, dt=dt, method=resample_method)
     step = ds.dt
     fs = 1.0 / step
-    if cutoff is not None:
-        butter_sos(cutoff, fs, order)  # checks cutoff and order before any work
-        _check_decimation(cutoff, fs, decimate)
-    elif decimate > 1:
-        warnings.warn(
-            f"decimating by {decimate} without a low-pass filter aliases everything above "
-            f"{fs / (2 * decimate):g} Hz; pass a cutoff",
-            DataWarning,
-            stacklevel=2,
-        )
+    _check_filter(cutoff, fs, order, decimate)
     trim_s = (2.0 / cutoff if cutoff is not None else 0.0) if trim is None else float(trim)
     runs = ds.runs
 
@@ -910,39 +475,11 @@ def preprocess(
         "resampled": resample_method if resampled else None,
         "torque_filtered": bool(filter_torque and cutoff is not None),
     }
-    if ds.dq is not None and velocity == "measured":
-        dq = filt(ds.dq)
-        info["dq"] = "measured" + (", filtered" if cutoff is not None else "")
-        derived_from_q = False
-    else:
-        dq = central_difference(q, step, derivative=1, runs=runs)
-        info["dq"] = "central difference of " + ("filtered q" if cutoff is not None else "q")
-        derived_from_q = True
-    if ds.ddq is not None and not derived_from_q:
-        ddq = filt(ds.ddq)
-        info["ddq"] = "measured" + (", filtered" if cutoff is not None else "")
-    elif derived_from_q:
-        ddq = central_difference(q, step, derivative=2, runs=runs)
-        info["ddq"] = "second difference of " + ("filtered q" if cutoff is not None else "q")
-    else:
-        ddq = central_difference(dq, step, derivative=1, runs=runs)
-        info["ddq"] = "central difference of dq"
-
-    rows = kept_rows(runs, decimate=decimate, trim_samples=_samples(trim_s, step))
-    steps = []
-    if resampled:
-        steps.append("resampled")
-    if info["torque_filtered"]:
-        steps.append("filtered")
-    if decimate > 1:
-        steps.append("decimated")
-    if trim_s > 0:
-        steps.append("trimmed")
-    meta = {key: value for key, value in ds.meta.items() if key != "run_starts"}
-    if len(runs) > 1:
-        meta["run_starts"] = [run.start for run in runs]
-    meta["preprocess"] = info
-    meta["reference"] = _reference(steps)
+    dq, ddq, info["dq"], info["ddq"] = _derivatives(
+        ds, q, filt, filtered=cutoff is not None, velocity=velocity
+    )
+    rows = kept_rows(runs, decimate=decimate, trim_samples=whole_samples(trim_s, step))
+    meta = _preprocessed_meta(ds, info, resampled=resampled, decimate=decimate, trim_s=trim_s)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DataWarning)  # already checked on ds
         full = Dataset(ds.t, q, tau, dq=dq, ddq=ddq, meta=meta)
