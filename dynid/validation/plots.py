@@ -32,6 +32,7 @@ __all__ = [
     "COLORS",
     "MAX_POINTS",
     "figure_png",
+    "fixed_margins",
     "joint_grid",
     "pair_grid",
     "plot_friction",
@@ -63,8 +64,43 @@ def thin(n: int, limit: int = MAX_POINTS) -> slice:
     return slice(None, None, max(1, int(np.ceil(n / limit))))
 
 
+def fixed_margins(
+    fig: Figure,
+    nrows: int,
+    ncols: int,
+    *,
+    left: float = 0.85,
+    right: float = 0.2,
+    top: float = 0.65,
+    bottom: float = 0.5,
+    hspace: float = 0.45,
+    wspace: float = 0.9,
+) -> None:
+    """Place a figure's grid of panels with margins and gaps given in inches (no layout engine).
+
+    A fixed placement instead of matplotlib's constrained layout, which measures every tick label at each
+    draw (about half of a validation report's time); the margins are the constrained layout's on dynid's
+    report figures, to a few hundredths of an inch.
+    """
+    w, h = fig.get_size_inches()
+    avail_h = max(h - top - bottom, 0.1)
+    avail_w = max(w - left - right, 0.1)
+    ax_h = max((avail_h - (nrows - 1) * hspace) / nrows, 0.05)
+    ax_w = max((avail_w - (ncols - 1) * wspace) / ncols, 0.05)
+    fig.subplots_adjust(
+        left=left / w, right=1 - right / w, bottom=bottom / h, top=1 - top / h,
+        hspace=hspace / ax_h, wspace=wspace / ax_w,
+    )  # fmt: skip
+
+
 def joint_grid(
-    n: int, *, ncols: int | None = None, height: float = 2.3, width: float = 11.0, sharex: bool = True
+    n: int,
+    *,
+    ncols: int | None = None,
+    height: float = 2.3,
+    width: float = 11.0,
+    sharex: bool = True,
+    fixed: dict | None = None,
 ) -> tuple[Figure, list[Axes]]:
     """A figure with one panel per joint, in rows of ``ncols``.
 
@@ -80,6 +116,8 @@ def joint_grid(
         Width of the figure (inches).
     sharex : bool
         Share the x axis between panels.
+    fixed : dict, optional
+        Margins for :func:`fixed_margins` (inches) instead of the constrained layout.
 
     Returns
     -------
@@ -88,8 +126,10 @@ def joint_grid(
     """
     ncols = ncols or (1 if n == 1 else 2)
     nrows = int(np.ceil(n / ncols))
-    fig = Figure(figsize=(width, height * nrows + 0.6), layout="constrained")
+    fig = Figure(figsize=(width, height * nrows + 0.6), layout=None if fixed is not None else "constrained")
     axes = fig.subplots(nrows, ncols, sharex=sharex, squeeze=False)
+    if fixed is not None:
+        fixed_margins(fig, nrows, ncols, **fixed)
     flat = list(axes.ravel())
     for ax in flat[n:]:
         ax.remove()
@@ -99,7 +139,12 @@ def joint_grid(
 
 
 def pair_grid(
-    n: int, *, height: float = 2.0, width: float = 11.0, width_ratios: tuple[float, float] = (3.0, 2.0)
+    n: int,
+    *,
+    height: float = 2.0,
+    width: float = 11.0,
+    width_ratios: tuple[float, float] = (3.0, 2.0),
+    fixed: dict | None = None,
 ) -> tuple[Figure, list[tuple[Axes, Axes]]]:
     """A figure with one row per joint and two panels in each: a signal and, beside it, its error.
 
@@ -113,6 +158,8 @@ def pair_grid(
         Width of the figure (inches).
     width_ratios : (float, float)
         Widths of the left and right panels, relative.
+    fixed : dict, optional
+        Margins for :func:`fixed_margins` (inches) instead of the constrained layout.
 
     Returns
     -------
@@ -120,8 +167,10 @@ def pair_grid(
         The figure and each joint's (left, right) panels, joint 1 first; every panel shares the time axis.
         Call :func:`tidy_grid` on the left and on the right panels (``ncols=1``) after drawing.
     """
-    fig = Figure(figsize=(width, height * n + 0.6), layout="constrained")
+    fig = Figure(figsize=(width, height * n + 0.6), layout=None if fixed is not None else "constrained")
     axes = fig.subplots(n, 2, sharex=True, squeeze=False, gridspec_kw={"width_ratios": list(width_ratios)})
+    if fixed is not None:
+        fixed_margins(fig, n, 2, **fixed)
     for ax in axes.ravel():
         ax.grid(True, alpha=0.3, linewidth=0.6)
     return fig, [(axes[j, 0], axes[j, 1]) for j in range(n)]

@@ -182,6 +182,7 @@ def _gmm_sentence(results: Sequence[ValidationResult]) -> str:
 def _render_figures(results: Sequence[ValidationResult], pdf_pages: Any | None) -> list[ReportFigure]:
     from dynid.validation.plots import (
         figure_png,
+        fixed_margins,
         joint_grid,
         pair_grid,
         plot_friction,
@@ -205,8 +206,11 @@ def _render_figures(results: Sequence[ValidationResult], pdf_pages: Any | None) 
     # methods side by side
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(11, 3.6), layout="constrained")
+    fig = Figure(figsize=(11, 3.6))
     ax = fig.subplots()
+    # the legend right of the panel, as wide as its longest label (8 pt: about 0.07 inch a character)
+    longest = max(len("noise floor"), *(len(r.label) for r in results))
+    fixed_margins(fig, 1, 1, right=max(1.9, 0.75 + 0.07 * longest), bottom=0.45)
     plot_method_rms(
         ax, [r.label for r in results], [r.metrics["rms"] for r in results], noise=first.noise.std
     )
@@ -220,7 +224,7 @@ def _render_figures(results: Sequence[ValidationResult], pdf_pages: Any | None) 
     )
 
     # measured vs predicted, the residual beside
-    fig, pairs = pair_grid(n)
+    fig, pairs = pair_grid(n, fixed={"bottom": 0.85, "hspace": 0.35, "wspace": 0.85})
     predictions = {r.label: r.tau_pred for r in results}
     for j, (left, right) in enumerate(pairs):
         plot_torque(left, first.t, first.tau[:, j], {k: v[:, j] for k, v in predictions.items()}, joint=j + 1)
@@ -240,7 +244,7 @@ def _render_figures(results: Sequence[ValidationResult], pdf_pages: Any | None) 
         if label not in labels:  # the noise band
             handles.append(handle)
             labels.append(label)
-    fig.legend(handles, labels, loc="outside lower center", ncols=len(labels), fontsize=8, frameon=False)
+    fig.legend(handles, labels, loc="lower center", ncols=len(labels), fontsize=8, frameon=False)
     emit(
         "torque",
         "Measured and predicted joint torque",
@@ -255,7 +259,7 @@ def _render_figures(results: Sequence[ValidationResult], pdf_pages: Any | None) 
     # residual before / after GMM: only where the mixture changed the prediction
     with_gmm = gmm_changed(results)
     if with_gmm is not None:
-        fig, axes = joint_grid(n)
+        fig, axes = joint_grid(n, fixed={"bottom": 0.85, "hspace": 0.35, "wspace": 0.85})
         for j, ax in enumerate(axes):
             plot_residuals(
                 ax,
@@ -266,7 +270,7 @@ def _render_figures(results: Sequence[ValidationResult], pdf_pages: Any | None) 
                 noise=float(with_gmm.noise.std[j]),
             )
         handles, labels = axes[0].get_legend_handles_labels()
-        fig.legend(handles, labels, loc="outside lower center", ncols=len(labels), fontsize=8, frameon=False)
+        fig.legend(handles, labels, loc="lower center", ncols=len(labels), fontsize=8, frameon=False)
         tidy_grid(axes)
         emit(
             "residual",
@@ -277,7 +281,7 @@ def _render_figures(results: Sequence[ValidationResult], pdf_pages: Any | None) 
         )
 
     # friction against velocity
-    fig, axes = joint_grid(n, sharex=False, height=2.6)
+    fig, axes = joint_grid(n, sharex=False, height=2.6, fixed={"hspace": 0.75, "wspace": 0.85})
     for j, ax in enumerate(axes):
         plot_friction(
             ax, first.dq[:, j], first.friction_estimate[:, j], _friction_curves(results, j), joint=j + 1
