@@ -8,7 +8,8 @@ controller and noisy, quantised sensors: identification has to find a truth it i
 ``quick=True`` shortens the trajectories and the search, never skips a stage.
 
 This module sits at the top of dynid, beside the commands: it uses every layer.  It prints nothing;
-``progress`` receives the lines the command shows.
+``progress`` receives the lines the command shows.  The records the stages hand each other and the
+runner that times them are in :mod:`dynid.demo_records`.
 
 Examples
 --------
@@ -26,11 +27,26 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal, Protocol, TypeVar, overload
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from dynid.exceptions import DynidError, UsageError
+from dynid.demo_records import (
+    FULL,
+    DemoContext,
+    Excitation,
+    Fits,
+    GapDiagnosis,
+    Outcome,
+    ReportPage,
+    Runs,
+    SimulatedRun,
+    StageRecord,
+    StageRunner,
+    Step,
+    Validation,
+)
+from dynid.exceptions import UsageError
 
 if TYPE_CHECKING:
     from dynid.diagnosis import Diagnosis
@@ -97,42 +113,6 @@ _DECIMATE = 4  # 1 kHz -> 250 Hz after the 20 Hz filter: the same information, a
 _STAGES = 7
 
 
-class _Summarised(Protocol):
-    """A stage's result: it says what the stage did in one line."""
-
-    @property
-    def summary(self) -> str: ...
-
-
-_R = TypeVar("_R", bound=_Summarised)
-
-
-@dataclass(frozen=True)
-class StageRecord:
-    """One stage of the demo as it ran.
-
-    Attributes
-    ----------
-    stage : str
-        What the stage does, in words.
-    status : str
-        ``"done"`` or ``"failed"`` (only the diagnosis may fail without stopping the demo).
-    summary : str
-        One line: the stage's figures, or ``"failed: <why>"``.
-    seconds : float
-        Wall time of the stage (s).
-    """
-
-    stage: str
-    status: str
-    summary: str
-    seconds: float
-
-    def to_dict(self) -> dict[str, Any]:
-        """The record as the demo's JSON holds it (keys ``stage``, ``status``, ``summary``, ``seconds``)."""
-        return {"stage": self.stage, "status": self.status, "summary": self.summary, "seconds": self.seconds}
-
-
 @dataclass(frozen=True)
 class DemoResult:
     """What :func:`run_demo` made.
@@ -174,170 +154,8 @@ class DemoResult:
         return [s.stage for s in self.stages if s.status == "failed"]
 
 
-_FULL = "full"  # the label of the full method among the compared ones
-
-
-class _Stages:
-    """Runs named stages, reports progress, keeps a record of each."""
-
-    def __init__(self, total: int, progress: Callable[[str], None]) -> None:
-        self.total = total
-        self.progress = progress
-        self.records: list[StageRecord] = []
-
-    @overload
-    def run(self, label: str, fn: Callable[[], _R], *, may_fail: Literal[False] = ...) -> _R: ...
-    @overload
-    def run(self, label: str, fn: Callable[[], _R], *, may_fail: bool) -> _R | None: ...
-
-    def run(self, label: str, fn: Callable[[], _R], *, may_fail: bool = False) -> _R | None:
-        """Run one stage: ``fn`` does the work and returns its result, whose ``summary`` is one line.
-
-        ``may_fail``: a :class:`~dynid.exceptions.DynidError` of this stage is recorded as a failure,
-        None is returned and the next stages still run.
-        """
-        self.progress(f"[{len(self.records) + 1}/{self.total}] {label}...")
-        start = time.perf_counter()
-        try:
-            result = fn()
-        except DynidError as err:
-            if not may_fail:
-                raise
-            elapsed = time.perf_counter() - start
-            self.records.append(StageRecord(label, "failed", f"failed: {err}", elapsed))
-            self.progress(f"      failed: {err} ({elapsed:.1f} s)")
-            return None
-        elapsed = time.perf_counter() - start
-        self.records.append(StageRecord(label, "done", result.summary, elapsed))
-        self.progress(f"      {result.summary} ({elapsed:.1f} s)")
-        return result
-
-    @property
-    def failed(self) -> list[str]:
-        return [r.stage for r in self.records if r.status == "failed"]
-
-
 def _silent(line: str) -> None:
     """The default progress: nothing."""
-
-
-@dataclass(frozen=True)
-class _Demo:
-    """What every stage reads: the robot, the folder, the mode, the seed and the progress."""
-
-    robot: Any
-    out: Path
-    mode: str
-    seed: int
-    first_build: bool  # the symbolic generator is built in this run
-    progress: Callable[[str], None]
-
-    @property
-    def settings(self) -> dict[str, Any]:
-        """The mode's settings (:data:`SETTINGS`)."""
-        return SETTINGS[self.mode]
-
-    def say(self, message: str) -> None:
-        """A long step's news, indented under its stage's counter."""
-        self.progress(f"      {message}")
-
-
-@dataclass(frozen=True)
-class _Step:
-    """A stage that hands nothing on but its summary line and its figures for the demo's JSON."""
-
-    summary: str
-    figures: dict[str, Any]
-
-
-@dataclass(frozen=True)
-class _Excitation:
-    """The excitation design: the problem (its limits give the held-out run's trajectory too) and its result."""
-
-    problem: Any
-    design: Any
-    trajectory: Any
-    summary: str
-    figures: dict[str, Any]
-
-
-@dataclass(frozen=True)
-class _SimulatedRun:
-    """One simulated run and the dataset file written from it."""
-
-    result: Any
-    path: Path
-
-
-@dataclass(frozen=True)
-class _Runs:
-    """The simulated truth and the two runs, read back from their files."""
-
-    truth: Any
-    identification: Any
-    validation: Any
-    validation_period: float
-    identification_file: Path
-    summary: str
-    figures: dict[str, Any]
-
-
-@dataclass(frozen=True)
-class _Fits:
-    """The models of the compared methods, in :data:`~dynid.validation.validate.COMPARISON`'s order."""
-
-    fitted: tuple[Any, ...]
-    files: dict[str, str]  # model file name by label
-    summary: str
-    figures: dict[str, Any]
-
-
-@dataclass(frozen=True)
-class _Validation:
-    """Every model on the held-out run, side by side, and against the simulated truth."""
-
-    results: tuple[ValidationResult, ...]
-    rows: list[dict[str, Any]]
-    truth_errors: dict[str, dict[str, float]]
-    summary: str
-
-    def labelled(self, label: str) -> ValidationResult:
-        """The validation of the model with this label."""
-        return next(r for r in self.results if r.label == label)
-
-    @property
-    def full(self) -> ValidationResult:
-        """The validation of the full method."""
-        return self.labelled(_FULL)
-
-
-@dataclass(frozen=True)
-class _Diagnosis:
-    """The gap diagnosis of the full method and its page."""
-
-    result: Diagnosis
-    report: Path
-    summary: str
-    figures: dict[str, Any]
-
-
-@dataclass(frozen=True)
-class _Report:
-    """The HTML report and the figures it adds to the demo's JSON."""
-
-    path: Path
-    summary: str
-    figures: dict[str, Any]
-
-
-@dataclass(frozen=True)
-class _Outcome:
-    """What the stages made: the figures so far (in stage order) and the results the demo returns."""
-
-    figures: dict[str, Any]
-    validation: _Validation
-    diagnosis: _Diagnosis | None
-    report: _Report
 
 
 def run_demo(
@@ -379,7 +197,7 @@ def run_demo(
     out = _claim_folder(Path(out_dir))
     mode = "quick" if quick else "full"
     started = time.perf_counter()
-    stages = _Stages(total=_STAGES, progress=say_line)
+    stages = StageRunner(total=_STAGES, progress=say_line)
     demo = _start(out, mode, seed, say_line)
     outcome = _run_stages(demo, stages)
     return _result(demo, stages, outcome, total=time.perf_counter() - started)
@@ -405,15 +223,21 @@ def _claim_folder(out: Path) -> Path:
     return out
 
 
-def _start(out: Path, mode: str, seed: int, progress: Callable[[str], None]) -> _Demo:
+def _start(out: Path, mode: str, seed: int, progress: Callable[[str], None]) -> DemoContext:
     """The demo's robot and settings, announced."""
     from dynid.symbolic.build import generator_is_built
     from dynid.symbolic.robot import load_robot
 
     # The UR5 at its own limits (URDF; 10 rad/s^2 where the URDF has none), as a user's first run has it.
     robot = load_robot(DEFAULT_ROBOT)
-    demo = _Demo(
-        robot=robot, out=out, mode=mode, seed=seed, first_build=not generator_is_built(), progress=progress
+    demo = DemoContext(
+        robot=robot,
+        out=out,
+        mode=mode,
+        seed=seed,
+        first_build=not generator_is_built(),
+        progress=progress,
+        settings=SETTINGS[mode],
     )
     progress(
         f"dynid demo ({mode}): {robot.name}, {robot.n} joints; the simulated robot is the UR5 with its inertial "
@@ -422,7 +246,7 @@ def _start(out: Path, mode: str, seed: int, progress: Callable[[str], None]) -> 
     return demo
 
 
-def _result(demo: _Demo, stages: _Stages, outcome: _Outcome, *, total: float) -> DemoResult:
+def _result(demo: DemoContext, stages: StageRunner, outcome: Outcome, *, total: float) -> DemoResult:
     """The demo's result: its figures completed with the stages and the total time (s)."""
     from dynid._io import to_jsonable
 
@@ -446,7 +270,7 @@ def _result(demo: _Demo, stages: _Stages, outcome: _Outcome, *, total: float) ->
     )
 
 
-def _run_stages(demo: _Demo, stages: _Stages) -> _Outcome:
+def _run_stages(demo: DemoContext, stages: StageRunner) -> Outcome:
     """The seven stages in order, each handing its result to those after it."""
     # One BLAS / OpenMP thread: on small matrices a threaded BLAS is many times slower here (the
     # excitation's figures took 5 s instead of 0.1 s on 2 busy cores); joblib's workers set their own.
@@ -488,11 +312,11 @@ def _run_stages(demo: _Demo, stages: _Stages) -> _Outcome:
             ),
         )
         figures.update(report.figures)
-    return _Outcome(figures=figures, validation=validation, diagnosis=diagnosis, report=report)
+    return Outcome(figures=figures, validation=validation, diagnosis=diagnosis, report=report)
 
 
 # ---------------------------------------------------------------------- 1. symbolic model
-def _symbolic(demo: _Demo) -> _Step:
+def _symbolic(demo: DemoContext) -> Step:
     """Symbolic functions, base parameters, and the compiled C's rnea checked against Pinocchio."""
     import pinocchio as pin
 
@@ -515,7 +339,7 @@ def _symbolic(demo: _Demo) -> _Step:
     tau = lib.rnea(q, dq, ddq)
     model, data = robot.pin_model, robot.pin_model.createData()
     err = max(float(np.abs(tau[k] - pin.rnea(model, data, q[k], dq[k], ddq[k])).max()) for k in range(len(q)))
-    return _Step(
+    return Step(
         summary=(
             f"{base.n_base} base parameters ({int(base.gravity_related.sum())} gravity-related); compiled C rnea "
             f"matches numeric Pinocchio to {err:.1e} N m on 500 random states"
@@ -525,7 +349,7 @@ def _symbolic(demo: _Demo) -> _Step:
 
 
 # ---------------------------------------------------------------------- 2. excitation
-def _excite(demo: _Demo) -> _Excitation:
+def _excite(demo: DemoContext) -> Excitation:
     """The optimised excitation trajectory, written to ``excitation.json``."""
     from dynid.optim.excitation import ExcitationProblem, design_excitation
 
@@ -544,7 +368,7 @@ def _excite(demo: _Demo) -> _Excitation:
     )
     traj = result.trajectories[0]
     traj.save(demo.out / "excitation.json")
-    return _Excitation(
+    return Excitation(
         problem=problem,
         design=result,
         trajectory=traj,
@@ -566,7 +390,7 @@ def _excite(demo: _Demo) -> _Excitation:
 
 
 # ---------------------------------------------------------------------- 3. simulation
-def _simulate(demo: _Demo, excitation: _Excitation) -> _Runs:
+def _simulate(demo: DemoContext, excitation: Excitation) -> Runs:
     """The identification run on the excitation and a held-out run on another trajectory, as files."""
     from dynid.data.files import load_dataset
     from dynid.sim.simulator import build_truth
@@ -580,7 +404,7 @@ def _simulate(demo: _Demo, excitation: _Excitation) -> _Runs:
     )
     val = _simulate_run(demo, truth, "validation", other, cfg["val_periods"], demo.seed + 2)
     # Read back what was written: the rest of the demo sees the files a user would pass to dynid.
-    return _Runs(
+    return Runs(
         truth=truth,
         identification=load_dataset(ident.path, demo.robot.n),
         validation=load_dataset(val.path, demo.robot.n),
@@ -608,8 +432,8 @@ def _simulate(demo: _Demo, excitation: _Excitation) -> _Runs:
 
 
 def _simulate_run(
-    demo: _Demo, truth: Any, name: str, trajectory: Any, periods: int, seed: int
-) -> _SimulatedRun:
+    demo: DemoContext, truth: Any, name: str, trajectory: Any, periods: int, seed: int
+) -> SimulatedRun:
     """One simulated run of ``periods`` periods of ``trajectory``, written to ``<name>.csv`` with its truth."""
     from dynid.sim.simulator import simulate, write_simulation
 
@@ -622,11 +446,11 @@ def _simulate_run(
         source=f"the demo's {name} trajectory",
     )
     path, _ = write_simulation(result, demo.out / f"{name}.csv")
-    return _SimulatedRun(result=result, path=path)
+    return SimulatedRun(result=result, path=path)
 
 
 # ---------------------------------------------------------------------- 4. identification
-def _identify(demo: _Demo, runs: _Runs) -> _Fits:
+def _identify(demo: DemoContext, runs: Runs) -> Fits:
     """The full method, OLS and IRLS on the identification run, each written to its model file."""
     from dynid.identify.linear_system import Preprocessing
     from dynid.identify.model import save_model
@@ -642,10 +466,10 @@ def _identify(demo: _Demo, runs: _Runs) -> _Fits:
     )
     files = {}
     for f in fitted:
-        name = "model.json" if f.label == _FULL else f"model_{f.label.lower()}.json"
+        name = "model.json" if f.label == FULL else f"model_{f.label.lower()}.json"
         save_model(f.model, demo.out / name)
         files[f.label] = name
-    return _Fits(
+    return Fits(
         fitted=tuple(fitted),
         files=files,
         summary=(
@@ -669,7 +493,7 @@ def _identify(demo: _Demo, runs: _Runs) -> _Fits:
 
 
 # ---------------------------------------------------------------------- 5. validation
-def _validate(demo: _Demo, runs: _Runs, fits: _Fits) -> _Validation:
+def _validate(demo: DemoContext, runs: Runs, fits: Fits) -> Validation:
     """Every model on the held-out run, and its rigid body against the simulated truth."""
     from dynid.validation.validate import compare, validate
 
@@ -686,8 +510,8 @@ def _validate(demo: _Demo, runs: _Runs, fits: _Fits) -> _Validation:
     rows = compare(list(results))
     truth_errors = _truth_errors(runs.truth, {r.label: r.model for r in results})
     by_label = {r.label: r for r in results}
-    full, ols, irls = by_label[_FULL], by_label["OLS"], by_label["IRLS"]
-    return _Validation(
+    full, ols, irls = by_label[FULL], by_label["OLS"], by_label["IRLS"]
+    return Validation(
         results=results,
         rows=rows,
         truth_errors=truth_errors,
@@ -700,7 +524,7 @@ def _validate(demo: _Demo, runs: _Runs, fits: _Fits) -> _Validation:
 
 
 # ---------------------------------------------------------------------- 6. diagnosis
-def _diagnose(demo: _Demo, runs: _Runs, validation: _Validation) -> _Diagnosis:
+def _diagnose(demo: DemoContext, runs: Runs, validation: Validation) -> GapDiagnosis:
     """The gap diagnosis of the full method, with its own page ``diagnosis.html``."""
     from dynid.diagnosis import diagnose, write_diagnosis_report
 
@@ -714,7 +538,7 @@ def _diagnose(demo: _Demo, runs: _Runs, validation: _Validation) -> _Diagnosis:
         result, demo.out / "diagnosis.html", title="dynid demo: gap diagnosis of the full method"
     )
     text = result.summary().splitlines()
-    return _Diagnosis(
+    return GapDiagnosis(
         result=result,
         report=path,
         summary=f"verdict {', '.join(result.verdict)}; wrote {path}: {text[0] if text else ''}",
@@ -724,14 +548,14 @@ def _diagnose(demo: _Demo, runs: _Runs, validation: _Validation) -> _Diagnosis:
 
 # ---------------------------------------------------------------------- 7. report
 def _report(
-    demo: _Demo,
-    excitation: _Excitation,
-    runs: _Runs,
-    validation: _Validation,
-    diagnosis: _Diagnosis | None,
+    demo: DemoContext,
+    excitation: Excitation,
+    runs: Runs,
+    validation: Validation,
+    diagnosis: GapDiagnosis | None,
     records: tuple[StageRecord, ...],
     figures: dict[str, Any],
-) -> _Report:
+) -> ReportPage:
     """The HTML report: every model on the held-out run, the diagnosis, the truth and the stages before it."""
     from dynid._io import to_jsonable
     from dynid.validation.report import render_report
@@ -766,7 +590,7 @@ def _report(
         ],
     )
     path = rep.write(demo.out / "report.html")
-    return _Report(
+    return ReportPage(
         path=path,
         summary=f"wrote {path} ({len(rep.figures)} figures, {len(rep.html) / 1e6:.1f} MB)",
         figures=added,
@@ -774,7 +598,7 @@ def _report(
 
 
 def _diagnosis_section(
-    diagnosis: _Diagnosis | None, label: str, records: tuple[StageRecord, ...]
+    diagnosis: GapDiagnosis | None, label: str, records: tuple[StageRecord, ...]
 ) -> tuple[str, str]:
     """The report's section on the diagnosis: its verdict and candidates, or why it failed."""
     title = "Sim-to-real gap diagnosis"
@@ -789,7 +613,7 @@ def _diagnosis_section(
     )
 
 
-def _truth_section(validation: _Validation) -> tuple[str, str]:
+def _truth_section(validation: Validation) -> tuple[str, str]:
     """The report's section on each model's rigid body against the simulated truth."""
     from dynid.validation.report import html_table
 

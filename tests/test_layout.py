@@ -86,6 +86,9 @@ IMPORTED_BY = {
 }
 
 PART_OF = {
+    "dynid.demo_records": "dynid.demo",
+    "dynid.validation.baseline": "dynid.validation.validate",
+    "dynid.validation.result": "dynid.validation.validate",
     "dynid.data.filters": "dynid.data.preprocess",
     "dynid.data.resampling": "dynid.data.preprocess",
     "dynid.data.rows": "dynid.data.preprocess",

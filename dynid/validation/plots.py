@@ -81,6 +81,17 @@ def fixed_margins(
     A fixed placement instead of matplotlib's constrained layout, which measures every tick label at each
     draw (about half of a validation report's time); the margins are the constrained layout's on dynid's
     report figures, to a few hundredths of an inch.
+
+    Parameters
+    ----------
+    fig : Figure
+        The figure, its panels made (``fig.subplots``).
+    nrows, ncols : int
+        The grid of panels.
+    left, right, top, bottom : float
+        Margins (inches) from the figure's edges to the grid.
+    hspace, wspace : float
+        Gaps (inches) between rows and between columns of panels.
     """
     w, h = fig.get_size_inches()
     avail_h = max(h - top - bottom, 0.1)

@@ -25,6 +25,10 @@ diagnosis measures it (:func:`dynid.validation.noise.measure_noise`): the spread
 when the data repeat a motion (``period`` given, read from the simulator's sidecar
 ``<data>.truth.json``, or detected from the angles) at least twice; otherwise the white-noise level
 of the raw torque's spectrum carried through the filter.
+
+The result (:class:`ValidationResult`, :func:`describe_model`) lives in :mod:`dynid.validation.result`
+and the robot description's own model (:func:`nominal_model`, :func:`described_model`) in
+:mod:`dynid.validation.baseline`; both are importable from here too.
 """
 
 from __future__ import annotations
@@ -35,7 +39,7 @@ import os
 import time
 import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -43,13 +47,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynid.data.dataset import Dataset
-from dynid.data.preparation import Prepared, Preprocessing, prepare
+from dynid.data.preparation import Prepared, Preprocessing
 from dynid.exceptions import DataError, ModelFileError, ShapeError, UsageError
-from dynid.identify.columns import column_set, linear_torque
-from dynid.identify.friction import FrictionLayer
+from dynid.identify.columns import linear_torque
 from dynid.identify.model import IdentifiedModel, identify
+from dynid.validation.baseline import described_model, nominal_model
 from dynid.validation.metrics import NoiseFloor, torque_metrics
 from dynid.validation.noise import measure_noise
+from dynid.validation.result import ValidationResult, describe_model
 
 __all__ = [
     "COMPARISON",
@@ -68,158 +73,6 @@ __all__ = [
     "validate",
     "write_predictions",
 ]
-
-
-def _finite(values: NDArray[np.float64]) -> list[float | None]:
-    return [float(v) if np.isfinite(v) else None for v in np.ravel(values)]
-
-
-def describe_model(model: IdentifiedModel) -> str:
-    """One line naming a model's three layers, e.g. ``consistent + seed friction + GMM (joints 1, 2)``.
-
-    Parameters
-    ----------
-    model : IdentifiedModel
-        The model.
-    """
-    parts = [model.method]
-    if model.friction is None:
-        parts.append("no friction")
-    elif model.friction_source == "layer1":
-        parts.append("linear friction")
-    else:
-        parts.append(f"{model.friction.model} friction")
-    if model.gmr is None:
-        parts.append("no GMM")
-    elif model.gmr.active_.any():
-        parts.append("GMM (joints " + ", ".join(str(j + 1) for j in np.flatnonzero(model.gmr.active_)) + ")")
-    else:
-        parts.append("GMM (no joint helped)")
-    return " + ".join(parts)
-
-
-@dataclass(frozen=True, eq=False)
-class ValidationResult:
-    """A model's prediction of held-out data, split into layers, with its error figures.
-
-    Attributes
-    ----------
-    label : str
-        Name of the model in tables and legends.
-    model : IdentifiedModel
-        The model validated.
-    t : ndarray, shape (m,)
-        Time stamps of the compared samples (s).
-    q, dq : ndarray, shape (m, n)
-        States there (rad, rad/s), as reconstructed by the model's preprocessing.
-    tau : ndarray, shape (m, n)
-        Measured torque as compared (N m): treated as described by ``reference``.
-    tau_pred : ndarray, shape (m, n)
-        Predicted torque (N m); ``tau_link + tau_friction + tau_gmm``.
-    tau_link, tau_friction, tau_gmm : ndarray, shape (m, n)
-        Rigid-body, friction and GMM parts of the prediction (N m).
-    metrics : dict
-        :func:`dynid.validation.metrics.torque_metrics` of ``tau`` against ``tau_pred``.
-    metrics_before_gmm : dict
-        The same without the GMM part.
-    noise : NoiseFloor
-        Measured noise floor of ``tau``.
-    reference : str
-        How the measured torque was treated ("raw", "filtered and trimmed", ...).
-    data : str
-        Where the data came from (a file name or a description).
-    info : dict
-        Anything else worth reporting (the model file, ...).
-    """
-
-    label: str
-    model: IdentifiedModel
-    t: NDArray[np.float64]
-    q: NDArray[np.float64]
-    dq: NDArray[np.float64]
-    tau: NDArray[np.float64]
-    tau_pred: NDArray[np.float64]
-    tau_link: NDArray[np.float64]
-    tau_friction: NDArray[np.float64]
-    tau_gmm: NDArray[np.float64]
-    metrics: dict[str, Any]
-    metrics_before_gmm: dict[str, Any]
-    noise: NoiseFloor
-    reference: str
-    data: str
-    info: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def n(self) -> int:
-        """Number of joints."""
-        return self.tau.shape[1]
-
-    @property
-    def residual(self) -> NDArray[np.float64]:
-        """``tau - tau_pred`` (N m), shape (m, n)."""
-        return self.tau - self.tau_pred
-
-    @property
-    def residual_before_gmm(self) -> NDArray[np.float64]:
-        """``tau - tau_link - tau_friction`` (N m): the residual the GMM layer is given."""
-        return self.tau - self.tau_link - self.tau_friction
-
-    @property
-    def friction_estimate(self) -> NDArray[np.float64]:
-        """``tau - tau_link`` (N m): the friction torque the data show, as layer 2 sees it."""
-        return self.tau - self.tau_link
-
-    @property
-    def has_gmm(self) -> bool:
-        """Whether the model's GMM layer corrects at least one joint."""
-        return self.model.gmr is not None and bool(self.model.gmr.active_.any())
-
-    def summary(self) -> dict[str, Any]:
-        """The figures of this model alone (a row of a comparison): JSON-ready."""
-        m = self.metrics
-        return {
-            "label": self.label,
-            "description": describe_model(self.model),
-            "method": self.model.method,
-            "friction": "none" if self.model.friction is None else self.model.friction.model,
-            "friction_source": self.model.friction_source,
-            "gmm": self.has_gmm,
-            "cond": float(self.model.cond) if np.isfinite(self.model.cond) else None,
-            "rms": _finite(m["rms"]),
-            "rms_mean": float(m["rms_mean"]),
-            "nrms": _finite(m["nrms"]),
-            "r2": _finite(m["r2"]),
-            "max_error": _finite(m["max_error"]),
-            "rms_before_gmm": _finite(self.metrics_before_gmm["rms"]),
-            "rms_mean_before_gmm": float(self.metrics_before_gmm["rms_mean"]),
-            **({"model_file": self.info["model_file"]} if "model_file" in self.info else {}),
-        }
-
-    def figures(self) -> dict[str, Any]:
-        """The ``dynid validate`` figures (DESIGN.md): JSON-ready.
-
-        Keys: ``rms`` (per joint, N m), ``rms_mean``, ``nrms``, ``r2``, ``max_error``, ``noise_floor``
-        (per joint, N m), ``noise_floor_mean``, ``noise_floor_method``, ``noise_floor_detail``,
-        ``rms_over_noise``, ``reference``, ``n_samples``, ``duration_s``, ``data``, ``robot``, and the
-        model's ``label``, ``description``, ``method``, ``cond``, ``rms_before_gmm``.
-        """
-        row = self.summary()
-        std = self.noise.std
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = np.where(std > 0, self.metrics["rms"] / std, np.where(std == 0, np.inf, np.nan))
-        return {
-            **row,
-            "noise_floor": _finite(self.noise.std),
-            "noise_floor_mean": _finite(np.array([self.noise.rms_mean]))[0],
-            "noise_floor_method": self.noise.method,
-            "noise_floor_detail": self.noise.detail,
-            "rms_over_noise": _finite(ratio),
-            "reference": self.reference,
-            "n_samples": int(self.t.size),
-            "duration_s": float(self.t[-1] - self.t[0]) if self.t.size else 0.0,
-            "data": self.data,
-            "robot": self.model.robot.name,
-        }
 
 
 # ---------------------------------------------------------------------------- checks
@@ -489,132 +342,6 @@ def write_predictions(result: ValidationResult, path: str | os.PathLike[str]) ->
 
 
 # ---------------------------------------------------------------------------- a reference model
-def nominal_model(
-    robot,
-    data: Dataset,
-    *,
-    preprocessing: Preprocessing | None = None,
-    friction: str = "linear",
-) -> IdentifiedModel:
-    """The robot's own (URDF) parameters with a friction model fitted to the data: a baseline.
-
-    The rigid-body part comes unchanged from the robot description (its link parameters and armature);
-    only the friction is fitted, to ``tau - tau_link`` on ``data``, as layer 2 would.  An identified
-    model should predict held-out data better than this.
-
-    Parameters
-    ----------
-    robot : RobotModel
-        The robot, with the parameters of its description.
-    data : Dataset
-        Data to fit the friction on (the identification data, not the held-out ones).
-    preprocessing : Preprocessing, optional
-        As for the identified models it is compared with.
-    friction : str
-        Friction model (default ``linear``: Coulomb, viscous and offset per joint).
-
-    Returns
-    -------
-    IdentifiedModel
-        With ``method="urdf"`` and a zero covariance (nothing of the rigid body was estimated).
-    """
-    cols = column_set(robot, friction=False, armature=True)
-    n = robot.n
-    phi = np.concatenate(
-        [np.asarray(robot.params, float), np.asarray(robot.armature, float), np.zeros(3 * n)]
-    )
-    x = cols.P @ phi
-    prep = prepare(data, preprocessing, n_joints=n)
-    rows = prep.rows
-    link = prep.filter(linear_torque(cols, x, prep.q, prep.dq, prep.ddq))[rows]
-    resid = prep.tau_reference - link
-    layer = FrictionLayer(model=friction).fit(prep.dq[rows], resid)
-    after = resid - layer.predict(prep.dq[rows])
-
-    def rms(r: NDArray[np.float64]) -> list[float]:
-        return [float(v) for v in np.sqrt(np.mean(r**2, axis=0))]
-
-    return described_model(
-        robot,
-        cols,
-        x,
-        prep,
-        layer,
-        method="urdf",
-        friction_source="layer2",
-        rms_layers={"link": rms(resid), "friction": rms(after), "gmm": rms(after)},
-        notes=["rigid body from the robot description"],
-        n_samples=len(rows),
-    )
-
-
-def described_model(
-    robot,
-    cols,
-    x: NDArray[np.float64],
-    prep: Prepared,
-    friction: FrictionLayer,
-    *,
-    method: str,
-    friction_source: str,
-    rms_layers: dict[str, list[float]],
-    notes: list[str],
-    n_samples: int | None = None,
-    layers_filtered: bool = False,
-) -> IdentifiedModel:
-    """A model whose rigid body comes from a robot description: nothing of it estimated.
-
-    The shared shape of :func:`nominal_model` (URDF bodies, friction fitted) and
-    :func:`dynid.simmodel.nominal.description_model` (a simulator's file, friction as it states it): a
-    zero covariance, no mixture, no condition number.
-
-    Parameters
-    ----------
-    robot : RobotModel
-        The robot.
-    cols : ColumnSet
-        The model's columns.
-    x : ndarray, shape (p,)
-        Its parameters in those columns.
-    prep : Prepared
-        The data it was prepared on (its settings and reference are recorded).
-    friction : FrictionLayer
-        The friction layer.
-    method : str
-        What the model is (``"urdf"``, ``"nominal"``).
-    friction_source : {"layer1", "layer2"}
-        Where the friction comes from (see :class:`IdentifiedModel`).
-    rms_layers : dict
-        Training RMS (N m) after ``link``, ``friction`` and ``gmm``, per joint (NaN where not measured).
-    notes : list of str
-        Notes for the summary.
-    n_samples : int, optional
-        Samples the friction was fitted on.
-    layers_filtered : bool
-        As for :class:`IdentifiedModel`.
-    """
-    n = robot.n
-    info: dict[str, Any] = {"notes": list(notes), "reference": prep.reference}
-    if n_samples is not None:
-        info = {"n_samples": int(n_samples), **info}
-    return IdentifiedModel(
-        robot=robot,
-        columns=cols,
-        params=x,
-        cov=np.zeros((cols.p, cols.p)),
-        method=method,
-        preprocessing=dict(prep.settings),
-        friction=friction,
-        friction_source=friction_source,
-        gmr=None,
-        cond=float("nan"),
-        rms=np.asarray(rms_layers["friction"], dtype=np.float64).reshape(n),
-        rms_layers=rms_layers,
-        info=info,
-        layers_filtered=layers_filtered,
-    )
-
-
 # ---------------------------------------------------------------------------- methods side by side
 class MethodSpec(NamedTuple):
     """One model of a comparison: its label and how :func:`dynid.identify.model.identify` makes it.
