@@ -240,10 +240,10 @@ def part_excite(repeat: int, seeds: list[int] | None = None, screen_iter: int = 
 # called from one thread at a time, so the process's CPU time during its calls is its own (with what
 # its calls run in threads)
 STAGES = (
-    ("build_system (states, regressor, filter, QR)", "dynid.identify.model", None, "build_system"),
+    ("build_system (states, regressor, filter, QR)", "dynid.identify.three_layer", None, "build_system"),
     ("  its blocked QR of Z", "dynid.identify.linear_system", None, "_qr_rows"),
     ("layer 1 (IRLS)", "dynid.identify.estimators", "IRLS", "fit"),
-    ("refine (two calls: with mixtures, physical alone)", "dynid.identify.model", None, "refine"),
+    ("refine (two calls: with mixtures, physical alone)", "dynid.identify.three_layer", None, "refine"),
     ("  friction fits (shape searches)", "dynid.identify.friction", "FrictionLayer", "fit"),
     ("  mixture EM (fit_mixtures)", "dynid.identify.gmr", "GMRCorrection", "fit_mixtures"),
     ("  mixture designs (gates at full rate)", "dynid.identify.gmr", "GMRCorrection", "design"),

@@ -86,6 +86,10 @@ IMPORTED_BY = {
 }
 
 PART_OF = {
+    "dynid.identify.fit_figures": "dynid.identify.three_layer",
+    "dynid.identify.identified": "dynid.identify.model",
+    "dynid.identify.model_file": "dynid.identify.model",
+    "dynid.identify.three_layer": "dynid.identify.model",
     "dynid.demo_records": "dynid.demo",
     "dynid.validation.baseline": "dynid.validation.validate",
     "dynid.validation.result": "dynid.validation.validate",
