@@ -86,6 +86,11 @@ IMPORTED_BY = {
 }
 
 PART_OF = {
+    "dynid.identify.effect_builders": "dynid.identify.effect_terms",
+    "dynid.identify.friction_base": "dynid.identify.friction",
+    "dynid.identify.friction_fitting": "dynid.identify.friction",
+    "dynid.identify.friction_models": "dynid.identify.friction",
+    "dynid.identify.mixture": "dynid.identify.gmr",
     "dynid.identify.fit_figures": "dynid.identify.three_layer",
     "dynid.identify.identified": "dynid.identify.model",
     "dynid.identify.model_file": "dynid.identify.model",

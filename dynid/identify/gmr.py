@@ -44,24 +44,30 @@ depend on the inputs only.  :meth:`GMRCorrection.design` gives the expert column
 :meth:`GMRCorrection.set_experts` writes fitted experts back into the mixture (means and
 covariances), so the three-layer pipeline can estimate the experts jointly with the link parameters
 (:mod:`dynid.identify.model`).
+
+This module holds the correction (:class:`GMRCorrection`), its density gate and its validation samples;
+the mixtures' own arithmetic (EM, densities, the conditional mean) is :mod:`dynid.identify.mixture`.
 """
 
 from __future__ import annotations
 
-import contextlib
-import math
-import warnings
-from collections.abc import Iterator
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
-import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
 from dynid._threads import one_blas_thread
 from dynid.data.periodic import period_of  # one detector for the package; re-exported here
 from dynid.exceptions import DataError, ModelFileError, UsageError
 from dynid.identify.checks import check_is_fitted
+from dynid.identify.mixture import (
+    Mixture,
+    conditional_mean,
+    fit_gaussian_mixture,
+    gates,
+    log_density,
+    one_openmp_thread,
+)
 
 __all__ = [
     "GMRCorrection",
@@ -86,240 +92,6 @@ _GATE_WIDTH = 4.0
 # standard deviations: the wide density above keeps a broad mixture (one or two components) near 1 far
 # outside the states it saw.
 _RANGE_MARGIN = 1.0
-
-
-class _Mixture(NamedTuple):
-    """A fitted Gaussian mixture: weights (K,), means (K, d), covariances (K, d, d)."""
-
-    weights_: NDArray[np.float64]
-    means_: NDArray[np.float64]
-    covariances_: NDArray[np.float64]
-    n_iter_: int
-
-
-def fit_gaussian_mixture(
-    X: NDArray[np.float64],
-    K: int,
-    *,
-    reg_covar: float = 1e-4,
-    random_state: int = 0,
-    max_iter: int = 200,
-    tol: float = 1e-3,
-) -> _Mixture:
-    """EM for a Gaussian mixture with full covariances, as :class:`sklearn.mixture.GaussianMixture`.
-
-    The same algorithm as scikit-learn's (one k-means start with the same seed, the same M-step with
-    ``reg_covar`` on the diagonal, the same stop on the change of the mean log-likelihood) with all
-    components at once in stacked arrays.  Its parameters equal scikit-learn's 1.9 to rounding (at most
-    1.3e-14 apart on standardised data, with the same iteration counts; tests/identify/test_gmr.py
-    checks 1e-11); it takes a fifth of the time on the small fits dynid makes (4,000 samples of 2-3
-    coordinates: about 70 % of scikit-learn's time was its per-component loops and input checks).
-
-    Parameters
-    ----------
-    X : ndarray, shape (m, d)
-        Samples (standardised by the caller).
-    K : int
-        Number of components, at most ``m``.
-    reg_covar : float
-        Added to the diagonal of every covariance.
-    random_state : int
-        Seed of the k-means start.
-    max_iter, tol : int, float
-        EM stops after ``max_iter`` iterations or when the mean log-likelihood changes by less than ``tol``.
-
-    Returns
-    -------
-    _Mixture
-
-    Notes
-    -----
-    The k-means start runs on OpenMP's threads: on small fits, call it within :func:`_one_openmp_thread`
-    (k-means spent 0.3 s per fit on a shared 2-core machine with OpenMP's default threads, 0.02 s with
-    one; setting the limit costs about 5 ms, so the callers here set it once for all their fits).
-    """
-    from sklearn.cluster import KMeans
-    from sklearn.exceptions import ConvergenceWarning
-
-    X = np.asarray(X, dtype=np.float64)
-    if X.ndim != 2 or X.shape[0] < 2 or not np.all(np.isfinite(X)):
-        raise DataError(
-            f"the mixture needs finite samples as an (m, d) array with m >= 2; got shape {X.shape}"
-            + ("" if X.size == 0 or np.all(np.isfinite(X)) else " with non-finite values")
-            + ": drop or interpolate the bad samples"
-        )
-    m, d = X.shape
-    if not (isinstance(K, (int, np.integer)) and 1 <= K <= m):
-        raise UsageError(f"K is {K!r}; give a whole number of components from 1 to the {m} samples")
-    if not (np.isfinite(reg_covar) and reg_covar >= 0):
-        raise UsageError(f"reg_covar is {reg_covar!r}; give a finite number >= 0 (default 1e-4)")
-    if not isinstance(random_state, (int, np.integer)):
-        raise UsageError(f"random_state is {random_state!r}; give an integer seed")
-    if K == 1:
-        label = np.zeros(m, dtype=np.intp)
-    else:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", ConvergenceWarning)
-            start = KMeans(n_clusters=K, n_init=1, random_state=np.random.RandomState(random_state))
-            label = start.fit(X).labels_
-    XT = np.ascontiguousarray(X.T)
-    diag = np.arange(d)
-    tiny = 10 * np.finfo(np.float64).eps
-
-    def m_step(R):  # R: responsibilities (K, m)
-        nk = R.sum(axis=1) + tiny
-        means = (R @ X) / nk[:, None]
-        diff = XT[None] - means[:, :, None]  # (K, d, m)
-        cov = np.matmul(diff * R[:, None, :], diff.transpose(0, 2, 1)) / nk[:, None, None]
-        cov[:, diag, diag] += reg_covar
-        return nk, means, cov
-
-    def singular(call, *args):  # a collapsed component's singular covariance, in one sentence
-        try:
-            return call(*args)
-        except np.linalg.LinAlgError:
-            raise DataError(
-                f"a component of the {K}-component mixture collapsed onto too few distinct samples (its "
-                f"covariance is singular with reg_covar {reg_covar:g}); use fewer components or a larger reg_covar"
-            ) from None
-
-    R = np.zeros((K, m))
-    R[label, np.arange(m)] = 1.0
-    nk, means, cov = m_step(R)
-    weights = nk / m
-    bound = -np.inf
-    n_iter = 0
-    while n_iter < int(max_iter):
-        n_iter += 1
-        previous = bound
-        logp = singular(_component_log_densities, X, weights, means, cov)  # weighted, (K, m), as the gates'
-        norm = _logsumexp(logp)
-        with np.errstate(under="ignore"):
-            R = np.exp(logp - norm)
-        nk, means, cov = m_step(R)
-        weights = nk / nk.sum()
-        bound = float(norm.mean())
-        if abs(bound - previous) < tol:
-            break
-    singular(np.linalg.cholesky, cov)  # the returned covariances too are positive definite
-    return _Mixture(weights, means, cov, n_iter)
-
-
-@contextlib.contextmanager
-def _one_openmp_thread() -> Iterator[None]:
-    """OpenMP limited to one thread in the calling thread (the k-means starts of EM)."""
-    from threadpoolctl import threadpool_limits
-
-    with threadpool_limits(limits=1, user_api="openmp"):
-        yield
-
-
-def conditional_mean(
-    u: NDArray[np.float64],
-    weights: NDArray[np.float64],
-    means: NDArray[np.float64],
-    covariances: NDArray[np.float64],
-    n_in: int,
-) -> NDArray[np.float64]:
-    """Conditional mean of a Gaussian mixture: ``E[y | u]`` with ``x = [u, y]``.
-
-    Parameters
-    ----------
-    u : ndarray, shape (m, n_in)
-        Inputs.
-    weights : ndarray, shape (K,)
-        Mixture weights.
-    means : ndarray, shape (K, n_in + n_out)
-        Component means over ``[u, y]``.
-    covariances : ndarray, shape (K, n_in + n_out, n_in + n_out)
-        Component covariances.
-    n_in : int
-        Number of inputs (the first ``n_in`` coordinates).
-
-    Returns
-    -------
-    ndarray, shape (m, n_out)
-    """
-    m = u.shape[0]
-    K = len(weights)
-    n_out = means.shape[1] - n_in
-    logp = np.empty((K, m))
-    cond = np.empty((K, m, n_out))
-    for k in range(K):
-        S = covariances[k]
-        L, sol, logp[k] = _component(u, weights[k], means[k, :n_in], S[:n_in, :n_in])
-        # S_yu S_uu^-1 (u - mu) = (L^-1 S_uy)^T L^-1 (u - mu)
-        A = scipy.linalg.solve_triangular(L, S[:n_in, n_in:], lower=True, check_finite=False)  # (n_in, n_out)
-        cond[k] = means[k, n_in:] + sol.T @ A
-    h = np.exp(logp - _logsumexp(logp))
-    return np.einsum("km,kmo->mo", h, cond)
-
-
-def _component(
-    u: NDArray[np.float64], weight: float, mean: NDArray[np.float64], cov: NDArray[np.float64]
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """One component over the inputs: Cholesky factor L of ``cov``, ``L^-1 (u - mean)^T`` (d, m) and
-    ``log(weight N(u; mean, cov))`` (m,)."""
-    n_in = u.shape[1]
-    L = np.linalg.cholesky(cov)
-    sol = scipy.linalg.solve_triangular(L, (u - mean).T, lower=True, check_finite=False)
-    maha = np.einsum("im,im->m", sol, sol)
-    logdet = 2.0 * np.log(np.diag(L)).sum()
-    return L, sol, math.log(max(weight, 1e-300)) - 0.5 * (maha + logdet + n_in * math.log(2 * math.pi))
-
-
-_DENSITY_VALUES = 2_000_000  # values of one block of the stacked densities' temporaries (K d rows, 16 MB)
-
-
-def _component_log_densities(u, weights, means, covs) -> NDArray[np.float64]:
-    """Weighted log-density (K, m) of each component of a Gaussian mixture at the inputs ``u`` (m, d).
-
-    All components at once (stacked Cholesky factors): :func:`_component`'s values to rounding, in a
-    third of the time on the gates of a default identification.  The rows go in blocks, so that the
-    temporaries stay near 16 MB whatever the mixture and the recording (a vector-mode mixture of 16
-    components over 12 inputs on 360,000 samples needed 1.1 GB in one block).
-    """
-    m, n_in = u.shape
-    L = np.linalg.cholesky(covs)  # (K, d, d)
-    Linv = np.linalg.inv(L)
-    logdet = 2.0 * np.log(np.diagonal(L, axis1=1, axis2=2)).sum(axis=1)
-    const = np.log(np.maximum(weights, 1e-300)) - 0.5 * (logdet + n_in * math.log(2 * math.pi))
-    out = np.empty((len(weights), m))
-    step = max(1, _DENSITY_VALUES // max(1, len(weights) * n_in))
-    for a in range(0, m, step):
-        block = u[a : a + step]
-        sol = np.matmul(Linv, block.T[None] - means[:, :, None])  # L^-1 (u - mean)^T, (K, d, rows)
-        out[:, a : a + len(block)] = const[:, None] - 0.5 * np.einsum("kdm,kdm->km", sol, sol)
-    return out
-
-
-def _logsumexp(a: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``log(sum(exp(a), axis=0))`` without overflow (scipy's logsumexp, without its 2 ms of checks)."""
-    top = a.max(axis=0)
-    top = np.where(np.isfinite(top), top, 0.0)
-    with np.errstate(divide="ignore", under="ignore"):
-        return np.log(np.exp(a - top).sum(axis=0)) + top
-
-
-def _gates(
-    u: NDArray[np.float64],
-    weights: NDArray[np.float64],
-    means: NDArray[np.float64],
-    covs: NDArray[np.float64],
-) -> NDArray[np.float64]:
-    """Responsibilities ``h_k(u)`` (m, K) of a Gaussian mixture over the inputs."""
-    logp = _component_log_densities(u, weights, means, covs)
-    return np.exp(logp - _logsumexp(logp)).T
-
-
-def _log_density(
-    u: NDArray[np.float64],
-    weights: NDArray[np.float64],
-    means: NDArray[np.float64],
-    covs: NDArray[np.float64],
-) -> NDArray[np.float64]:
-    """Log-density (m,) of a Gaussian mixture over the inputs (standardised units)."""
-    return _logsumexp(_component_log_densities(u, weights, means, covs))
 
 
 def density_gate(mdl: dict[str, Any], u: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -353,7 +125,7 @@ def density_gate(mdl: dict[str, Any], u: NDArray[np.float64]) -> NDArray[np.floa
     n_in = len(inp)
     us = (u[:, inp] - mdl["mean"][:n_in]) / mdl["scale"][:n_in]
     covs = _GATE_WIDTH**2 * mdl["covariances"][:, :n_in, :n_in]
-    logp = _log_density(us, mdl["weights"], mdl["means"][:, :n_in], covs)
+    logp = log_density(us, mdl["weights"], mdl["means"][:, :n_in], covs)
     margin = float(mdl.get("range_margin", np.inf))
     if np.isfinite(margin):
         # beyond the training range of any input, by how many of its standard deviations
@@ -526,7 +298,7 @@ class GMRCorrection:
             raise DataError("tau_err holds non-finite values; drop or interpolate those samples")
         return u, y
 
-    def _em(self, K: int, data: NDArray[np.float64]) -> _Mixture:
+    def _em(self, K: int, data: NDArray[np.float64]) -> Mixture:
         return fit_gaussian_mixture(data, K, reg_covar=float(self.reg_covar), random_state=self.random_state)
 
     def _model(
@@ -540,7 +312,7 @@ class GMRCorrection:
         K = max(1, min(int(K), len(X) // (X.shape[1] + 2)))
         gm = self._em(K, (X - mean) / scale)
         us = (X[:, :n_in] - mean[:n_in]) / scale[:n_in]
-        density = _log_density(
+        density = log_density(
             us, gm.weights_, gm.means_[:, :n_in], _GATE_WIDTH**2 * gm.covariances_[:, :n_in, :n_in]
         )
         return {
@@ -559,7 +331,7 @@ class GMRCorrection:
 
     # ------------------------------------------------------------------ fit / predict
     @one_blas_thread
-    @_one_openmp_thread()
+    @one_openmp_thread()
     def fit(self, u: ArrayLike, y: ArrayLike) -> GMRCorrection:
         """Choose the sizes and fit the mixtures; keep, per joint, only a correction that validates.
 
@@ -642,7 +414,7 @@ class GMRCorrection:
         return self
 
     @one_blas_thread
-    @_one_openmp_thread()
+    @one_openmp_thread()
     def fit_mixtures(
         self, u: ArrayLike, y: ArrayLike, sizes: list[int], active: ArrayLike | None = None
     ) -> GMRCorrection:
@@ -738,7 +510,7 @@ class GMRCorrection:
             inp = mdl["inputs"]
             n_in = len(inp)
             us = (np.clip(u[:, inp], mdl["lo"], mdl["hi"]) - mdl["mean"][:n_in]) / mdl["scale"][:n_in]
-            h = _gates(us, mdl["weights"], mdl["means"][:, :n_in], mdl["covariances"][:, :n_in, :n_in])
+            h = gates(us, mdl["weights"], mdl["means"][:, :n_in], mdl["covariances"][:, :n_in, :n_in])
             parts = [h] + [h * (us[:, [i]] - mdl["means"][:, i]) for i in range(n_in)]
             block = np.hstack(parts) * density_gate(mdl, u)[:, None]
             for o in mdl["outputs"]:

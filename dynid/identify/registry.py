@@ -7,7 +7,7 @@ module, imported only when the class is looked up, so that reading the names (``
 imports neither SciPy nor CasADi.
 
 >>> FRICTION_MODELS.names()        # ('none', 'linear', 'seed', 'stribeck', 'sigmoid')
->>> FRICTION_MODELS["seed"]        # SeedFriction (imports dynid.identify.friction)
+>>> FRICTION_MODELS["seed"]        # SeedFriction (imports dynid.identify.friction_models)
 
 A built-in model is one line of a table below beside its class; a model of one's own is registered by
 its class, checked against its base: :func:`dynid.identify.friction.register_friction_model`
@@ -99,11 +99,11 @@ class Registry(Mapping[str, type]):
 FRICTION_MODELS = Registry(
     "friction model",
     {
-        "none": "dynid.identify.friction:NoFriction",
-        "linear": "dynid.identify.friction:LinearFriction",
-        "seed": "dynid.identify.friction:SeedFriction",
-        "stribeck": "dynid.identify.friction:StribeckFriction",
-        "sigmoid": "dynid.identify.friction:SigmoidFriction",
+        "none": "dynid.identify.friction_models:NoFriction",
+        "linear": "dynid.identify.friction_models:LinearFriction",
+        "seed": "dynid.identify.friction_models:SeedFriction",
+        "stribeck": "dynid.identify.friction_models:StribeckFriction",
+        "sigmoid": "dynid.identify.friction_models:SigmoidFriction",
     },
 )
 """Single-joint friction models by name (subclasses of :class:`dynid.identify.friction.FrictionModel`): the

@@ -200,7 +200,7 @@ def test_the_links_shifted_torque_is_the_exact_shift_to_first_order(ur5) -> None
     derivatives); for a deflection of a fraction of a milliradian that is the exact shift to within the
     deflection's own relative size, on every joint the arm couples it to, gravity included."""
     from dynid.identify.columns import compiled_base_regressor
-    from dynid.identify.effect_terms import FeatureSource, _shifted
+    from dynid.identify.effect_builders import FeatureSource, _shifted
 
     t = np.arange(0.0, 4.0, 1e-3)
     n = ur5.n

@@ -75,10 +75,10 @@ def test_the_mixture_em_is_scikit_learns(rng, d, K) -> None:
 def test_stacked_component_densities_equal_one_at_a_time(rng, monkeypatch) -> None:
     from scipy.special import logsumexp
 
-    import dynid.identify.gmr as gmr_module
-    from dynid.identify.gmr import _component, _component_log_densities, _logsumexp
+    import dynid.identify.mixture as mixture_module
+    from dynid.identify.mixture import _component, _component_log_densities, _logsumexp
 
-    monkeypatch.setattr(gmr_module, "_DENSITY_VALUES", 70)  # blocks of 7 rows: 400 rows in 58 blocks
+    monkeypatch.setattr(mixture_module, "_DENSITY_VALUES", 70)  # blocks of 7 rows: 400 rows in 58 blocks
 
     K, d = 5, 2
     w = rng.dirichlet(np.ones(K))

@@ -125,10 +125,10 @@ def test_the_command_line_choices_are_the_registries(toy) -> None:
 def test_the_docs_list_the_registries() -> None:
     """The friction and estimator modules' tables name every built-in entry; a choice list written out in
     the README or docs/ (``--friction {a,b}``) is the registry's."""
-    from dynid.identify import estimators, friction
+    from dynid.identify import estimators, friction_models
 
     for name in FRICTION_MODELS:
-        assert re.search(rf"^``{name}``\s", friction.__doc__, flags=re.M), name
+        assert re.search(rf"^``{name}``\s", friction_models.__doc__, flags=re.M), name
     for name in ESTIMATORS:
         assert re.search(rf"^{name.upper()}\s", estimators.__doc__, flags=re.M), name
     registry = {"--friction": set(FRICTION_MODELS), "--method": set(method_names())}
