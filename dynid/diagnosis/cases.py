@@ -25,7 +25,33 @@ from dynid.sim.cases import calibrate_value, case_excitation
 from dynid.sim.effects import EFFECT_NAMES, parse_effects
 from dynid.sim.simulator import SimulationResult, simulate
 
-__all__ = ["CaseRuns", "classify", "run_case", "simulate_runs", "truth_labels"]
+__all__ = ["CaseRuns", "case_record", "classify", "run_case", "simulate_runs", "truth_labels"]
+
+
+def case_record(d, injected, truth_injected, *, level, seed, values, achieved) -> dict[str, Any]:
+    """The figures every withheld-effect case reports (lab and field): what was injected, the verdict.
+
+    Parameters
+    ----------
+    d : Diagnosis
+        The case's diagnosis.
+    injected : sequence of str
+        The effects injected, as given.
+    truth_injected : list of (str, int or None)
+        The injected effects the catalogue can name, with their joints (:func:`truth_labels`).
+    level, seed, values, achieved
+        The case's size, seed, effect values and the size it reached.
+    """
+    return {
+        "injected": list(injected),
+        "truth": [f"{e}@{j}" if j else e for e, j in truth_injected],
+        "level": level,
+        "seed": seed,
+        "values": values,
+        "achieved_level": achieved,
+        "verdict": list(d.verdict),
+        "excess": [float(v) for v in d.excess["ratio"]],
+    }
 
 
 def classify(diagnosis, injected: Sequence[tuple[str, int | None]]) -> dict[str, Any]:
@@ -262,14 +288,9 @@ def run_case(
     d = diagnose(model, train, held, effects=tuple(catalogue), **(diagnose_options or {}))
     cls = classify(d, truth_injected)
     return {
-        "injected": list(injected),
-        "truth": [f"{e}@{j}" if j else e for e, j in truth_injected],
-        "level": level,
-        "seed": seed,
-        "values": runs.values,
-        "achieved_level": runs.achieved,
-        "verdict": list(d.verdict),
-        "excess": [float(v) for v in d.excess["ratio"]],
+        **case_record(
+            d, injected, truth_injected, level=level, seed=seed, values=runs.values, achieved=runs.achieved
+        ),
         "realised": [e.to_dict() for e in runs.train.truth.effects],
         "diagnosis": d,
         **cls,

@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynid.data.dataset import Dataset
-from dynid.diagnosis.cases import classify, simulate_runs, truth_labels
+from dynid.diagnosis.cases import case_record, classify, simulate_runs, truth_labels
 from dynid.sim.cases import NOISE_STD, case_centre, case_excitation
 from dynid.sim.effects import EFFECT_NAMES
 from dynid.sim.sensors import NoiseModel, torque_noise
@@ -360,14 +360,9 @@ def run_field_case(
     true_std = true_noise_std(model, case)
     cls = classify(d, truth_injected)
     return {
-        "injected": list(injected),
-        "truth": [f"{e}@{j}" if j else e for e, j in truth_injected],
-        "level": level,
-        "seed": seed,
-        "values": case.values,
-        "achieved_level": case.achieved,
-        "verdict": list(d.verdict),
-        "excess": [float(v) for v in d.excess["ratio"]],
+        **case_record(
+            d, injected, truth_injected, level=level, seed=seed, values=case.values, achieved=case.achieved
+        ),
         "provisional": bool(d.provisional),
         "floor_method": d.noise.method,
         "floor": [float(v) for v in d.noise.std],

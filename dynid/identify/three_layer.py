@@ -1,19 +1,6 @@
 """The three-layer identification: :class:`ThreeLayerModel` (what :func:`dynid.identify.model.identify` runs).
 
-Layers (METHOD.md section 4):
-
-1. link parameters by OLS / WLS / GLS / IRLS / physically consistent least squares on the
-   parallel-filtered stacked regressor (base parameters, armature, and linear friction identified
-   with them unless ``friction="none"``);
-2. friction: ``F_est = tau - tau_link`` (the rigid-body part of layer 1 removed, its linear friction
-   not), fitted per joint by the chosen model; with ``friction="linear"`` the layer-1 coefficients are
-   kept as they are;
-3. what is left, ``tau_err``, by Gaussian mixture regression on ``[q, dq]`` (guarded: zero where it
-   does not help on validation blocks).
-
-By default the layers are not fitted one after the other but refitted together for a few rounds
-(:mod:`dynid.identify.refine`: link parameters, friction coefficients and mixture experts in one least
-squares, friction shape and mixture gates in between); ``rounds=0`` gives the paper's sequence.
+The layers, and how they are refitted together, are described in :mod:`dynid.identify.model`.
 The thresholds that guard the mixture and the figures the fit reports are
 :mod:`dynid.identify.fit_figures`; the result is an :class:`~dynid.identify.identified.IdentifiedModel`.
 """
