@@ -35,6 +35,7 @@ from __future__ import annotations
 import os
 import warnings
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -179,7 +180,68 @@ def read_rosbag(
     name = path.name or str(path)
     wanted = [str(j) for j in joint_names]
     robot = f"the robot '{robot_name}'" if robot_name else "the robot"
-    Reader, errors, store = _rosbags()
+    rosbags = _rosbags()
+    _check_bag_path(path)
+    read = _read_joint_states(rosbags, path, name, topic, wanted, robot)
+    _check_joint_rows(read, name, wanted, robot)
+    meta, notes = _joint_notes(read, path, wanted, robot)
+    timeline = _timeline(read, name)
+    meta = {**meta, **timeline.meta, "t0_ns": int(timeline.ns[0])}
+    notes = [*notes, *timeline.notes]
+    t = (timeline.ns - timeline.ns[0]).astype(np.float64) * 1e-9
+    try:
+        ds = Dataset(t, timeline.q, timeline.tau, dq=timeline.dq, meta=meta)
+    except DataError as err:
+        raise DataError(f"{name}: {err}") from None
+    if not ds.is_uniform:
+        ds, note = _resample(ds)
+        notes.append(note)
+    if notes:
+        warnings.warn(f"{name} ({read.topic}): " + "; ".join(notes), DataWarning, stacklevel=3)
+    return ds
+
+
+@dataclass(frozen=True)
+class _JointRows:
+    """The rows read from a bag's JointState topic, and what mapping their names found."""
+
+    topic: str
+    stamps: list[int]
+    received: list[int]
+    q: list[NDArray[np.float64]]
+    tau: list[NDArray[np.float64]]
+    dq: list[NDArray[np.float64] | None]
+    name_lists: list[tuple[str, ...]]
+    ignored: list[str]
+    prefixes: list[str]
+    skipped: int
+
+
+@dataclass(frozen=True)
+class _Timeline:
+    """The samples in stamp order (ns) and the meta entries and notes putting them there gave."""
+
+    ns: NDArray[np.int64]
+    q: NDArray[np.float64]
+    tau: NDArray[np.float64]
+    dq: NDArray[np.float64] | None
+    meta: dict[str, Any]
+    notes: list[str]
+
+    def take(self, index: NDArray[Any], meta: dict[str, Any], note: str) -> _Timeline:
+        """The samples at ``index`` (an order or a mask), with one more meta entry and note."""
+        return _Timeline(
+            self.ns[index],
+            self.q[index],
+            self.tau[index],
+            None if self.dq is None else self.dq[index],
+            {**self.meta, **meta},
+            [*self.notes, note],
+        )
+
+
+def _check_bag_path(path: Path) -> None:
+    """Refuse a path that does not exist or a folder that is not a rosbag2 recording."""
     if not path.exists():
         raise DataError(f"no ROS 2 recording at {path}; check the path")
     if path.is_dir() and not (path / "metadata.yaml").is_file():
@@ -187,6 +249,13 @@ def read_rosbag(
             f"{path} is a folder without metadata.yaml, not a rosbag2 recording; give the bag folder "
             "ros2 bag record wrote, or its .mcap file"
         )
+
+
+def _read_joint_states(
+    rosbags: tuple[Any, Any, Any], path: Path, name: str, topic: str | None, wanted: list[str], robot: str
+) -> _JointRows:
+    """Read the chosen JointState topic's messages as rows in the robot's joint order."""
+    Reader, errors, store = rosbags
     stamps: list[int] = []
     received: list[int] = []
     rows_q: list[NDArray[np.float64]] = []
@@ -214,17 +283,7 @@ def read_rosbag(
                 prefixes.update(dict.fromkeys([prefix] if prefix else []))
                 position, velocity, effort = (np.asarray(a, dtype=np.float64) for a in
                                               (msg.position, msg.velocity, msg.effort))
-                for field, values, required in (("position", position, True), ("velocity", velocity, False),
-                                                ("effort", effort, True)):
-                    if len(values) == len(names) or (not required and len(values) == 0):
-                        continue
-                    fix = ("efforts are the joint torques dynid identifies from; record them"
-                           if field == "effort" and len(values) == 0
-                           else "every message must give one value per name")
-                    raise DataError(
-                        f"{name}: message {k} on {chosen} names {len(names)} joints but holds {len(values)} "
-                        f"{field} values; {fix}"
-                    )
+                _check_lengths(name, chosen, k, names, position, velocity, effort)
                 stamps.append(_stamp_ns(msg))
                 received.append(int(received_ns))
                 rows_q.append(position[index])
@@ -238,20 +297,56 @@ def read_rosbag(
             f"{name} could not be read as a ROS 2 recording ({type(err).__name__}: {said}); "
             "give a rosbag2 folder (with metadata.yaml) or an .mcap file written by ros2 bag record"
         ) from None
+    return _JointRows(
+        chosen, stamps, received, rows_q, rows_tau, rows_dq, list(maps), list(ignored), list(prefixes), skipped
+    )
 
-    if not stamps and maps:
-        seen = sorted({n for names in maps for n in names})
+
+def _check_lengths(
+    name: str,
+    chosen: str,
+    k: int,
+    names: tuple[str, ...],
+    position: NDArray[np.float64],
+    velocity: NDArray[np.float64],
+    effort: NDArray[np.float64],
+) -> None:
+    """Refuse a message whose position, velocity or effort length differs from its name list."""
+    for field, values, required in (("position", position, True), ("velocity", velocity, False),
+                                    ("effort", effort, True)):
+        if len(values) == len(names) or (not required and len(values) == 0):
+            continue
+        fix = ("efforts are the joint torques dynid identifies from; record them"
+               if field == "effort" and len(values) == 0
+               else "every message must give one value per name")
         raise DataError(
-            f"{name}: no message on {chosen} names a joint of {robot} (they name {', '.join(seen)}; {robot} "
+            f"{name}: message {k} on {chosen} names {len(names)} joints but holds {len(values)} "
+            f"{field} values; {fix}"
+        )
+
+
+def _check_joint_rows(read: _JointRows, name: str, wanted: list[str], robot: str) -> None:
+    """Refuse a topic none of whose messages names the robot's joints, or with fewer than 2 rows."""
+    if not read.stamps and read.name_lists:
+        seen = sorted({n for names in read.name_lists for n in names})
+        raise DataError(
+            f"{name}: no message on {read.topic} names a joint of {robot} (they name {', '.join(seen)}; {robot} "
             f"has {', '.join(wanted)}); give the robot (--robot) the bag was recorded on"
         )
-    if len(stamps) < 2:
+    if len(read.stamps) < 2:
         raise DataError(
-            f"{name}: the topic {chosen} holds {len(stamps)} JointState message(s) with the joints of "
+            f"{name}: the topic {read.topic} holds {len(read.stamps)} JointState message(s) with the joints of "
             f"{robot}; a dataset needs at least 2 samples, record a longer run"
         )
+
+
+def _joint_notes(read: _JointRows, path: Path, wanted: list[str], robot: str) -> tuple[dict[str, Any], list[str]]:
+    """The dataset's first meta entries and the notes on prefixed names, ignored joints and skipped messages."""
     notes: list[str] = []
-    meta: dict[str, Any] = {"source": str(path), "topic": chosen, "joint_names": wanted, "messages": len(stamps)}
+    meta: dict[str, Any] = {
+        "source": str(path), "topic": read.topic, "joint_names": wanted, "messages": len(read.stamps)
+    }
+    prefixes, ignored = read.prefixes, read.ignored
     if prefixes:
         meta["joint_prefix"] = list(prefixes) if len(prefixes) > 1 else next(iter(prefixes))
         shown = ", ".join(f"'{p}'" for p in prefixes)
@@ -265,54 +360,65 @@ def read_rosbag(
             if len(ignored) == 1
             else f"joints {', '.join(ignored)} are not joints of {robot} and are ignored"
         )
-    if skipped:
-        meta["skipped_messages"] = skipped
-        notes.append(f"{_count(skipped, 'message')} naming none of the robot's joints skipped")
-    ns = np.asarray(stamps, dtype=np.int64)
+    if read.skipped:
+        meta["skipped_messages"] = read.skipped
+        notes.append(f"{_count(read.skipped, 'message')} naming none of the robot's joints skipped")
+    return meta, notes
+
+
+def _timeline(read: _JointRows, name: str) -> _Timeline:
+    """The rows as arrays on their time stamps, in stamp order and without repeated stamps."""
+    timeline = _stack_rows(read)
+    timeline = _in_stamp_order(timeline)
+    timeline, messages = _drop_repeats(timeline)
+    if len(timeline.ns) < 2:
+        raise DataError(
+            f"{name}: the {messages} JointState messages on {read.topic} all carry one stamp "
+            f"({timeline.ns[0] * 1e-9:.9g} s), so they make 1 sample, not a run in time; record with a driver that stamps "
+            "each message (a driver that leaves the stamps at zero is read by the bag's receive times)"
+        )
+    return timeline
+
+
+def _stack_rows(read: _JointRows) -> _Timeline:
+    """The rows as arrays on the header stamps, or on the receive times when header stamps are zero."""
+    notes: list[str] = []
+    meta: dict[str, Any] = {}
+    ns = np.asarray(read.stamps, dtype=np.int64)
     zero = int((ns == 0).sum())
     if zero:
-        ns = np.asarray(received, dtype=np.int64)
+        ns = np.asarray(read.received, dtype=np.int64)
         meta["stamps"] = "receive"
         which = "the header stamps are" if zero == len(ns) else f"{zero} of {len(ns)} header stamps are"
         notes.append(f"{which} zero, so the bag's receive times are used as the time")
     else:
         meta["stamps"] = "header"
-    q, tau = np.array(rows_q), np.array(rows_tau)
-    dq = None if any(v is None for v in rows_dq) else np.array(rows_dq)
-    if dq is None and any(v is not None for v in rows_dq):
+    q, tau = np.array(read.q), np.array(read.tau)
+    dq = None if any(v is None for v in read.dq) else np.array(read.dq)
+    if dq is None and any(v is not None for v in read.dq):
         notes.append("some messages carry no velocities, so dq is left out (it is derived from q)")
-    late = int(np.sum(np.diff(ns) < 0))
-    if late:
-        order = np.argsort(ns, kind="stable")
-        meta["reordered"] = late
-        notes.append(f"{_count(late, 'message')} stamped before the message stored ahead of "
-                     f"{'it' if late == 1 else 'them'}: the messages are put in stamp order")
-        ns, q, tau = ns[order], q[order], tau[order]
-        dq = None if dq is None else dq[order]
-    keep = np.concatenate(([True], np.diff(ns) > 0))
-    if not keep.all():
-        meta["dropped_repeats"] = int((~keep).sum())
-        notes.append(f"{_count(meta['dropped_repeats'], 'message')} repeating an earlier stamp dropped")
-        ns, q, tau = ns[keep], q[keep], tau[keep]
-        dq = None if dq is None else dq[keep]
-    if len(ns) < 2:
-        raise DataError(
-            f"{name}: the {len(keep)} JointState messages on {chosen} all carry one stamp "
-            f"({ns[0] * 1e-9:.9g} s), so they make 1 sample, not a run in time; record with a driver that stamps "
-            "each message (a driver that leaves the stamps at zero is read by the bag's receive times)"
-        )
-    meta["t0_ns"] = int(ns[0])
-    t = (ns - ns[0]).astype(np.float64) * 1e-9
-    try:
-        ds = Dataset(t, q, tau, dq=dq, meta=meta)
-    except DataError as err:
-        raise DataError(f"{name}: {err}") from None
-    if not ds.is_uniform:
-        ds, note = _resample(ds)
-        notes.append(note)
-    if notes:
-        warnings.warn(f"{name} ({chosen}): " + "; ".join(notes), DataWarning, stacklevel=3)
-    return ds
+    return _Timeline(ns, q, tau, dq, meta, notes)
+
+
+def _in_stamp_order(timeline: _Timeline) -> _Timeline:
+    """The samples sorted by stamp (stable), said when any was stored after a later one."""
+    late = int(np.sum(np.diff(timeline.ns) < 0))
+    if not late:
+        return timeline
+    order = np.argsort(timeline.ns, kind="stable")
+    note = (f"{_count(late, 'message')} stamped before the message stored ahead of "
+            f"{'it' if late == 1 else 'them'}: the messages are put in stamp order")
+    return timeline.take(order, {"reordered": late}, note)
+
+
+def _drop_repeats(timeline: _Timeline) -> tuple[_Timeline, int]:
+    """The samples without those repeating the previous stamp, and how many there were before."""
+    keep = np.concatenate(([True], np.diff(timeline.ns) > 0))
+    if keep.all():
+        return timeline, len(keep)
+    dropped = int((~keep).sum())
+    note = f"{_count(dropped, 'message')} repeating an earlier stamp dropped"
+    return timeline.take(keep, {"dropped_repeats": dropped}, note), len(keep)
 
 
 def _count(k: int, noun: str) -> str:

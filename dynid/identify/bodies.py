@@ -16,6 +16,7 @@ parameters, those nearest the robot's description.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -335,6 +336,39 @@ def described_bodies(
         ``divergence`` (the summed divergence before and after).
     """
     phi = np.asarray(phi, dtype=np.float64).copy()
+    free = _free_directions(robot, cols, mask)
+    info: dict[str, Any] = {"iterations": 0, "directions": int(free.N.shape[1])}
+    if free.N.shape[1] == 0:
+        return phi, info
+    lb, e_scale = _extra_bounds(free, phi)
+    phi = _nudged_inside(phi, free, lb, e_scale)
+    div = _divergence(robot, free, phi, lb, e_scale, eps)
+    w = np.zeros(free.N.shape[1])
+    f_start = div.value(w)
+    if not np.isfinite(f_start):  # the start sits on the margin: nothing safe to move
+        return phi, info
+    w, f, info["iterations"] = _newton(div, w, f_start, max_iter)
+    n, e_idx = free.n, free.e_idx
+    phi[free.act] = _onto_affine(free, div, w)
+    phi[10 * n + e_idx] = np.maximum(phi[10 * n + e_idx], lb)
+    info["divergence"] = {"start": f_start, "end": f}
+    return phi, info
+
+
+@dataclass(frozen=True)
+class _Free:
+    """The parameters in play and the directions the identified parameters leave free in them."""
+
+    n: int
+    P: NDArray[np.float64]
+    e_idx: NDArray[np.intp]
+    act: NDArray[np.intp]
+    ref: NDArray[np.float64]
+    N: NDArray[np.float64]
+
+
+def _free_directions(robot, cols: ColumnSet, mask: NDArray[np.bool_] | None) -> _Free:
+    """The links' and the extras' entries in play, and a scaled basis of the null space of ``P`` in them."""
     n = cols.n
     mask = np.ones(cols.p, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
     P = cols.P[mask]
@@ -350,85 +384,158 @@ def described_bodies(
     else:
         Vkt, rank = np.eye(len(act)), 0
     N = D[:, None] * Vkt[rank:].T  # phi_a = phi_a,0 + N w keeps P phi
-    info: dict[str, Any] = {"iterations": 0, "directions": int(N.shape[1])}
-    if N.shape[1] == 0:
-        return phi, info
-    eps_l, J_ref_pd = reference_bodies(robot.params, eps)
-    A = np.linalg.inv(J_ref_pd)  # (n, 4, 4)
-    shift = eps_l[:, None, None] * np.eye(4)
+    return _Free(n=n, P=P, e_idx=e_idx, act=act, ref=ref, N=N)
+
+
+def _extra_bounds(free: _Free, phi: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Lower bounds of the extras in play (none for offsets) and their scales."""
+    n, e_idx = free.n, free.e_idx
     kinds = [EXTRA_KINDS[e // n] for e in e_idx]
     lb = np.array([-np.inf if k == "offset" else 0.0 for k in kinds])
-    e_ref = ref[10 * n + e_idx]
     e_scale = np.maximum(np.abs(phi[10 * n + e_idx]), 1e-6)
     e_scale = np.maximum(e_scale, 1e-2 * float(e_scale.max(initial=1e-6)))
+    return lb, e_scale
+
+
+def _nudged_inside(
+    phi: NDArray[np.float64], free: _Free, lb: NDArray[np.float64], e_scale: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """``phi`` with the extras sitting on their bound nudged strictly inside (the start must be)."""
+    n, e_idx = free.n, free.e_idx
     bounded = np.isfinite(lb)
-    # the start must be strictly inside: nudge extras sitting on their bound
+    phi = phi.copy()
     e0 = phi[10 * n + e_idx]
     phi[10 * n + e_idx] = np.where(bounded & (e0 <= lb + 1e-9 * e_scale), lb + 1e-9 * e_scale, e0)
-    base = phi[act].copy()
-    B_all = pseudo_inertia_jacobian(N, n)
-    trace_grad = np.einsum("lab,lkba->k", A, B_all)  # the gradient of sum_l tr(A_l J_l): constant
-    Ne = N[10 * n :]
-    kappa = 1e-9  # barrier weight of the extras' bounds (relative to the unit pull)
+    return phi
 
-    def parts(w):
-        pa = base + N @ w
+
+@dataclass(frozen=True)
+class _Divergence:
+    """The bodies' divergence from their description (plus the extras' pull and barrier) over the free
+    coordinates ``w``: ``phi_a = base + N w``."""
+
+    n: int
+    base: NDArray[np.float64]
+    N: NDArray[np.float64]
+    A: NDArray[np.float64]
+    shift: NDArray[np.float64]
+    lb: NDArray[np.float64]
+    bounded: NDArray[np.bool_]
+    e_ref: NDArray[np.float64]
+    e_scale: NDArray[np.float64]
+    B_all: NDArray[np.float64]
+    trace_grad: NDArray[np.float64]
+    kappa: float = 1e-9  # barrier weight of the extras' bounds (relative to the unit pull)
+
+    def parts(self, w: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The links' pseudo-inertias and the extras at ``w``."""
+        n = self.n
+        pa = self.base + self.N @ w
         return pseudo_inertia(pa[: 10 * n].reshape(n, 10)), pa[10 * n :]
 
-    def value(w):
-        Js, e = parts(w)
+    def value(self, w: NDArray[np.float64]) -> float:
+        """The divergence at ``w`` (inf outside the margins or bounds)."""
+        lb, bounded, e_scale, kappa = self.lb, self.bounded, self.e_scale, self.kappa
+        Js, e = self.parts(w)
         slack = (e - lb)[bounded]
         if np.any(slack <= 0):
             return np.inf
-        out = _EXTRA_PULL * float(np.sum(((e - e_ref) / e_scale) ** 2)) - kappa * float(
+        out = _EXTRA_PULL * float(np.sum(((e - self.e_ref) / e_scale) ** 2)) - kappa * float(
             np.sum(np.log(slack / e_scale[bounded]))
         )
         try:
-            L = np.linalg.cholesky(Js - shift)
+            L = np.linalg.cholesky(Js - self.shift)
         except np.linalg.LinAlgError:
             return np.inf
         logdet = 2 * float(np.log(np.diagonal(L, axis1=1, axis2=2)).sum())
-        return out + float(np.einsum("lab,lba->", A, Js)) - logdet
+        return out + float(np.einsum("lab,lba->", self.A, Js)) - logdet
 
-    w = np.zeros(N.shape[1])
-    f = value(w)
-    if not np.isfinite(f):  # the start sits on the margin: nothing safe to move
-        return phi, info
-    f_start = f
-    for step_count in range(1, max_iter + 1):
-        Js, e = parts(w)
-        grad = 2 * _EXTRA_PULL * Ne.T @ ((e - e_ref) / e_scale**2)
+    def derivatives(self, w: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Gradient and Hessian of the divergence at ``w``."""
+        e_scale, kappa = self.e_scale, self.kappa
+        Ne = self.N[10 * self.n :]
+        Js, e = self.parts(w)
+        grad = 2 * _EXTRA_PULL * Ne.T @ ((e - self.e_ref) / e_scale**2)
         hess = 2 * _EXTRA_PULL * (Ne.T / e_scale**2) @ Ne
-        slack = (e - lb)[bounded]
-        Nb = Ne[bounded]
+        slack = (e - self.lb)[self.bounded]
+        Nb = Ne[self.bounded]
         grad -= kappa * Nb.T @ (1.0 / slack)
         hess += kappa * (Nb.T / slack**2) @ Nb
-        grad += trace_grad
-        add_neg_logdet(Js - shift, B_all, 1.0, grad, hess)
+        grad += self.trace_grad
+        add_neg_logdet(Js - self.shift, self.B_all, 1.0, grad, hess)
+        return grad, hess
+
+
+def _divergence(
+    robot,
+    free: _Free,
+    phi: NDArray[np.float64],
+    lb: NDArray[np.float64],
+    e_scale: NDArray[np.float64],
+    eps: float | ArrayLike,
+) -> _Divergence:
+    """The divergence from the described bodies, with ``phi`` (inside the bounds) as ``w = 0``."""
+    n, N = free.n, free.N
+    eps_l, J_ref_pd = reference_bodies(robot.params, eps)
+    A = np.linalg.inv(J_ref_pd)  # (n, 4, 4)
+    B_all = pseudo_inertia_jacobian(N, n)
+    return _Divergence(
+        n=n,
+        base=phi[free.act].copy(),
+        N=N,
+        A=A,
+        shift=eps_l[:, None, None] * np.eye(4),
+        lb=lb,
+        bounded=np.isfinite(lb),
+        e_ref=free.ref[10 * n + free.e_idx],
+        e_scale=e_scale,
+        B_all=B_all,
+        trace_grad=np.einsum("lab,lkba->k", A, B_all),  # the gradient of sum_l tr(A_l J_l): constant
+    )
+
+
+def _newton(
+    div: _Divergence, w: NDArray[np.float64], f: float, max_iter: int
+) -> tuple[NDArray[np.float64], float, int]:
+    """Damped Newton steps from ``w`` (value ``f``): the last point, its value and the steps taken."""
+    iterations = 0
+    for step_count in range(1, max_iter + 1):
+        grad, hess = div.derivatives(w)
         step = newton_direction(hess, grad)
         decrement = float(-grad @ step)
-        info["iterations"] = step_count
+        iterations = step_count
         if decrement <= 1e-10 * max(1.0, abs(f)):
             break
-        t = 1.0
-        while True:
-            f_new = value(w + t * step)
-            if f_new <= f - 0.25 * t * decrement:
-                break
-            t *= 0.5
-            if t < 1e-12:
-                break
+        t, f_new = _line_search(div, w, step, f, decrement)
         if t < 1e-12:
             break
         w, f = w + t * step, f_new
-    target = P[:, act] @ base
-    moved = base + N @ w
-    # back onto the affine set exactly (the null space is numerical: rounding of its basis)
-    moved += np.linalg.lstsq(P[:, act], target - P[:, act] @ moved, rcond=None)[0]
-    phi[act] = moved
-    phi[10 * n + e_idx] = np.maximum(phi[10 * n + e_idx], lb)
-    info["divergence"] = {"start": f_start, "end": f}
-    return phi, info
+    return w, f, iterations
+
+
+def _line_search(
+    div: _Divergence, w: NDArray[np.float64], step: NDArray[np.float64], f: float, decrement: float
+) -> tuple[float, float]:
+    """Backtracking (Armijo, 1/4) along ``step``: the step length (below 1e-12: none found) and the value there."""
+    t = 1.0
+    while True:
+        f_new = div.value(w + t * step)
+        if f_new <= f - 0.25 * t * decrement:
+            break
+        t *= 0.5
+        if t < 1e-12:
+            break
+    return t, f_new
+
+
+def _onto_affine(free: _Free, div: _Divergence, w: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The entries in play at ``w``, put back onto the affine set exactly (the null space is numerical:
+    rounding of its basis)."""
+    Pa = free.P[:, free.act]
+    target = Pa @ div.base
+    moved = div.base + div.N @ w
+    moved += np.linalg.lstsq(Pa, target - Pa @ moved, rcond=None)[0]
+    return moved
 
 
 def link_inertials(standard: ArrayLike) -> list[dict[str, Any]]:

@@ -181,6 +181,38 @@ def design_payload_motion(
     import time
 
     start_time = time.perf_counter()
+    lo, hi, q0 = _checked_request(robot, pose, duration, speed_fraction)
+    problem = ExcitationProblem(robot=robot, harmonics=harmonics, base_freq=1.0 / duration)
+    series = _series(problem, q0, duration, harmonics, robot.n)
+    grid = max(60, 16 * harmonics)
+    bounds = _limit_bounds(robot, lo, hi, speed_fraction, grid)
+    solver = _payload_solver(robot, link, T, series, problem, grid, noise_std, bounds)
+    rng = np.random.default_rng(seed)
+    limited = robot.with_limits(q_min=lo, q_max=hi, dq_max=speed_fraction * robot.dq_max,
+                                ddq_max=speed_fraction * robot.ddq_max)  # fmt: skip
+    shrink = _Shrink(ExcitationProblem(robot=limited, harmonics=harmonics, base_freq=1.0 / duration), series)
+    payload = _Payload(robot, link, T, noise_std)
+    say(f"designing a {duration:g} s payload motion for {robot.name} ({starts} starts, IPOPT)")
+    best, baseline = _best_of_starts(solver, shrink, payload, rng, starts)
+    traj = FourierTrajectory(
+        a=best.traj.a, b=best.traj.b, c=best.traj.c, base_freq=best.traj.base_freq,
+        meta={"design": "payload", "pose": [float(v) for v in q0], "link": int(link + 1)},
+    )  # fmt: skip
+    return PayloadMotion(
+        trajectory=traj,
+        pose=q0,
+        relative_std=best.std,
+        cond=best.cond,
+        baseline_cond=baseline,
+        feasible=bool(best.ok),
+        seconds=time.perf_counter() - start_time,
+    )
+
+
+def _checked_request(
+    robot, pose, duration: float, speed_fraction: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The position limits less the margin and the start pose, after refusing a bad duration, fraction or pose."""
     if not (math.isfinite(duration) and 0 < duration <= MAX_DURATION):
         raise UsageError(
             f"--duration is {duration}; give the payload motion's length in s, in (0, {MAX_DURATION:g}]"
@@ -199,12 +231,67 @@ def design_payload_motion(
             f"the pose's joint {j + 1} is {q0[j]:.4g} rad, outside [{lo[j]:.4g}, {hi[j]:.4g}] (its limits less a "
             f"{100 * _MARGIN:.0f} % margin); give a pose inside them"
         )
-    problem = ExcitationProblem(robot=robot, harmonics=harmonics, base_freq=1.0 / duration)
+    return lo, hi, q0
+
+
+@dataclass(frozen=True)
+class _Series:
+    """The motion's Fourier series from its null-space coordinates: at rest at ``q0`` at both ends."""
+
+    pa: NDArray[np.float64]
+    pb: NDArray[np.float64]
+    lw: NDArray[np.float64]
+    q0: NDArray[np.float64]
+    duration: float
+    k: int
+    n: int
+
+    def trajectory(self, z: NDArray[np.float64], scale: float = 1.0) -> FourierTrajectory:
+        """The trajectory of coordinates ``z`` (``(y_a, y_b)``, column-major) scaled by ``scale``."""
+        k, n = self.k, self.n
+        za = z[: k * n].reshape(n, k).T * scale  # veccat is column-major: (k, n) column by column
+        zb = z[k * n :].reshape(n, k).T * scale
+        a, b = self.pa @ za, self.pb @ zb
+        return FourierTrajectory(a=a, b=b, c=self.q0 + (1.0 / self.lw) @ b, base_freq=1.0 / self.duration)
+
+
+def _series(
+    problem: ExcitationProblem, q0: NDArray[np.float64], duration: float, harmonics: int, n: int
+) -> _Series:
+    """The rest-to-rest parametrisation of the excitation problem's series about the pose."""
     pa, pb = problem.null_bases
-    k = harmonics - 1
-    grid = max(60, 16 * harmonics)
-    t = np.arange(grid) * (duration / grid)
     lw = problem.wf * np.arange(1, harmonics + 1)
+    return _Series(pa=pa, pb=pb, lw=lw, q0=q0, duration=duration, k=harmonics - 1, n=n)
+
+
+@dataclass(frozen=True)
+class _Solver:
+    """IPOPT on the payload criterion with the limits' bounds on the grid."""
+
+    solver: ca.Function
+    lbg: NDArray[np.float64]
+    ubg: NDArray[np.float64]
+
+    def solve(self, z0: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The optimised coordinates from the start ``z0``."""
+        sol = self.solver(x0=z0, lbg=self.lbg, ubg=self.ubg)
+        return np.asarray(sol["x"]).ravel()
+
+
+def _payload_solver(
+    robot,
+    link: int,
+    T: NDArray[np.float64],
+    series: _Series,
+    problem: ExcitationProblem,
+    grid: int,
+    noise_std,
+    bounds: tuple[NDArray[np.float64], NDArray[np.float64]],
+) -> _Solver:
+    """The NLP (A-optimality of the scaled payload information on the grid, limits as constraints) and IPOPT."""
+    n, k, q0, duration = robot.n, series.k, series.q0, series.duration
+    pa, pb, lw = series.pa, series.pb, series.lw
+    t = np.arange(grid) * (duration / grid)
     Sq, Cq, C, S, dS, dC = problem.basis(t)
     # per joint, the series as linear maps of (y_a, y_b) (each (k,)): swing q - q0, dq, ddq
     Mq_a, Mq_b = Sq @ pa, ((1.0 / lw)[None, :] - Cq) @ pb  # q(t) - q0, since c = q0 + (1/lw) b
@@ -227,14 +314,6 @@ def design_payload_motion(
     objective = ca.log(ca.trace(ca.solve(info + ridge * ca.DM.eye(10), ca.DM.eye(10))))
     x = ca.veccat(ya, yb)
     g = ca.veccat(Q, DQ, DDQ)
-    lbg = np.concatenate(
-        [np.tile(lo, (grid, 1)).T.ravel(), -speed_fraction * np.tile(robot.dq_max, (grid, 1)).T.ravel(),
-         -speed_fraction * np.tile(robot.ddq_max, (grid, 1)).T.ravel()]
-    )  # fmt: skip
-    ubg = np.concatenate(
-        [np.tile(hi, (grid, 1)).T.ravel(), speed_fraction * np.tile(robot.dq_max, (grid, 1)).T.ravel(),
-         speed_fraction * np.tile(robot.ddq_max, (grid, 1)).T.ravel()]
-    )  # fmt: skip
     solver = ca.nlpsol(
         "payload_motion",
         "ipopt",
@@ -248,20 +327,34 @@ def design_payload_motion(
             "ipopt.sb": "yes",
         },
     )
-    rng = np.random.default_rng(seed)
+    return _Solver(solver, *bounds)
 
-    def trajectory(z: NDArray[np.float64], scale: float = 1.0) -> FourierTrajectory:
-        za = z[: k * n].reshape(n, k).T * scale  # veccat is column-major: (k, n) column by column
-        zb = z[k * n :].reshape(n, k).T * scale
-        a, b = pa @ za, pb @ zb
-        return FourierTrajectory(a=a, b=b, c=q0 + (1.0 / lw) @ b, base_freq=1.0 / duration)
 
-    limited = robot.with_limits(q_min=lo, q_max=hi, dq_max=speed_fraction * robot.dq_max,
-                                ddq_max=speed_fraction * robot.ddq_max)  # fmt: skip
-    check = ExcitationProblem(robot=limited, harmonics=harmonics, base_freq=1.0 / duration)
+def _limit_bounds(
+    robot, lo: NDArray[np.float64], hi: NDArray[np.float64], speed_fraction: float, grid: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Lower and upper bounds of the constraints ``(q, dq, ddq)`` on the grid: positions, speeds, accelerations."""
+    lbg = np.concatenate(
+        [np.tile(lo, (grid, 1)).T.ravel(), -speed_fraction * np.tile(robot.dq_max, (grid, 1)).T.ravel(),
+         -speed_fraction * np.tile(robot.ddq_max, (grid, 1)).T.ravel()]
+    )  # fmt: skip
+    ubg = np.concatenate(
+        [np.tile(hi, (grid, 1)).T.ravel(), speed_fraction * np.tile(robot.dq_max, (grid, 1)).T.ravel(),
+         speed_fraction * np.tile(robot.ddq_max, (grid, 1)).T.ravel()]
+    )  # fmt: skip
+    return lbg, ubg
 
-    def largest(z: NDArray[np.float64]) -> float:
+
+@dataclass(frozen=True)
+class _Shrink:
+    """The fine-grid check of a motion, and the shrinking toward the pose that makes it pass."""
+
+    check: ExcitationProblem
+    series: _Series
+
+    def largest(self, z: NDArray[np.float64]) -> float:
         """The largest scale of ``z`` whose motion passes the fine-grid check (shrinking goes toward the pose)."""
+        check, trajectory = self.check, self.series.trajectory
         low, high = 0.0, 1.0
         while check.is_feasible(trajectory(z, high)) and high < 1e6:
             low, high = high, 2.0 * high
@@ -270,45 +363,64 @@ def design_payload_motion(
             low, high = (mid, high) if check.is_feasible(trajectory(z, mid)) else (low, mid)
         return low
 
-    def checked(z: NDArray[np.float64]) -> tuple[FourierTrajectory, bool]:
-        if check.is_feasible(trajectory(z)):
+    def checked(self, z: NDArray[np.float64]) -> tuple[FourierTrajectory, bool]:
+        """The motion of ``z``, shrunk until it passes the check, and whether it passes at a scale above 0."""
+        trajectory = self.series.trajectory
+        if self.check.is_feasible(trajectory(z)):
             return trajectory(z), True
-        scale = largest(z)
+        scale = self.largest(z)
         return trajectory(z, scale), scale > 0
 
-    def start() -> NDArray[np.float64]:
-        z = rng.standard_normal(2 * k * n)
-        return z * 0.8 * largest(z)  # strictly inside the limits
+    def start(self, rng: np.random.Generator) -> NDArray[np.float64]:
+        """A random start strictly inside the limits."""
+        series = self.series
+        z = rng.standard_normal(2 * series.k * series.n)
+        return z * 0.8 * self.largest(z)  # strictly inside the limits
 
-    say(f"designing a {duration:g} s payload motion for {robot.name} ({starts} starts, IPOPT)")
+
+@dataclass(frozen=True)
+class _Payload:
+    """What the payload's figures of a motion are computed for: the robot, carrying link, frame and noise."""
+
+    robot: Any
+    link: int
+    T: NDArray[np.float64]
+    noise_std: Any
+
+    def figures(self, traj: FourierTrajectory) -> tuple[NDArray[np.float64], float]:
+        """Relative standard deviations and condition number of the payload on ``traj``."""
+        return _figures(payload_information(self.robot, traj, self.link, self.T, noise_std=self.noise_std))
+
+
+@dataclass(frozen=True)
+class _Candidate:
+    """A checked motion and its figures."""
+
+    traj: FourierTrajectory
+    ok: bool
+    std: NDArray[np.float64]
+    cond: float
+
+
+def _best_of_starts(
+    solver: _Solver, shrink: _Shrink, payload: _Payload, rng: np.random.Generator, starts: int
+) -> tuple[_Candidate, float]:
+    """The best checked motion over the random starts (a checked random one if none passes), and the best
+    start's condition number."""
     best, best_value, baseline = None, math.inf, math.inf
     for i in range(starts):
-        z0 = start()
-        _, cond0 = _figures(payload_information(robot, trajectory(z0), link, T, noise_std=noise_std))
+        z0 = shrink.start(rng)
+        _, cond0 = payload.figures(shrink.series.trajectory(z0))
         baseline = min(baseline, cond0)
-        sol = solver(x0=z0, lbg=lbg, ubg=ubg)
-        z = np.asarray(sol["x"]).ravel()
-        traj, ok = checked(z)
-        std, cond = _figures(payload_information(robot, traj, link, T, noise_std=noise_std))
+        z = solver.solve(z0)
+        traj, ok = shrink.checked(z)
+        std, cond = payload.figures(traj)
         value = float(np.sum(std**2)) if ok else math.inf
         if value < best_value:
-            best, best_value = (traj, ok, std, cond), value
+            best, best_value = _Candidate(traj, ok, std, cond), value
         advance(i + 1, starts)
     if best is None:
-        traj, ok = checked(start())
-        std, cond = _figures(payload_information(robot, traj, link, T, noise_std=noise_std))
-        best = (traj, ok, std, cond)
-    traj, ok, std, cond = best
-    traj = FourierTrajectory(
-        a=traj.a, b=traj.b, c=traj.c, base_freq=traj.base_freq,
-        meta={"design": "payload", "pose": [float(v) for v in q0], "link": int(link + 1)},
-    )  # fmt: skip
-    return PayloadMotion(
-        trajectory=traj,
-        pose=q0,
-        relative_std=std,
-        cond=cond,
-        baseline_cond=baseline,
-        feasible=bool(ok),
-        seconds=time.perf_counter() - start_time,
-    )
+        traj, ok = shrink.checked(shrink.start(rng))
+        std, cond = payload.figures(traj)
+        best = _Candidate(traj, ok, std, cond)
+    return best, baseline
