@@ -76,7 +76,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from dynid._progress import say
-    from dynid.diagnosis.candidates import EFFECT_NAMES
+    from dynid.diagnosis.candidates import effect_names
     from dynid.diagnosis.core import diagnose
     from dynid.diagnosis.report import write_diagnosis_report
     from dynid.exceptions import UsageError
@@ -104,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
         ],
         {"model": args.model, "data": args.data, "heldout": args.heldout, "robot": robot_file(args)},
     )
-    effects = EFFECT_NAMES
+    effects = effect_names()
     if args.effects:
         effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
         placed = next((e for e in effects if "@" in e or ":" in e), None)

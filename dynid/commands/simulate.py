@@ -10,17 +10,19 @@ __all__ = ["HELP", "add_arguments", "run"]
 
 HELP = "simulate a robot following a trajectory: measured t, q, tau and a sidecar with the truth"
 
-_EFFECT_HELP = (
-    "unmodelled effects, NAME[@J|@J-K][:VALUE],... with VALUE scaling the documented default size (1.0) and "
-    "@J / @J-K choosing joints (numbered from 1). Names: offset (torque-sensor offset, 2%% of the joint's "
-    "torque scale), armature (rotor inertia, 5%% of the joint inertia), stribeck (low-speed bump, 2.5%%), "
-    "load_friction (Coulomb + 5%% of |drive torque|, 2.5%% back-driven), temperature (friction drops by 30%% "
-    "with a 60 s warm-up), cogging (1%% + 0.5%% ripple at 100 and 200 cycles/rev), elasticity (joint spring, "
-    "10 Hz locked-motor resonance, motor encoder), backlash (1 mrad dead zone), delay (4 ms on the measured "
-    "torque), drive_gain (measured torque scaled by 1 +- 5%% per joint), payload (5%% of the arm's mass on "
-    "the last link), base_tilt (gravity turned 1 degree), coupled_friction (friction on dq_a + dq_b of the "
-    "last two joints), nonlinear_viscous (dq|dq| and dq^3 terms). Example: offset,elasticity@3:2,delay:1.5"
-)
+
+def _effect_help() -> str:
+    """The ``--effects`` help, its names and their words read from the catalogue (registered effects too)."""
+    from dynid.sim.effects import EFFECTS
+
+    names = ", ".join(f"{name} ({cls.summary})" if cls.summary else name for name, cls in EFFECTS.items())
+    return (
+        "unmodelled effects, NAME[@J|@J-K][:VALUE],... with VALUE scaling the documented default size (1.0) "
+        f"and @J / @J-K choosing joints (numbered from 1). Names: {names}. Example: offset,elasticity@3:2,"
+        "delay:1.5"
+    ).replace("%", "%%")
+
+
 _NOISE_HELP = (
     "sensor model, key=value,... or 'off': torque (white std, fraction of the joint's torque scale, default "
     "0.01), coloured (AR(1) std, 0.005), colour (AR(1) coefficient per ms, 0.9), encoder_bits (logged "
@@ -34,7 +36,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--trajectory", required=True, metavar="T.json", help="trajectory file (.json or .csv)"
     )
-    parser.add_argument("--effects", default=None, metavar="NAME[:VALUE],...", help=_EFFECT_HELP)
+    parser.add_argument("--effects", default=None, metavar="NAME[:VALUE],...", help=_effect_help())
     parser.add_argument("--noise", default=None, metavar="KEY=VALUE,...", help=_NOISE_HELP)
     parser.add_argument("--seed", type=int, default=0, help="seed of the noise and of the truth (default 0)")
     parser.add_argument(

@@ -7,65 +7,34 @@ re-identification absorbs is never credited to the effect).  Columns are compute
 the same states as the base regressor, and then low-passed with the torque's filter (parallel
 filtering, DIAGNOSIS.md section 3).
 
-========================  ===================================================  ===================
-effect                    columns on joint j (``s = sign``)                    hyper-parameter
-========================  ===================================================  ===================
-offset                    1                                                    -
-armature                  ddq_j                                                -
-stribeck                  s(dq_j) exp(-(|dq_j| / vs)^2)                        vs
-load_friction             s(dq_j) |tau_j|                                      -
-temperature               h(t) s(dq_j),  h(t) dq_j;  h = 1 - exp(-t / T)       T
-cogging                   sin(k N q_j), cos(k N q_j), k = 1, 2                 N (gear ratio)
-elasticity                M(q)[:, j] d^2 tau_j / dt^2 (all joints; first      -
-                          order of q_j = theta_j - tau_j / K)
-backlash                  M(q)[:, j] d^2 b_j / dt^2, M(q)[:, j] d^2 tau_j /    eps
-                          dt^2 (all joints), b_j; b_j = tanh(tau_j / eps)
-delay                     d tau_j / dt (first order of tau(t - d))             -
-drive_gain                tau_j                                                -
-base_tilt                 d g(q) / d alpha about two horizontal axes (all j)   -
-coupled_friction          s(w), w on joints a and b, w = dq_a +- dq_b          pair and sign
-nonlinear_viscous         dq_j |dq_j|,  dq_j^3                                 -
-payload                   (absorbed by the base parameters: parametric test)   -
-========================  ===================================================  ===================
-
-A delay also has a form common to all joints (``delay@all``, :func:`dynid.identify.effect_terms.common_term`): the delay column on
-every joint with one coefficient, so that one lag of the torques against the angles is one candidate.
-``tau`` is the identified model's predicted torque (the "first fit"); for backlash its links' share,
-which the transmission carries (the motor's armature and friction act before the gear).
-No two candidates on a joint span the same columns: a load friction that differs between driving and
-back-driven motion has no column of its own for the difference, ``s(dq_j) |tau_j| s(dq_j tau_j)`` being
-``tau_j`` itself, the drive gain's column (the simulator's load friction, 0.05 driving and 0.025
-back-driven, is a load friction of 0.0375 and a drive gain of 0.0125 on its joint).  Candidates whose
-columns contain a simpler one's by design (the motor-inertia column of elasticity and backlash is the
-armature's; backlash holds the teeth's stiffness, elasticity's column) are told apart by the
-simpler-candidate test (:func:`dynid.diagnosis.screening.parsimonious`).
-The column builders live in :mod:`dynid.identify.effect_terms`, shared with ``identify --effects``.
-Elasticity, backlash and delay are not linear in their parameters: the screen uses the first-order
-columns above, the refit (:mod:`dynid.diagnosis.refinement`) fits their physical parameters (for
-backlash a dead zone whose sides change once the torque has reversed beyond a threshold, a crossing
-time later).
+The table of the columns, effect by effect, is :mod:`dynid.identify.effect_builders`' (shared with
+``identify --effects``); what the diagnosis reads of an effect beside them (per joint or of the whole arm,
+the motion that excites it) is its simulation class's (:mod:`dynid.sim.effect_classes`), so that
+:data:`CANDIDATES` follows the catalogue, effects registered with
+:func:`dynid.sim.effects.register_effect` included.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 
 from dynid.identify.effect_terms import BUILDERS as _BUILDERS  # noqa: F401 (the builders, by effect)
 from dynid.identify.effect_terms import (
     COMMON_EFFECTS,
+    EFFECT_GRIDS,
     Candidate,
     FeatureSource,
-    backlash_grid,
     candidate_columns,
-    cogging_grid,
     common_term,
-    stribeck_grid,
-    temperature_grid,
 )
 from dynid.identify.effect_terms import relay as _relay  # noqa: F401 (the backlash dead-zone relay)
-from dynid.sim.effects import EFFECT_NAMES  # the catalogue: one list for simulate, identify, diagnose
+from dynid.sim.effects import (
+    EFFECT_NAMES,  # the catalogue: one list for simulate, identify, diagnose
+    EFFECTS,
+    effect_names,
+)
 
 __all__ = [
     "CANDIDATES",
@@ -75,6 +44,7 @@ __all__ = [
     "FeatureSource",
     "candidate_columns",
     "describe_hyper",
+    "effect_names",
     "enumerate_candidates",
     "excitation_hint",
     "settling_motion",
@@ -91,24 +61,24 @@ class _Spec:
     excites: str
 
 
-CANDIDATES: dict[str, _Spec] = {
-    "offset": _Spec(True, None, "both directions of motion at every speed (a constant does not change sign)"),
-    "armature": _Spec(True, None, "large accelerations of joint {j}"),
-    "stribeck": _Spec(True, stribeck_grid, "slow motion and many velocity reversals of joint {j}"),
-    "load_friction": _Spec(True, None, "large loads on joint {j}, both driving and back-driven"),
-    "temperature": _Spec(
-        True, temperature_grid, "a longer run (minutes) so that friction drift and motion part"
-    ),
-    "cogging": _Spec(True, cogging_grid, "slow constant-speed sweeps of joint {j} over several gear periods"),
-    "elasticity": _Spec(True, None, "fast torque changes on joint {j} (harmonics near its resonance)"),
-    "backlash": _Spec(True, backlash_grid, "torque reversals of joint {j} at low speed"),
-    "delay": _Spec(True, None, "faster excitation of joint {j} (a delay grows with frequency)"),
-    "drive_gain": _Spec(True, None, "large torques on joint {j} at several speeds"),
-    "payload": _Spec(False, None, "several tool orientations under gravity"),
-    "base_tilt": _Spec(False, None, "full turns of joint 1 in several arm configurations"),
-    "coupled_friction": _Spec(False, None, "wrist joints moving in equal and opposite directions"),
-    "nonlinear_viscous": _Spec(True, None, "high speeds of joint {j}"),
-}
+class _Candidates(Mapping[str, _Spec]):
+    """Effect name -> what the diagnosis reads of it: per joint or not (the class's ``selectable``), its
+    hyper-parameter grid (:data:`dynid.identify.effect_terms.EFFECT_GRIDS`) and the motion that excites it
+    (the class's ``excites``); read from the catalogue when asked, so a registered effect is in it."""
+
+    def __getitem__(self, name: str) -> _Spec:
+        cls = EFFECTS[name]
+        return _Spec(bool(cls.selectable), EFFECT_GRIDS.get(name), cls.excites)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(effect_names())
+
+    def __len__(self) -> int:
+        return len(EFFECTS)
+
+
+CANDIDATES: Mapping[str, _Spec] = _Candidates()
+"""Effect name -> ``per_joint``, ``grid``, ``excites``: the candidates of the catalogue, in its order."""
 
 
 def excitation_hint(cand: Candidate) -> str:

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from dynid.sim.cases import calibrate_value, case_excitation
-from dynid.sim.effects import EFFECT_NAMES, parse_effects
+from dynid.sim.effects import effect_names, parse_effects
 from dynid.sim.simulator import SimulationResult, simulate
 
 __all__ = ["CaseRuns", "case_record", "classify", "run_case", "simulate_runs", "truth_labels"]
@@ -224,7 +224,7 @@ def run_case(
     *,
     level: float,
     seed: int,
-    catalogue: Sequence[str] = EFFECT_NAMES,
+    catalogue: Sequence[str] | None = None,
     train_seconds: float = 20.0,
     heldout_seconds: float = 20.0,
     base_freq: float = 0.2,
@@ -244,8 +244,9 @@ def run_case(
         RMS contribution of each effect in noise standard deviations.
     seed : int
         Seed of the truth, noise and trajectories.
-    catalogue : sequence of str
-        Effects the diagnosis is told about (drop one to make it an unknown effect).
+    catalogue : sequence of str, optional
+        Effects the diagnosis is told about (drop one to make it an unknown effect); default the whole
+        catalogue (:func:`dynid.sim.effects.effect_names`).
     train_seconds, heldout_seconds : float
         Durations (s) of the training and held-out runs (several periods of ``1 / base_freq``).
     base_freq : float
@@ -282,6 +283,7 @@ def run_case(
         friction=friction,
         armature=armature,
     )
+    catalogue = effect_names() if catalogue is None else tuple(catalogue)
     truth_injected = truth_labels(injected, catalogue)
     train, held = runs.train.to_dataset(), runs.heldout.to_dataset()
     model = identify(robot, train, method="ols", friction=model_friction, gmm="off", armature=armature)

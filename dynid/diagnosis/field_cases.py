@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 from dynid.data.dataset import Dataset
 from dynid.diagnosis.cases import case_record, classify, simulate_runs, truth_labels
 from dynid.sim.cases import NOISE_STD, case_centre, case_excitation
-from dynid.sim.effects import EFFECT_NAMES
+from dynid.sim.effects import effect_names
 from dynid.sim.sensors import NoiseModel, torque_noise
 from dynid.sim.simulator import CONTROL_RATE, SimulationResult
 
@@ -318,7 +318,7 @@ def run_field_case(
     *,
     level: float,
     seed: int,
-    catalogue: Sequence[str] = EFFECT_NAMES,
+    catalogue: Sequence[str] | None = None,
     heldout_seconds: float = 20.0,
     friction: str = "linear",
     armature: bool = True,
@@ -333,8 +333,9 @@ def run_field_case(
     robot : RobotModel
     injected, level, seed, heldout_seconds, friction, armature, noise, train_periods
         As in :func:`field_case`.
-    catalogue : sequence of str
-        Effects the diagnosis is told about; an injected effect outside it is an unknown effect.
+    catalogue : sequence of str, optional
+        Effects the diagnosis is told about (default the whole catalogue); an injected effect outside it is
+        an unknown effect.
     diagnose_options : dict, optional
         Extra keyword arguments of :func:`dynid.diagnosis.core.diagnose`.
 
@@ -354,6 +355,7 @@ def run_field_case(
         robot, injected, level=level, seed=seed, heldout_seconds=heldout_seconds, friction=friction,
         armature=armature, noise=noise, train_periods=train_periods,
     )  # fmt: skip
+    catalogue = effect_names() if catalogue is None else tuple(catalogue)
     truth_injected = truth_labels(case.specs, catalogue)
     model = identify(robot, case.train, method="ols", friction="linear", gmm="off", armature=armature)
     d = diagnose(model, case.train, case.heldout, effects=tuple(catalogue), **(diagnose_options or {}))

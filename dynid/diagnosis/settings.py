@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from dynid.diagnosis.candidates import EFFECT_NAMES
+from dynid.diagnosis.candidates import effect_names
 from dynid.exceptions import UsageError
 
 __all__ = ["DiagnosisSettings"]
@@ -33,7 +33,8 @@ class DiagnosisSettings:
     Attributes
     ----------
     effects : tuple of str
-        The catalogue of candidate effects (default all of :data:`dynid.diagnosis.candidates.EFFECT_NAMES`).
+        The catalogue of candidate effects; None (the default): all of it, registered effects included
+        (:func:`dynid.sim.effects.effect_names`, read when the settings are made).
     alpha : float
         Family-wise error rate of the candidate tests (Holm).
     max_effects : int
@@ -77,7 +78,7 @@ class DiagnosisSettings:
         Unknown effect names, a period that is not a positive number of seconds.
     """
 
-    effects: tuple[str, ...] = EFFECT_NAMES
+    effects: tuple[str, ...] | None = None
     alpha: float = 0.05
     max_effects: int = 3
     min_gain: float = 0.15
@@ -93,12 +94,13 @@ class DiagnosisSettings:
     screen_top: int = 5
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "effects", tuple(self.effects))
-        unknown = [e for e in self.effects if e not in EFFECT_NAMES]
+        catalogue = effect_names()
+        object.__setattr__(self, "effects", catalogue if self.effects is None else tuple(self.effects))
+        unknown = [e for e in self.effects if e not in catalogue]
         if unknown:
             raise UsageError(
                 f"unknown effect {', '.join(repr(u) for u in unknown)}; the catalogue is "
-                f"{', '.join(EFFECT_NAMES)}: use those names."
+                f"{', '.join(catalogue)}: use those names."
             )
         if self.period is not None and not _positive(self.period):
             raise UsageError(

@@ -3,9 +3,53 @@
 :class:`FeatureSource` holds a dataset's full-rate signals (and memoises the mass matrix and the gravity
 tilt), :class:`Candidate` one effect on its joints with its hyper-parameters, :data:`BUILDERS` the
 function that turns a candidate into its columns (:func:`candidate_columns`; the exact transmission
-columns shift the model's torque, :func:`relay` is the backlash's dead zone) and the ``*_grid``
-functions the hyper-parameter grids scaled from the data.  Identify's side (parsing ``--effects``, the
-model file's terms, tuning) is :mod:`dynid.identify.effect_terms`, which gives these names too.
+columns shift the model's torque, :func:`relay` is the backlash's dead zone) and :data:`EFFECT_GRIDS`
+the hyper-parameter grids scaled from the data (the ``*_grid`` functions).  Identify's side (parsing
+``--effects``, the model file's terms, tuning) is :mod:`dynid.identify.effect_terms`, which gives these
+names too; the diagnosis screens the same columns as candidates (:mod:`dynid.diagnosis.candidates`).
+An effect kept outside dynid adds its builder with :func:`register_builder`, which
+:func:`dynid.sim.effects.register_effect` calls beside the effect's simulation class.
+
+Each effect of the catalogue (:mod:`dynid.sim.effect_classes`) is one or a few columns per joint,
+linear in their coefficients, refitted *together with* the base parameters (so what re-identification
+absorbs is never credited to the effect):
+
+========================  ===================================================  ===================
+effect                    columns on joint j (``s = sign``)                    hyper-parameter
+========================  ===================================================  ===================
+offset                    1                                                    -
+armature                  ddq_j                                                -
+stribeck                  s(dq_j) exp(-(|dq_j| / vs)^2)                        vs
+load_friction             s(dq_j) |tau_j|                                      -
+temperature               h(t) s(dq_j),  h(t) dq_j;  h = 1 - exp(-t / T)       T
+cogging                   sin(k N q_j), cos(k N q_j), k = 1, 2                 N (gear ratio)
+elasticity                M(q)[:, j] d^2 tau_j / dt^2 (all joints; first      -
+                          order of q_j = theta_j - tau_j / K)
+backlash                  M(q)[:, j] d^2 b_j / dt^2, M(q)[:, j] d^2 tau_j /    eps
+                          dt^2 (all joints), b_j; b_j = tanh(tau_j / eps)
+delay                     d tau_j / dt (first order of tau(t - d))             -
+drive_gain                tau_j                                                -
+base_tilt                 d g(q) / d alpha about two horizontal axes (all j)   -
+coupled_friction          s(w), w on joints a and b, w = dq_a +- dq_b          pair and sign
+nonlinear_viscous         dq_j |dq_j|,  dq_j^3                                 -
+payload                   (absorbed by the base parameters: parametric test)   -
+========================  ===================================================  ===================
+
+A delay also has a form common to all joints (``delay@all``, :func:`common_term`): the delay column on
+every joint with one coefficient, so that one lag of the torques against the angles is one candidate.
+``tau`` is the identified model's predicted torque (the "first fit"); for backlash its links' share,
+which the transmission carries (the motor's armature and friction act before the gear).
+No two candidates on a joint span the same columns: a load friction that differs between driving and
+back-driven motion has no column of its own for the difference, ``s(dq_j) |tau_j| s(dq_j tau_j)`` being
+``tau_j`` itself, the drive gain's column (the simulator's load friction, 0.05 driving and 0.025
+back-driven, is a load friction of 0.0375 and a drive gain of 0.0125 on its joint).  Candidates whose
+columns contain a simpler one's by design (the motor-inertia column of elasticity and backlash is the
+armature's; backlash holds the teeth's stiffness, elasticity's column) are told apart by the
+simpler-candidate test (:func:`dynid.diagnosis.screening.parsimonious`).
+Elasticity, backlash and delay are not linear in their parameters: the screen uses the first-order
+columns above, the refit (:mod:`dynid.diagnosis.refinement`) fits their physical parameters (for
+backlash a dead zone whose sides change once the torque has reversed beyond a threshold, a crossing
+time later).
 """
 
 from __future__ import annotations
@@ -22,16 +66,20 @@ from dynid.exceptions import UsageError
 __all__ = [
     "BUILDERS",
     "COMMON_EFFECTS",
+    "EFFECT_GRIDS",
     "Builder",
     "Candidate",
     "FeatureSource",
+    "Grid",
     "backlash_grid",
     "candidate_columns",
     "cogging_grid",
     "common_term",
+    "register_builder",
     "relay",
     "stribeck_grid",
     "temperature_grid",
+    "unregister_builder",
 ]
 
 _SIGN_EPS = 1e-3  # rad/s: velocities below this count as zero in sign(dq) (quantised encoders)
@@ -211,6 +259,10 @@ def _warm(t: NDArray[np.float64], T: float) -> NDArray[np.float64]:
 
 
 Builder = Callable[[FeatureSource, Candidate], NDArray[np.float64]]
+"""A column builder: ``(src, cand) -> (M, n, k)`` columns, zero on the joints the candidate does not act on."""
+
+Grid = Callable[[FeatureSource, int], list[dict[str, float]]]
+"""A hyper-parameter grid: ``(src, j) -> [hyper, ...]``, the variants to tune a candidate on joint j among."""
 
 
 def _offset(src, c):
@@ -474,3 +526,69 @@ def backlash_grid(src: FeatureSource, j: int) -> list[dict[str, float]]:
 
 def cogging_grid(src: FeatureSource, j: int) -> list[dict[str, float]]:
     return [{"N": float(N)} for N in (50, 80, 100, 120, 160, 200)]
+
+
+EFFECT_GRIDS: dict[str, Grid] = {
+    "stribeck": stribeck_grid,
+    "temperature": temperature_grid,
+    "backlash": backlash_grid,
+    "cogging": cogging_grid,
+}
+"""Hyper-parameter grids (scaled from the training data) of the effects that have one."""
+
+_BUILTIN = frozenset(BUILDERS)
+
+
+def register_builder(name: str, builder: Builder, *, grid: Grid | None = None, replace: bool = False) -> None:
+    """Add the column builder (and the hyper-parameter grid, if any) of an effect kept outside dynid.
+
+    :func:`dynid.sim.effects.register_effect` calls it with the effect's simulation class; on its own it
+    makes ``identify --effects NAME`` (and the diagnosis' columns) know the effect.
+
+    Parameters
+    ----------
+    name : str
+        The effect's catalogue name.
+    builder : callable
+        ``(FeatureSource, Candidate) -> (M, n, k)`` columns (:data:`Builder`).
+    grid : callable, optional
+        ``(FeatureSource, j) -> [hyper, ...]``: the hyper-parameter variants to tune among (:data:`Grid`).
+    replace : bool
+        Replace a builder registered before under this name (a built-in one is never replaced).
+
+    Raises
+    ------
+    UsageError
+        A builder or grid that is not callable, a built-in name, or a name taken without ``replace``.
+    """
+    if not callable(builder):
+        raise UsageError(
+            f"the effect '{name}' has no column builder ({builder!r} is not callable); give a function "
+            "(FeatureSource, Candidate) -> (M, n, k) columns."
+        )
+    if grid is not None and not callable(grid):
+        raise UsageError(
+            f"the hyper-parameter grid of the effect '{name}' is {grid!r}, not a function; give "
+            "(FeatureSource, joint) -> list of dicts, or None."
+        )
+    if name in _BUILTIN:
+        raise UsageError(
+            f"the effect name '{name}' is a built-in effect's; give your effect a name of its own."
+        )
+    if name in BUILDERS and not replace and BUILDERS[name] is not builder:
+        raise UsageError(
+            f"the effect name '{name}' has a column builder already; choose another name or pass replace=True."
+        )
+    BUILDERS[name] = builder
+    if grid is None:
+        EFFECT_GRIDS.pop(name, None)
+    else:
+        EFFECT_GRIDS[name] = grid
+
+
+def unregister_builder(name: str) -> None:
+    """Forget the builder (and grid) registered under ``name``; built-in builders stay.  Nothing to forget: no change."""
+    if name in _BUILTIN:
+        raise UsageError(f"the effect '{name}' is built in; only registered effects can be forgotten.")
+    BUILDERS.pop(name, None)
+    EFFECT_GRIDS.pop(name, None)

@@ -1,7 +1,7 @@
 """Effects as regressor columns: the one set of column builders that identify and the diagnosis share.
 
 Each effect of the catalogue (the simulator's :mod:`dynid.sim.effects` injects the same names; the
-table of columns is in :mod:`dynid.diagnosis.candidates`) becomes one or a few columns per joint, linear
+table of columns is in :mod:`dynid.identify.effect_builders`) becomes one or a few columns per joint, linear
 in their coefficients, built at full rate from the states of a dataset (:class:`FeatureSource`) and
 then low-passed with the torque's filter like every regressor column (parallel filtering).
 
@@ -33,6 +33,7 @@ from dynid.exceptions import UsageError
 from dynid.identify.effect_builders import (
     BUILDERS,
     COMMON_EFFECTS,
+    EFFECT_GRIDS,
     Candidate,
     FeatureSource,
     backlash_grid,
@@ -73,14 +74,6 @@ __all__ = [
 
 
 # ---------------------------------------------------------------------------- identify's side
-EFFECT_GRIDS: dict[str, Callable[[FeatureSource, int], list[dict[str, float]]]] = {
-    "stribeck": stribeck_grid,
-    "temperature": temperature_grid,
-    "backlash": backlash_grid,
-    "cogging": cogging_grid,
-}
-"""Hyper-parameter grids (scaled from the training data) of the effects that have one."""
-
 TAU_EFFECTS = ("load_friction", "delay", "drive_gain", "elasticity", "backlash")
 """Effects whose columns need the model's own torque (a first fit without the effects)."""
 

@@ -1,21 +1,66 @@
-"""The effect classes of the simulator's catalogue: the base class with its hooks, and one class per effect.
+"""The catalogue of the simulator's unmodelled effects: the base class with its hooks, one class per effect.
 
 :class:`Effect` is what the simulator calls (by role: ``model``, ``drive``, ``transmission``,
-``friction``, ``sensor``); each subclass realises one effect of :data:`dynid.sim.effects.EFFECTS` for
-a robot with :meth:`Effect.build` from an :class:`EffectContext` (the formulas and default sizes are
-in :mod:`dynid.sim.effects`).  Split out of :mod:`dynid.sim.effects`, which re-exports its names and
-holds the catalogue and the ``--effects`` parser.
+``friction``, ``sensor``); each subclass realises one effect for a robot with :meth:`Effect.build` from
+an :class:`EffectContext` (sizes relative to the robot's scales s_j, I_j, v_j: :mod:`dynid.sim.effects`)
+and says how the diagnosis reads it (``selectable``: per joint or of the whole arm; ``excites``: the
+motion that shows it).  :data:`EFFECTS` is the catalogue, name -> class, in the order below;
+:data:`EFFECT_NAMES` its built-in names; :func:`register_effect` adds an effect kept outside dynid
+(its class here, its column builder in :data:`dynid.identify.effect_builders.BUILDERS`).
+:mod:`dynid.sim.effects` re-exports these names and holds the ``--effects`` parser.
+
+Effects (``VALUE`` multiplies the size; random choices use the truth generator, so the seed repeats them):
+
+=================  ============================================================================  ==========
+name               model (default size at VALUE = 1)                                             joints
+=================  ============================================================================  ==========
+offset             constant torque-sensor offset ``o_j``, ``|o_j|`` = 2 % of s_j times a random    any
+                   factor in [0.5, 1], random sign
+armature           rotor inertia ``I_a ddq`` missing from the nominal model, I_a = 5 % of I_j      any
+stribeck           low-speed bump ``(Fs - Fc) exp(-(dq / vs)^2) sign(dq)``, Fs - Fc = 2.5 % of     any
+                   s_j, vs = 2 % of dq_max
+load_friction      Coulomb growing with the drive torque, ``mu |tau_m| sign(dq)``, mu = 0.05 when   any
+                   driving (dq tau_m > 0), 0.025 when back-driven
+temperature        the truth friction (above) scaled by ``1 - delta (1 - exp(-t / 60 s))``, delta   any
+                   = 0.3 (warming lowers friction along the run); needs a friction other than none
+cogging            ``sum_k a_k sin(k N x + phi_k)``, N = 100 (gear ratio), k = 1, 2, a_1 = 1 %,    any
+                   a_2 = 0.5 % of s_j, random phases; x the drive-side angle
+elasticity         joint spring between motor and link: motor inertia B, ``tau_s = K (theta -     any
+                   q) + D (dtheta - dq)``; K = I_j (2 pi 10 Hz)^2 / VALUE, D for 5 % damping,
+                   B = the truth armature or at least 50 % of I_j; the encoder reads theta
+backlash           dead zone of total width 1 mrad (0.5 mrad either way) in the transmission,      any
+                   stiffness I_j (2 pi 20 Hz)^2 (or the elasticity's K on the same joint)
+delay              the measured torque lags the applied one by d = 4 ms                           any
+drive_gain         measured torque = g_j times applied, g_j = 1 +- 5 % times a random factor in     any
+                   [0.5, 1] (random sign per joint: a common gain would be invisible)
+payload            point mass of 5 % of the arm's mass, 5 cm along the tool z axis                 none
+base_tilt          gravity rotated by 1 degree about a random horizontal axis                     none
+coupled_friction   friction on the velocity ``w = dq_a + dq_b`` of the last two joints (a          none
+                   coupled wrist): ``Fc tanh(w / eps) + Fv w`` on both joints, Fc = 5 % and Fv
+                   v = 3 % of min(s_a, s_b)
+nonlinear_viscous  ``kv2 dq|dq| + kv3 dq^3``, kv2 v_j^2 = 2 %, kv3 v_j^3 = 1 % of s_j              any
+=================  ============================================================================  ==========
+
+The motor inertia B of a flexible (elastic or backlashed) joint is not in the nominal model: it shows in
+the measured torque as ``B ddtheta`` like an armature, which re-identification with armature columns
+absorbs.  It is at least 50 % of I_j (reflected rotor inertias of geared arms are of that order) because
+the controller's derivative action, sized for the whole joint, must stay well inside the stability limit
+of the 1 kHz sampled loop on the motor alone (above the spring's resonance the controller sees only B);
+at 2 % and 10 % the drives chattered.
 """
 
 from __future__ import annotations
 
+import inspect
 import math
+import re
 from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
 
 from dynid.exceptions import UsageError
+from dynid.identify.effect_builders import Builder, Grid, register_builder, unregister_builder
 from dynid.sim.scales import RobotScales
 from dynid.sim.truth_friction import (
     COULOMB,
@@ -29,6 +74,9 @@ from dynid.sim.truth_friction import (
 from dynid.symbolic.robot import RobotModel, standard_from_com
 
 __all__ = [
+    "EFFECTS",
+    "EFFECT_NAMES",
+    "ROLES",
     "Armature",
     "Backlash",
     "BaseTilt",
@@ -45,6 +93,9 @@ __all__ = [
     "Payload",
     "Stribeck",
     "Temperature",
+    "effect_names",
+    "register_effect",
+    "unregister_effect",
 ]
 
 
@@ -66,6 +117,11 @@ class Effect:
     simulator reads their attributes), ``friction`` effects scale the truth friction (temperature:
     ``factor(t)``), ``sensor`` effects change the measured torque (:meth:`measure`).
 
+    Class attributes: ``name`` (the catalogue's), ``role``, ``selectable`` (takes a joint selector
+    ``@J``; the diagnosis then tests it per joint, else once for the arm), ``max_value`` / ``min_value``
+    with their reasons (``why_limit``, ``why_min``), ``summary`` (its words in ``simulate --help``) and
+    ``excites`` (the motion that would show it, ``{j}`` its joint, for the diagnosis' notes).
+
     Attributes
     ----------
     value : float
@@ -81,6 +137,8 @@ class Effect:
     why_limit: ClassVar[str] = "100 times the documented default size, far beyond a real arm's"
     min_value: ClassVar[float] = 0.0
     why_min: ClassVar[str] = ""
+    summary: ClassVar[str] = ""
+    excites: ClassVar[str] = "a richer excitation of joint {j}"
 
     value: float
     joints: tuple[int, ...]
@@ -161,6 +219,8 @@ class Offset(Effect):
 
     name: ClassVar[str] = "offset"
     role: ClassVar[str] = "sensor"
+    summary: ClassVar[str] = "torque-sensor offset, 2% of the joint's torque scale"
+    excites: ClassVar[str] = "both directions of motion at every speed (a constant does not change sign)"
     offset: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @classmethod
@@ -181,6 +241,8 @@ class DriveGain(Effect):
 
     name: ClassVar[str] = "drive_gain"
     role: ClassVar[str] = "sensor"
+    summary: ClassVar[str] = "measured torque scaled by 1 +- 5% per joint"
+    excites: ClassVar[str] = "large torques on joint {j} at several speeds"
     max_value: ClassVar[float | None] = 20.0
     why_limit: ClassVar[str] = "the gain 1 - 0.05 VALUE must stay positive"
     gain: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -203,6 +265,8 @@ class Delay(Effect):
 
     name: ClassVar[str] = "delay"
     role: ClassVar[str] = "sensor"
+    summary: ClassVar[str] = "4 ms on the measured torque"
+    excites: ClassVar[str] = "faster excitation of joint {j} (a delay grows with frequency)"
     max_value: ClassVar[float | None] = 250.0
     why_limit: ClassVar[str] = "a delay of 4 ms VALUE must stay below 1 s, far beyond any torque sensor's lag"
     delay: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -227,6 +291,8 @@ class Armature(Effect):
 
     name: ClassVar[str] = "armature"
     role: ClassVar[str] = "model"
+    summary: ClassVar[str] = "rotor inertia, 5% of the joint inertia"
+    excites: ClassVar[str] = "large accelerations of joint {j}"
     inertia: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @classmethod
@@ -246,6 +312,8 @@ class Payload(Effect):
 
     name: ClassVar[str] = "payload"
     role: ClassVar[str] = "model"
+    summary: ClassVar[str] = "5% of the arm's mass on the last link"
+    excites: ClassVar[str] = "several tool orientations under gravity"
     selectable: ClassVar[bool] = False
     mass: float = 0.0
     link: int = 0
@@ -291,6 +359,8 @@ class BaseTilt(Effect):
 
     name: ClassVar[str] = "base_tilt"
     role: ClassVar[str] = "model"
+    summary: ClassVar[str] = "gravity turned 1 degree"
+    excites: ClassVar[str] = "full turns of joint 1 in several arm configurations"
     selectable: ClassVar[bool] = False
     max_value: ClassVar[float | None] = 90.0
     why_limit: ClassVar[str] = "a tilt of 90 degrees or more is no longer a small tilt"
@@ -329,6 +399,8 @@ class Stribeck(Effect):
 
     name: ClassVar[str] = "stribeck"
     role: ClassVar[str] = "drive"
+    summary: ClassVar[str] = "low-speed bump, 2.5%"
+    excites: ClassVar[str] = "slow motion and many velocity reversals of joint {j}"
     bump: np.ndarray = field(default_factory=lambda: np.zeros(0))
     speed: np.ndarray = field(default_factory=lambda: np.zeros(0))
     eps: float = SMOOTHING
@@ -359,6 +431,8 @@ class LoadFriction(Effect):
 
     name: ClassVar[str] = "load_friction"
     role: ClassVar[str] = "drive"
+    summary: ClassVar[str] = "Coulomb + 5% of |drive torque|, 2.5% back-driven"
+    excites: ClassVar[str] = "large loads on joint {j}, both driving and back-driven"
     mu_drive: np.ndarray = field(default_factory=lambda: np.zeros(0))
     mu_back: np.ndarray = field(default_factory=lambda: np.zeros(0))
     eps: float = SMOOTHING
@@ -393,6 +467,8 @@ class Temperature(Effect):
 
     name: ClassVar[str] = "temperature"
     role: ClassVar[str] = "friction"
+    summary: ClassVar[str] = "friction drops by 30% with a 60 s warm-up"
+    excites: ClassVar[str] = "a longer run (minutes) so that friction drift and motion part"
     max_value: ClassVar[float | None] = 1.0 / 0.3
     why_limit: ClassVar[str] = "the friction drop 0.3 VALUE must stay below 100 %"
     drop: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -423,6 +499,8 @@ class Cogging(Effect):
 
     name: ClassVar[str] = "cogging"
     role: ClassVar[str] = "drive"
+    summary: ClassVar[str] = "1% + 0.5% ripple at 100 and 200 cycles/rev"
+    excites: ClassVar[str] = "slow constant-speed sweeps of joint {j} over several gear periods"
     ratio: float = 100.0
     amplitude: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     phase: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
@@ -455,6 +533,8 @@ class CoupledFriction(Effect):
 
     name: ClassVar[str] = "coupled_friction"
     role: ClassVar[str] = "drive"
+    summary: ClassVar[str] = "friction on dq_a + dq_b of the last two joints"
+    excites: ClassVar[str] = "wrist joints moving in equal and opposite directions"
     selectable: ClassVar[bool] = False
     coulomb: float = 0.0
     viscous: float = 0.0
@@ -502,6 +582,8 @@ class NonlinearViscous(Effect):
 
     name: ClassVar[str] = "nonlinear_viscous"
     role: ClassVar[str] = "drive"
+    summary: ClassVar[str] = "dq|dq| and dq^3 terms"
+    excites: ClassVar[str] = "high speeds of joint {j}"
     kv2: np.ndarray = field(default_factory=lambda: np.zeros(0))
     kv3: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
@@ -529,6 +611,8 @@ class Elasticity(Effect):
 
     name: ClassVar[str] = "elasticity"
     role: ClassVar[str] = "transmission"
+    summary: ClassVar[str] = "joint spring, 10 Hz locked-motor resonance, motor encoder"
+    excites: ClassVar[str] = "fast torque changes on joint {j} (harmonics near its resonance)"
     min_value: ClassVar[float] = 0.01
     why_min: ClassVar[str] = (
         "the locked-motor resonance 10 Hz / sqrt(VALUE) must stay at or below 100 Hz: a stiffer spring is a rigid "
@@ -553,6 +637,8 @@ class Backlash(Effect):
 
     name: ClassVar[str] = "backlash"
     role: ClassVar[str] = "transmission"
+    summary: ClassVar[str] = "1 mrad dead zone"
+    excites: ClassVar[str] = "torque reversals of joint {j} at low speed"
     gap: np.ndarray = field(default_factory=lambda: np.zeros(0))
     stiffness: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
@@ -566,3 +652,123 @@ class Backlash(Effect):
 
     def details(self):
         return {"gap": self.gap, "stiffness": self.stiffness, "units": "rad (total width), N m/rad"}
+
+
+# ---------------------------------------------------------------------------- the catalogue
+EFFECTS: dict[str, type[Effect]] = {
+    cls.name: cls
+    for cls in (
+        Offset,
+        Armature,
+        Stribeck,
+        LoadFriction,
+        Temperature,
+        Cogging,
+        Elasticity,
+        Backlash,
+        Delay,
+        DriveGain,
+        Payload,
+        BaseTilt,
+        CoupledFriction,
+        NonlinearViscous,
+    )
+}
+"""Effect name -> class, in the order of DESIGN.md (the built-in effects), then the registered ones."""
+
+EFFECT_NAMES: tuple[str, ...] = tuple(EFFECTS)
+"""The built-in catalogue's effect names, in catalogue order (DESIGN.md): what ``simulate --effects``
+injects, ``identify --effects`` models and ``diagnose`` tests.  Every other list of built-in effects is
+this one; :func:`effect_names` adds the registered effects."""
+
+ROLES = ("model", "drive")
+"""The roles an effect kept outside dynid may take: the simulator calls their hooks (:meth:`Effect.apply_model`,
+:meth:`Effect.drive`) for any effect; the sensor, friction and transmission effects it applies by name."""
+
+_NAME = re.compile(r"^[a-z_]+$")
+
+
+def effect_names() -> tuple[str, ...]:
+    """The catalogue's effect names now: :data:`EFFECT_NAMES`, then the registered effects in their order."""
+    return tuple(EFFECTS)
+
+
+def register_effect(
+    cls: type[Effect], builder: Builder | None, *, grid: Grid | None = None, replace: bool = False
+) -> type[Effect]:
+    """Add an effect kept outside dynid to the catalogue: its simulation class and its column builder.
+
+    Afterwards ``dynid simulate --effects NAME`` injects it, ``dynid identify --effects NAME`` models it
+    and ``dynid diagnose`` tests it (by default; ``--effects NAME`` alone), in this process.
+
+    Parameters
+    ----------
+    cls : type
+        A subclass of :class:`Effect` with its ``name`` (lower case letters and ``_``), its ``role``
+        (:data:`ROLES`), :meth:`Effect.build` and the role's hook (``apply_model`` or ``drive``);
+        ``selectable``, ``summary`` and ``excites`` as it needs.
+    builder : callable
+        ``(FeatureSource, Candidate) -> (M, n, k)`` columns (:data:`dynid.identify.effect_builders.Builder`):
+        what ``identify --effects`` fits and the diagnosis screens.
+    grid : callable, optional
+        ``(FeatureSource, j) -> [hyper, ...]``: the hyper-parameter variants (``Candidate.hyper``) to tune
+        the builder among, scaled from the data (:data:`dynid.identify.effect_builders.Grid`).
+    replace : bool
+        Replace an effect registered before under the same name (a built-in effect is never replaced).
+
+    Returns
+    -------
+    type
+        ``cls``.
+
+    Raises
+    ------
+    UsageError
+        What the catalogue cannot use, in one sentence: not an Effect subclass, no builder, a name,
+        role or hook missing, a built-in name, or a name taken without ``replace``.
+    """
+    if not (isinstance(cls, type) and issubclass(cls, Effect)) or cls is Effect:
+        raise UsageError(
+            f"{getattr(cls, '__name__', repr(cls))} is not an effect; subclass dynid.sim.effects.Effect."
+        )
+    what = cls.__name__
+    name = cls.name
+    if not isinstance(name, str) or not _NAME.match(name) or name in ("none", "off", "all"):
+        raise UsageError(
+            f"the effect {what} has the name {name!r}; give it a name of lower case letters and '_' "
+            "(not none, off or all)."
+        )
+    if builder is None or not callable(builder):
+        raise UsageError(
+            f"the effect '{name}' has no column builder; give register_effect({what}, builder) a function "
+            "(FeatureSource, Candidate) -> (M, n, k) columns."
+        )
+    if cls.role not in ROLES:
+        raise UsageError(
+            f"the effect '{name}' has the role {cls.role!r}; an effect of one's own acts through the model or "
+            "the drive (role 'model' or 'drive'), the simulator applies the others by name."
+        )
+    hook = "apply_model" if cls.role == "model" else "drive"
+    for method in ("build", hook):
+        if inspect.getattr_static(cls, method) is inspect.getattr_static(Effect, method):
+            raise UsageError(
+                f"the effect '{name}' ({what}) does not define {method}; a {cls.role} effect needs it."
+            )
+    if name in EFFECT_NAMES:
+        raise UsageError(f"the effect name '{name}' is a built-in effect's; give {what} a name of its own.")
+    if name in EFFECTS and EFFECTS[name] is not cls and not replace:
+        raise UsageError(
+            f"the effect name '{name}' is taken by {EFFECTS[name].__name__}; choose another name or pass "
+            "replace=True."
+        )
+    register_builder(name, builder, grid=grid, replace=True)
+    EFFECTS[name] = cls
+    return cls
+
+
+def unregister_effect(name: str) -> None:
+    """Forget a registered effect (its class and its builder); a built-in effect stays.  Unknown: no change."""
+    if name in EFFECT_NAMES:
+        raise UsageError(f"the effect '{name}' is built in; only registered effects can be forgotten.")
+    EFFECTS.pop(name, None)
+    unregister_builder(name)

@@ -39,44 +39,8 @@ continuous function whose steep slope near zero speed the integrator treats impl
 :mod:`dynid.sim.simulator`), so a velocity reversal neither chatters nor needs tiny steps.  Real
 sticking (zero speed held over a finite time) is not reproduced.
 
-Effects (``VALUE`` multiplies the size; random choices use the truth generator, so the seed repeats them):
-
-=================  ============================================================================  ==========
-name               model (default size at VALUE = 1)                                             joints
-=================  ============================================================================  ==========
-offset             constant torque-sensor offset ``o_j``, ``|o_j|`` = 2 % of s_j times a random    any
-                   factor in [0.5, 1], random sign
-armature           rotor inertia ``I_a ddq`` missing from the nominal model, I_a = 5 % of I_j      any
-stribeck           low-speed bump ``(Fs - Fc) exp(-(dq / vs)^2) sign(dq)``, Fs - Fc = 2.5 % of     any
-                   s_j, vs = 2 % of dq_max
-load_friction      Coulomb growing with the drive torque, ``mu |tau_m| sign(dq)``, mu = 0.05 when   any
-                   driving (dq tau_m > 0), 0.025 when back-driven
-temperature        the truth friction (above) scaled by ``1 - delta (1 - exp(-t / 60 s))``, delta   any
-                   = 0.3 (warming lowers friction along the run); needs a friction other than none
-cogging            ``sum_k a_k sin(k N x + phi_k)``, N = 100 (gear ratio), k = 1, 2, a_1 = 1 %,    any
-                   a_2 = 0.5 % of s_j, random phases; x the drive-side angle
-elasticity         joint spring between motor and link: motor inertia B, ``tau_s = K (theta -     any
-                   q) + D (dtheta - dq)``; K = I_j (2 pi 10 Hz)^2 / VALUE, D for 5 % damping,
-                   B = the truth armature or at least 50 % of I_j; the encoder reads theta
-backlash           dead zone of total width 1 mrad (0.5 mrad either way) in the transmission,      any
-                   stiffness I_j (2 pi 20 Hz)^2 (or the elasticity's K on the same joint)
-delay              the measured torque lags the applied one by d = 4 ms                           any
-drive_gain         measured torque = g_j times applied, g_j = 1 +- 5 % times a random factor in     any
-                   [0.5, 1] (random sign per joint: a common gain would be invisible)
-payload            point mass of 5 % of the arm's mass, 5 cm along the tool z axis                 none
-base_tilt          gravity rotated by 1 degree about a random horizontal axis                     none
-coupled_friction   friction on the velocity ``w = dq_a + dq_b`` of the last two joints (a          none
-                   coupled wrist): ``Fc tanh(w / eps) + Fv w`` on both joints, Fc = 5 % and Fv
-                   v = 3 % of min(s_a, s_b)
-nonlinear_viscous  ``kv2 dq|dq| + kv3 dq^3``, kv2 v_j^2 = 2 %, kv3 v_j^3 = 1 % of s_j              any
-=================  ============================================================================  ==========
-
-The motor inertia B of a flexible (elastic or backlashed) joint is not in the nominal model: it shows in
-the measured torque as ``B ddtheta`` like an armature, which re-identification with armature columns
-absorbs.  It is at least 50 % of I_j (reflected rotor inertias of geared arms are of that order) because
-the controller's derivative action, sized for the whole joint, must stay well inside the stability limit
-of the 1 kHz sampled loop on the motor alone (above the spring's resonance the controller sees only B);
-at 2 % and 10 % the drives chattered.
+Effects: the catalogue :data:`EFFECTS` and its table (names, models, default sizes) are in
+:mod:`dynid.sim.effect_classes`, beside the classes; :func:`register_effect` adds one kept outside dynid.
 
 Syntax of one effect: ``NAME`` (all joints it applies to, size 1), ``NAME:VALUE``, ``NAME@J`` (joint J
 only, joints numbered from 1), ``NAME@J-K`` (joints J..K), ``NAME@J:VALUE``; several effects are
@@ -85,9 +49,9 @@ drive_gain, delay, offset, whatever the order given.
 
 The code is split by responsibility: :mod:`dynid.sim.scales` (the robot's scales),
 :mod:`dynid.sim.truth_friction` (the truth friction and the default friction sizes),
-:mod:`dynid.sim.effect_classes` (the effect classes); this module holds the catalogue
-(:data:`EFFECTS`, :data:`EFFECT_NAMES`) and the ``--effects`` parser (:func:`parse_effects`) and
-re-exports the others' names, which import from here as before.
+:mod:`dynid.sim.effect_classes` (the effect classes and their catalogue, :data:`EFFECTS`,
+:data:`EFFECT_NAMES`, :func:`register_effect`); this module holds the ``--effects`` parser
+(:func:`parse_effects`) and re-exports the others' names, which import from here as before.
 """
 
 from __future__ import annotations
@@ -99,22 +63,14 @@ from dataclasses import dataclass
 
 from dynid.exceptions import UsageError
 from dynid.sim.effect_classes import (
-    Armature,
-    Backlash,
-    BaseTilt,
-    Cogging,
-    CoupledFriction,
-    Delay,
-    DriveGain,
+    EFFECT_NAMES,
+    EFFECTS,
+    ROLES,
     Effect,
     EffectContext,
-    Elasticity,
-    LoadFriction,
-    NonlinearViscous,
-    Offset,
-    Payload,
-    Stribeck,
-    Temperature,
+    effect_names,
+    register_effect,
+    unregister_effect,
 )
 from dynid.sim.scales import RobotScales, robot_scales
 from dynid.sim.truth_friction import COULOMB as COULOMB
@@ -133,16 +89,20 @@ __all__ = [
     "EFFECTS",
     "EFFECT_NAMES",
     "FRICTION_KINDS",
+    "ROLES",
     "Effect",
     "EffectContext",
     "EffectRequest",
     "RobotScales",
     "TruthFriction",
+    "effect_names",
     "parse_effects",
+    "register_effect",
     "robot_scales",
+    "unregister_effect",
 ]
-# The effect classes and the default sizes (``COULOMB``, ``SMOOTHING``, ...; imported as themselves, so
-# re-exported) also import from here, as before the split.
+# The default sizes (``COULOMB``, ``SMOOTHING``, ...; imported as themselves, so re-exported) also import
+# from here, as before the split; the effect classes from dynid.sim.effect_classes.
 
 
 # ---------------------------------------------------------------------------- requests
@@ -271,29 +231,3 @@ def _check_request(req: EffectRequest) -> None:
             f"the effect '{req.name}' acts on the whole arm and takes no joint selector; write '{req.name}' "
             f"or '{req.name}:VALUE'."
         )
-
-
-EFFECTS: dict[str, type[Effect]] = {
-    cls.name: cls
-    for cls in (
-        Offset,
-        Armature,
-        Stribeck,
-        LoadFriction,
-        Temperature,
-        Cogging,
-        Elasticity,
-        Backlash,
-        Delay,
-        DriveGain,
-        Payload,
-        BaseTilt,
-        CoupledFriction,
-        NonlinearViscous,
-    )
-}
-"""Effect name -> class, in the order of DESIGN.md."""
-
-EFFECT_NAMES: tuple[str, ...] = tuple(EFFECTS)
-"""The catalogue's effect names, in catalogue order (DESIGN.md): what ``simulate --effects`` injects,
-``identify --effects`` models and ``diagnose`` tests.  Every other list of effects is this one."""

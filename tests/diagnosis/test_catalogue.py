@@ -15,6 +15,8 @@ import numpy as np
 import pytest
 
 import dynid.diagnosis.candidates as candidates
+import dynid.identify.effect_builders as effect_builders
+import dynid.sim.effect_classes as effect_classes
 import dynid.sim.effects as effects
 from dynid.cli import main
 from dynid.diagnosis.screening import _nested
@@ -93,11 +95,13 @@ def test_every_effect_has_feature_columns_or_the_parameter_change_test():
 
 
 def test_the_simulator_docs_list_the_catalogue_in_order():
-    assert tuple(_table_names(effects.__doc__, "name")) == effects.EFFECT_NAMES
+    """The table beside the classes (:mod:`dynid.sim.effect_classes`)."""
+    assert tuple(_table_names(effect_classes.__doc__, "name")) == effects.EFFECT_NAMES
 
 
 def test_the_diagnosis_docs_list_the_catalogue():
-    names = _table_names(candidates.__doc__, "effect")
+    """The table of columns beside the builders (:mod:`dynid.identify.effect_builders`)."""
+    names = _table_names(effect_builders.__doc__, "effect")
     assert sorted(names) == sorted(effects.EFFECT_NAMES)
 
 
