@@ -86,6 +86,7 @@ module runs the stages.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -96,7 +97,7 @@ from dynid._threads import single_blas_thread
 from dynid.data.dataset import Dataset
 from dynid.data.preparation import Prepared
 from dynid.diagnosis import baseline as bl
-from dynid.diagnosis.candidates import EFFECT_NAMES, enumerate_candidates
+from dynid.diagnosis.candidates import enumerate_candidates
 from dynid.diagnosis.consistency import MEMORY_SECONDS, Consistency, parameter_consistency
 from dynid.diagnosis.gapmap import gap_map
 from dynid.diagnosis.lack_of_fit import LackOfFit, training_lack_of_fit
@@ -104,7 +105,7 @@ from dynid.diagnosis.parameter_change import parameter_change_test
 from dynid.diagnosis.refinement import fitted_delay
 from dynid.diagnosis.remainder import Remainder, predictable_remainder
 from dynid.diagnosis.result import Diagnosis, RankedCandidate
-from dynid.diagnosis.screening import Context, confound_note, cross_fitted
+from dynid.diagnosis.screening import Context, CrossFitted, confound_note, cross_fitted
 from dynid.diagnosis.selection import Selection, select
 from dynid.diagnosis.settings import DiagnosisSettings
 from dynid.exceptions import DataError
@@ -120,7 +121,7 @@ def diagnose(
     heldout: Dataset,
     *,
     robot=None,
-    effects: Sequence[str] = EFFECT_NAMES,
+    effects: Sequence[str] | None = None,
     alpha: float = 0.05,
     max_effects: int = 3,
     min_gain: float = 0.15,
@@ -170,7 +171,7 @@ def diagnose(
         Too few samples for the baseline and a candidate.
     """
     settings = DiagnosisSettings(
-        effects=tuple(effects),
+        effects=None if effects is None else tuple(effects),
         alpha=alpha,
         max_effects=max_effects,
         min_gain=min_gain,
@@ -207,6 +208,28 @@ def run_diagnosis(
         return _run(model, train, heldout, settings, robot)
 
 
+@dataclass(frozen=True, eq=False)
+class _Refit:
+    """The baseline refitted on the training run, both runs with its torque, and the noise of the states."""
+
+    base: bl.Baseline
+    tr: bl.Side
+    ho: bl.Side
+    state_var: NDArray[np.float64]
+    state: bl.StateNoise | None
+    train_noise: NDArray[np.float64] | None
+    lack: LackOfFit | None
+
+
+@dataclass(frozen=True, eq=False)
+class _GapTests:
+    """The baseline cross-fitted on the held-out folds, the runs' agreement, and the excess over the floor."""
+
+    cross0: CrossFitted
+    consistency: Consistency
+    excess: dict[str, Any]
+
+
 def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, robot) -> Diagnosis:
     say("[1/6] preparing the training and held-out runs")
     structure = bl.model_structure(model, robot, train, heldout)
@@ -219,23 +242,9 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
     block = _block_rows(ho_sample, settings.block_seconds)
 
     say("[2/6] refitting the model's structure on the training run (the baseline)")
-    base = bl.refit_baseline(tr_sample)
-    tr = bl.side(tr_sample, structure, base.x)
-    ho = bl.side(ho_sample, structure, base.x)
-    state_var, _ = bl.state_estimation_variance(structure, heldout, ho_sample, base.x, sigma)
-    state = bl.state_noise(structure, heldout, ho_sample, base.x)
-    train_noise = _training_noise(tr)
-    # Does the training refit's residual repeat across the training periods?  Evidence on the training
-    # run alone (a lack-of-fit test against the pure error of its replicates); no floor enters.
-    lack = None
-    if train_noise is not None:
-        train_state, _ = bl.state_estimation_variance(
-            structure, train, tr_sample, base.x, np.sqrt(np.maximum(np.mean(train_noise**2, axis=0), 1e-300))
-        )
-        lack = training_lack_of_fit(
-            tr.prep, tr.rows, base.fit, _rows_in(tr, MEMORY_SECONDS), noise=train_noise, state_variance=train_state
-        )
+    refit = _refit(structure, train, heldout, tr_sample, ho_sample, sigma)
     del tr_sample, ho_sample  # their full-rate columns are no longer needed
+    base, tr, ho = refit.base, refit.tr, refit.ho
     held = bl.heldout_baseline(model, heldout, ho, base.x, sigma)
     ctx = Context(
         tr=tr,
@@ -244,52 +253,158 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
         block=block,
         mask=ho.moving,
         min_delay=float(np.median(np.diff(heldout.t))),
-        state=state,
+        state=refit.state,
         alpha=settings.alpha,
     )
     # The baseline cross-fitted on the held-out folds: the excess test's residual
     # (:func:`~dynid.diagnosis.baseline.crossfit_residual`) and the first round's cross-fitted footing.
     say("[3/6] cross-fitting the baseline on the held-out folds; the runs' agreement and the excess")
+    gap = _gap_tests(ctx, refit, held, noise, settings)
+
+    say("[4/6] screening the candidate effects")
+    skip = _in_model(structure)
+    groups = enumerate_candidates(tr.src, settings.effects, skip=skip, motor_inertia="armature" not in skip)
+    sel = select(ctx, base, held, groups, settings, gap.excess["significant_joint"], cross0=gap.cross0)
+
+    say("[5/6] the parameter change and the gap map")
+    par = _parameter_change(structure, base, tr, sel, block, settings, sigma)
+    gmap = _heldout_gap_map(ho, held, noise, block, robot, sel)
+    say("[6/6] the verdict")
+    verdict, notes = _verdict(sel, gap.excess, gap.consistency, refit.lack, noise, base, settings, robot.joint_names)
+    measured = noise.method in MEASURED_FLOORS
+    remainder = None
+    if verdict == ["unexplained"] or not measured:
+        remainder = _remainder(sel, tr, ho, sigma, block, settings)
+    floor_free = _floor_free(gap.consistency, refit.lack, settings.alpha)
+    status = _provisional(verdict, measured, remainder, sel, gap.excess, settings, held.mse, floor_free)
+    provisional = status[0]
+    notes = _remainder_notes(verdict, measured, status, remainder, robot.joint_names) + notes
+    undecided = [] if sel.accepted else _undecided(ctx, base, sel.ranking, settings)
+    return Diagnosis(
+        verdict=verdict,
+        accepted=sel.accepted,
+        ranking=sel.ranking,
+        decomposition=_decomposition(held, sel, sigma, ho.moving),
+        gap_map=gmap,
+        parametric=par,
+        noise=noise,
+        excess=gap.excess,
+        notes=notes,
+        joint_names=list(robot.joint_names),
+        settings=_settings_record(settings, structure, base, tr, ho),
+        residuals={
+            "t": ho.t,
+            "before": held.residual,
+            "after": sel.residual if sel.accepted else held.residual,
+            "noise_std": sigma,
+        },
+        provisional=provisional,
+        undecided=undecided,
+        remainder=None if remainder is None else remainder.to_dict(),
+        consistency=gap.consistency.to_dict(settings.alpha),
+        lack_of_fit=None if refit.lack is None else refit.lack.to_dict(settings.alpha),
+    )
+
+
+def _refit(
+    structure: bl.ModelStructure,
+    train: Dataset,
+    heldout: Dataset,
+    tr_sample: bl.Sample,
+    ho_sample: bl.Sample,
+    sigma: NDArray[np.float64],
+) -> _Refit:
+    """Refit the baseline on the training run; the states' noise and the training run's lack of fit."""
+    base = bl.refit_baseline(tr_sample)
+    tr = bl.side(tr_sample, structure, base.x)
+    ho = bl.side(ho_sample, structure, base.x)
+    state_var, _ = bl.state_estimation_variance(structure, heldout, ho_sample, base.x, sigma)
+    state = bl.state_noise(structure, heldout, ho_sample, base.x)
+    train_noise = _training_noise(tr)
+    lack = _training_lack(structure, train, tr_sample, tr, base, train_noise)
+    return _Refit(
+        base=base, tr=tr, ho=ho, state_var=state_var, state=state, train_noise=train_noise, lack=lack
+    )
+
+
+def _training_lack(
+    structure: bl.ModelStructure,
+    train: Dataset,
+    tr_sample: bl.Sample,
+    tr: bl.Side,
+    base: bl.Baseline,
+    train_noise: NDArray[np.float64] | None,
+) -> LackOfFit | None:
+    """The training refit's lack of fit across the training periods (None without periods)."""
+    # Does the training refit's residual repeat across the training periods?  Evidence on the training
+    # run alone (a lack-of-fit test against the pure error of its replicates); no floor enters.
+    if train_noise is None:
+        return None
+    train_state, _ = bl.state_estimation_variance(
+        structure, train, tr_sample, base.x, np.sqrt(np.maximum(np.mean(train_noise**2, axis=0), 1e-300))
+    )
+    return training_lack_of_fit(
+        tr.prep, tr.rows, base.fit, _rows_in(tr, MEMORY_SECONDS), noise=train_noise, state_variance=train_state
+    )
+
+
+def _gap_tests(
+    ctx: Context, refit: _Refit, held: bl.HeldOutBaseline, noise: NoiseFloor, settings: DiagnosisSettings
+) -> _GapTests:
+    """Cross-fit the baseline on the held-out folds; test the runs' agreement and the excess over the floor."""
+    base, tr, ho, block = refit.base, refit.tr, refit.ho, ctx.block
     cross0 = cross_fitted(ctx, base.fit, tr.X0, ho.X0, bl.FOLDS)
     # Do the two runs agree on the baseline's parameters?  Evidence that does not rest on the floor.
     consistency = parameter_consistency(
         cross0.fold,
         max(1, round(MEMORY_SECONDS / settings.block_seconds * block)),
-        noise=train_noise,
+        noise=refit.train_noise,
     )
     excess = bl.excess_over_floor(
         base.fit,
         ho,
         held,
-        sigma,
+        ctx.sigma,
         block,
         settings,
         crossfit=cross0.residual,
-        state_variance=state_var,
+        state_variance=refit.state_var,
         floor_rel_se=noise.rel_se,
     )
+    return _GapTests(cross0=cross0, consistency=consistency, excess=excess)
 
-    say("[4/6] screening the candidate effects")
-    skip = _in_model(structure)
-    groups = enumerate_candidates(tr.src, settings.effects, skip=skip, motor_inertia="armature" not in skip)
-    sel = select(ctx, base, held, groups, settings, excess["significant_joint"], cross0=cross0)
 
+def _parameter_change(
+    structure: bl.ModelStructure,
+    base: bl.Baseline,
+    tr: bl.Side,
+    sel: Selection,
+    block: int,
+    settings: DiagnosisSettings,
+    sigma: NDArray[np.float64],
+) -> dict[str, Any]:
+    """What the baseline refit absorbed: the parameter-change test, with the screen's one-joint gains."""
     # A torque gain on one joint scales that joint's measured torque: what the refit absorbs of it.
     # Its columns were built for the screen (round 0 tunes every candidate).
-    say("[5/6] the parameter change and the gap map")
     gain_dirs = {c.joint: base.fit.regress(C) for c, C in sel.tuned.values() if c.effect == "drive_gain"}
-    par = parameter_change_test(
+    return parameter_change_test(
         tr.src.ddq[tr.rows],
         structure.columns,
         base.fit,
         base.x,
-        robot,
+        structure.robot,
         block,
         settings.alpha,
         sigma,
         gain_dirs,
     )
-    gmap = gap_map(
+
+
+def _heldout_gap_map(
+    ho: bl.Side, held: bl.HeldOutBaseline, noise: NoiseFloor, block: int, robot, sel: Selection
+) -> dict[str, Any]:
+    """The gap map of the baseline's held-out residual."""
+    return gap_map(
         t=ho.t,
         q=ho.src.q[ho.rows],
         dq=ho.src.dq[ho.rows],
@@ -303,73 +418,63 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
         gear_ratio=_gear_ratio(sel.accepted),
         filter_gain=_filter_gain_function(ho.prep),
     )
-    say("[6/6] the verdict")
-    verdict, notes = _verdict(sel, excess, consistency, lack, noise, base, settings, robot.joint_names)
-    measured = noise.method in MEASURED_FLOORS
-    remainder = None
-    if verdict == ["unexplained"] or not measured:
-        # What a flexible state model predicts of what the model leaves, on held-out folds it did not see:
-        # evidence that does not rest on the floor.
-        remainder = predictable_remainder(
-            sel.cross.fold,
-            (tr.src.q[tr.rows], tr.src.dq[tr.rows], tr.src.ddq[tr.rows]),
-            tr.t,
-            tr.moving,
-            (ho.src.q[ho.rows], ho.src.dq[ho.rows], ho.src.ddq[ho.rows]),
-            ho.t,
-            ho.moving,
-            sigma,
-            block,
-            settings.alpha,
-        )
-    floor_free = consistency.leads(settings.alpha)
-    if lack is not None:
-        floor_free = floor_free | lack.leads(settings.alpha)
-    status = _provisional(verdict, measured, remainder, sel, excess, settings, held.mse, floor_free)
-    provisional = status[0]
-    notes = _remainder_notes(verdict, measured, status, remainder, robot.joint_names) + notes
-    undecided = [] if sel.accepted else _undecided(ctx, base, sel.ranking, settings)
-    return Diagnosis(
-        verdict=verdict,
-        accepted=sel.accepted,
-        ranking=sel.ranking,
-        decomposition=_decomposition(held, sel, sigma, ho.moving),
-        gap_map=gmap,
-        parametric=par,
-        noise=noise,
-        excess=excess,
-        notes=notes,
-        joint_names=list(robot.joint_names),
-        settings={
-            "effects": list(settings.effects),
-            "alpha": settings.alpha,
-            "max_effects": settings.max_effects,
-            "min_gain": settings.min_gain,
-            "min_closure": settings.min_closure,
-            "excess_tol": settings.excess_tol,
-            "measured_excess_tol": settings.measured_excess_tol,
-            "block_seconds": settings.block_seconds,
-            "screen_top": settings.screen_top,
-            "stick_fraction": settings.stick_fraction,
-            "confound_deg": settings.confound_deg,
-            "samples_train": int(tr.y.shape[0]),
-            "samples_heldout": int(ho.y.shape[0]),
-            "weight_passes": base.passes,
-            "weights_settled": base.settled,
-            "preprocessing": structure.preprocessing,
-        },
-        residuals={
-            "t": ho.t,
-            "before": held.residual,
-            "after": sel.residual if sel.accepted else held.residual,
-            "noise_std": sigma,
-        },
-        provisional=provisional,
-        undecided=undecided,
-        remainder=None if remainder is None else remainder.to_dict(),
-        consistency=consistency.to_dict(settings.alpha),
-        lack_of_fit=None if lack is None else lack.to_dict(settings.alpha),
+
+
+def _remainder(
+    sel: Selection,
+    tr: bl.Side,
+    ho: bl.Side,
+    sigma: NDArray[np.float64],
+    block: int,
+    settings: DiagnosisSettings,
+) -> Remainder:
+    """What a flexible state model predicts of the residual the selection leaves, on unseen held-out folds."""
+    # What a flexible state model predicts of what the model leaves, on held-out folds it did not see:
+    # evidence that does not rest on the floor.
+    return predictable_remainder(
+        sel.cross.fold,
+        (tr.src.q[tr.rows], tr.src.dq[tr.rows], tr.src.ddq[tr.rows]),
+        tr.t,
+        tr.moving,
+        (ho.src.q[ho.rows], ho.src.dq[ho.rows], ho.src.ddq[ho.rows]),
+        ho.t,
+        ho.moving,
+        sigma,
+        block,
+        settings.alpha,
     )
+
+
+def _floor_free(consistency: Consistency, lack: LackOfFit | None, alpha: float) -> NDArray[np.bool_]:
+    """Joints with evidence that no floor enters: the runs disagree, or the training residual repeats."""
+    floor_free = consistency.leads(alpha)
+    if lack is not None:
+        floor_free = floor_free | lack.leads(alpha)
+    return floor_free
+
+
+def _settings_record(
+    settings: DiagnosisSettings, structure: bl.ModelStructure, base: bl.Baseline, tr: bl.Side, ho: bl.Side
+) -> dict[str, Any]:
+    """The settings the diagnosis ran with, the samples it used and the baseline's reweighting."""
+    return {
+        "effects": list(settings.effects),
+        "alpha": settings.alpha,
+        "max_effects": settings.max_effects,
+        "min_gain": settings.min_gain,
+        "min_closure": settings.min_closure,
+        "excess_tol": settings.excess_tol,
+        "measured_excess_tol": settings.measured_excess_tol,
+        "block_seconds": settings.block_seconds,
+        "screen_top": settings.screen_top,
+        "stick_fraction": settings.stick_fraction,
+        "confound_deg": settings.confound_deg,
+        "samples_train": int(tr.y.shape[0]),
+        "samples_heldout": int(ho.y.shape[0]),
+        "weight_passes": base.passes,
+        "weights_settled": base.settled,
+        "preprocessing": structure.preprocessing,
+    }
 
 
 def _consistency_notes(c: Consistency, alpha: float, joint_names: list[str], excess: bool) -> list[str]:

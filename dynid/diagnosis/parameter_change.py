@@ -9,6 +9,7 @@ armatures are tested against their nominal values.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -46,6 +47,25 @@ def _absorbed_armature(cols: ColumnSet) -> NDArray[np.float64]:
     return out
 
 
+@dataclass(frozen=True)
+class _Change:
+    """The tested base parameters (indices), their nominal values, their change and its covariance."""
+
+    idx: NDArray[np.intp]
+    x_nom: NDArray[np.float64]
+    delta: NDArray[np.float64]
+    C: NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class _Finding:
+    """What the test names, the joint it names (or None) and the sentence that says it."""
+
+    finding: str
+    joint: int | None
+    text: str
+
+
 def parameter_change_test(
     ddq_train: NDArray[np.float64],
     cols: ColumnSet,
@@ -70,11 +90,46 @@ def parameter_change_test(
     within ``chi2_per_dof`` per degree of freedom (the block covariance underestimates the spread of
     filtered, coloured residuals by a few times: an exact chi^2 test would reject every model).
     """
-    n, nb = robot.n, cols.n_base
     # The block sums alone, without their lags: the allowances (chi2_per_dof, twice it for a clear
     # rejection) were set on that covariance.  With the lags it is wider on coloured noise, and on the
     # field UR5 a drive gain on joint 5 and a payload (1x and 3x each) then came out "unstructured".
     cov = fit.covariance(block, lags=False)
+    change = _nominal_change(cols, x, robot, cov)
+    # An armature cannot be negative (identify keeps it at zero or above): its change is at least minus
+    # the nominal one.
+    nominal_armature = np.maximum(np.asarray(robot.armature, dtype=float), 0.0)
+    hyp, lower = _hypotheses(cols, robot, change, nominal_armature, gain_dirs)
+    fits = st.structured_change_test(change.delta, change.C, hyp, n_obs=fit.shape[0], lower=lower)
+    h0 = next(f for f in fits if f.name == "none")
+    out = _hypotheses_record(fits, h0, len(change.idx))
+    found = _structured_finding(fits[0], h0, alpha, chi2_per_dof, nominal_armature)
+    # Per-joint parameters the model holds: torque offsets (nominal 0) and armatures (nominal: the URDF's).
+    # Each is tested alone, with the jackknife's spread over chunks of the training run: the block
+    # sandwich's standard errors were about half of it on field-like runs (noise correlated over 0.1 s,
+    # small model errors that differ along the motion), and an offset traded against gravity then looked
+    # "changed" on effect-free robots.
+    jack = fit.jackknife_covariance(JACKKNIFE_GROUPS)
+    out["per_joint_covariance"] = f"delete-a-chunk jackknife over {JACKKNIFE_GROUPS} chunks of the training data"
+    ddq_rms = np.sqrt(np.mean(ddq_train**2, axis=0))
+    flagged = []
+    for kind, unit in (("offset", "N m"), ("armature", "kg m^2")):
+        rows = _per_joint_rows(kind, cols, x, robot, jack, ddq_rms, sigma)
+        if not rows:
+            continue
+        out[kind + "s"] = rows
+        # A stricter level than alpha: with enough data a small model error makes any parameter "changed".
+        flagged += [(kind, unit, r) for r in rows if r["p_value"] < min(alpha, 1e-3) and r["relevant"]]
+    if flagged and found.finding in ("none", "unstructured"):
+        found = _per_joint_finding(flagged)
+    out["finding"] = found.finding
+    out["joint"] = found.joint
+    out["text"] = found.text
+    return out
+
+
+def _nominal_change(cols: ColumnSet, x: NDArray[np.float64], robot, cov: NDArray[np.float64]) -> _Change:
+    """The link and armature parameters with a finite variance: identified minus nominal, and covariance."""
+    n = robot.n
     k_all = len(x)
     link = np.array([k in ("link", "armature") for k in cols.kinds] + [False] * (k_all - len(cols.kinds)))
     link_idx = np.flatnonzero(link)
@@ -84,6 +139,20 @@ def parameter_change_test(
     idx = link_idx[np.isfinite(np.diag(cov))[link_idx]]
     delta = x[idx] - x_nom[idx]
     C = cov[np.ix_(idx, idx)]
+    return _Change(idx=idx, x_nom=x_nom, delta=delta, C=C)
+
+
+def _hypotheses(
+    cols: ColumnSet,
+    robot,
+    change: _Change,
+    nominal_armature: NDArray[np.float64],
+    gain_dirs: dict[int, NDArray[np.float64]] | None,
+) -> tuple[dict[str, NDArray[np.float64]], dict[str, float]]:
+    """The structured hypotheses' directions on the tested parameters, and their lower bounds."""
+    n, nb = robot.n, cols.n_base
+    idx, x_nom = change.idx, change.x_nom
+    k_all = len(x_nom)
     hyp: dict[str, NDArray[np.float64]] = {"drive_gain": x_nom[idx].reshape(-1, 1)}
     last = robot.n - 1
     Bl = np.zeros((k_all, 10))
@@ -95,9 +164,6 @@ def parameter_change_test(
         Aa[: cols.p] = cols.P[:, 10 * n : 11 * n]
     else:
         Aa[:nb] = _absorbed_armature(cols)
-    # An armature cannot be negative (identify keeps it at zero or above): its change is at least minus
-    # the nominal one.
-    nominal_armature = np.maximum(np.asarray(robot.armature, dtype=float), 0.0)
     lower: dict[str, float] = {}
     for j in range(n):
         if np.linalg.norm(Aa[idx, j]) > 0:
@@ -105,10 +171,12 @@ def parameter_change_test(
             lower[f"armature@{j + 1}"] = -float(nominal_armature[j])
     for j, d in (gain_dirs or {}).items():
         hyp[f"drive_gain@{j + 1}"] = d[idx]
-    fits = st.structured_change_test(delta, C, hyp, n_obs=fit.shape[0], lower=lower)
-    best = fits[0]
-    h0 = next(f for f in fits if f.name == "none")
-    out: dict[str, Any] = {
+    return hyp, lower
+
+
+def _hypotheses_record(fits, h0, n_parameters: int) -> dict[str, Any]:
+    """The hypotheses' fits and the nominal parameters' test, as the result's first entries."""
+    return {
         "hypotheses": [
             {
                 "name": f.name,
@@ -125,9 +193,15 @@ def parameter_change_test(
         "chi2_nominal": h0.chi2,
         "dof_nominal": h0.dof,
         "p_nominal": h0.p_value,
-        "n_parameters": len(idx),
+        "n_parameters": n_parameters,
         "covariance": "block (HAC) sandwich over blocks of the training data",
     }
+
+
+def _structured_finding(
+    best, h0, alpha: float, chi2_per_dof: float, nominal_armature: NDArray[np.float64]
+) -> _Finding:
+    """The structured hypothesis found (or none, or an unstructured change), and its sentence."""
     finding, joint = "none", None
     text = "The re-identified base parameters show no structured change from the nominal ones."
     clear = h0.p_value < alpha and h0.chi2 / h0.dof > 2 * chi2_per_dof
@@ -168,66 +242,59 @@ def parameter_change_test(
             "hypothesis (common or one-joint gain, payload, armature) explains the change: the nominal inertial parameters "
             "are off."
         )
-    # Per-joint parameters the model holds: torque offsets (nominal 0) and armatures (nominal: the URDF's).
-    # Each is tested alone, with the jackknife's spread over chunks of the training run: the block
-    # sandwich's standard errors were about half of it on field-like runs (noise correlated over 0.1 s,
-    # small model errors that differ along the motion), and an offset traded against gravity then looked
-    # "changed" on effect-free robots.
-    jack = fit.jackknife_covariance(JACKKNIFE_GROUPS)
-    out["per_joint_covariance"] = f"delete-a-chunk jackknife over {JACKKNIFE_GROUPS} chunks of the training data"
-    ddq_rms = np.sqrt(np.mean(ddq_train**2, axis=0))
-    flagged = []
-    for kind, unit in (("offset", "N m"), ("armature", "kg m^2")):
-        idx_k = [k for k, kd in enumerate(cols.kinds) if kd == kind]
-        if not idx_k:
-            continue
-        joints_k = [int(cols.joints[k]) for k in idx_k]
-        nominal = (
-            np.zeros(len(idx_k)) if kind == "offset" else np.array([robot.armature[j - 1] for j in joints_k])
-        )
-        change = x[idx_k] - nominal
-        if kind == "armature":
-            # The refit here is unconstrained; an armature is not negative (identify keeps it at zero or
-            # above), so a change below minus the nominal armature is the bound's, no more: a refit that
-            # goes below zero shows something else (a delay, a gain) taking the ddq column, not a rotor.
-            nominal = np.maximum(nominal, 0.0)
-            change = np.maximum(change, -nominal)
-        sd = np.sqrt(np.maximum(np.diag(jack)[idx_k], 1e-300))
-        p_holm = st.holm(2 * stats.t.sf(np.abs(change) / sd, JACKKNIFE_GROUPS - 1))
-        torque = np.abs(change) * (1.0 if kind == "offset" else ddq_rms[np.array(joints_k) - 1])
-        rows = [
-            {
-                "joint": jt,
-                "value": float(v),
-                "nominal": float(nm),
-                "change": float(dc),
-                "at_bound": bool(v < nm + dc),
-                "std": float(d),
-                "p_value": float(p),
-                "size_noise": float(tq / sigma[jt - 1]),
-                "relevant": bool(tq >= 0.5 * sigma[jt - 1]),
-            }
-            for jt, v, nm, dc, d, p, tq in zip(
-                joints_k, x[idx_k], nominal, change, sd, p_holm, torque, strict=True
-            )
-        ]
-        out[kind + "s"] = rows
-        # A stricter level than alpha: with enough data a small model error makes any parameter "changed".
-        flagged += [(kind, unit, r) for r in rows if r["p_value"] < min(alpha, 1e-3) and r["relevant"]]
-    if flagged and finding in ("none", "unstructured"):
-        kind = max(flagged, key=lambda f: f[2]["size_noise"])[0]
-        sig = [f for f in flagged if f[0] == kind]
-        finding = kind
-        joint = sig[0][2]["joint"] if len(sig) == 1 else None
-        what = "torque offsets" if kind == "offset" else "armatures (rotor inertias)"
-        text = (
-            f"Absorbed by the model's {kind} parameters: {what} "
-            + ", ".join(
-                f"joint {r['joint']}: {r['change']:.3g} +- {r['std']:.2g} {unit}" for _, unit, r in sig
-            )
-            + " (change from nominal)."
-        )
-    out["finding"] = finding
-    out["joint"] = joint
-    out["text"] = text
-    return out
+    return _Finding(finding=finding, joint=joint, text=text)
+
+
+def _per_joint_rows(
+    kind: str,
+    cols: ColumnSet,
+    x: NDArray[np.float64],
+    robot,
+    jack: NDArray[np.float64],
+    ddq_rms: NDArray[np.float64],
+    sigma: NDArray[np.float64],
+) -> list[dict[str, Any]]:
+    """Each of the model's ``kind`` parameters (offset or armature) tested alone against its nominal value."""
+    idx_k = [k for k, kd in enumerate(cols.kinds) if kd == kind]
+    if not idx_k:
+        return []
+    joints_k = [int(cols.joints[k]) for k in idx_k]
+    nominal = np.zeros(len(idx_k)) if kind == "offset" else np.array([robot.armature[j - 1] for j in joints_k])
+    change = x[idx_k] - nominal
+    if kind == "armature":
+        # The refit here is unconstrained; an armature is not negative (identify keeps it at zero or
+        # above), so a change below minus the nominal armature is the bound's, no more: a refit that
+        # goes below zero shows something else (a delay, a gain) taking the ddq column, not a rotor.
+        nominal = np.maximum(nominal, 0.0)
+        change = np.maximum(change, -nominal)
+    sd = np.sqrt(np.maximum(np.diag(jack)[idx_k], 1e-300))
+    p_holm = st.holm(2 * stats.t.sf(np.abs(change) / sd, JACKKNIFE_GROUPS - 1))
+    torque = np.abs(change) * (1.0 if kind == "offset" else ddq_rms[np.array(joints_k) - 1])
+    return [
+        {
+            "joint": jt,
+            "value": float(v),
+            "nominal": float(nm),
+            "change": float(dc),
+            "at_bound": bool(v < nm + dc),
+            "std": float(d),
+            "p_value": float(p),
+            "size_noise": float(tq / sigma[jt - 1]),
+            "relevant": bool(tq >= 0.5 * sigma[jt - 1]),
+        }
+        for jt, v, nm, dc, d, p, tq in zip(joints_k, x[idx_k], nominal, change, sd, p_holm, torque, strict=True)
+    ]
+
+
+def _per_joint_finding(flagged: list[tuple[str, str, dict[str, Any]]]) -> _Finding:
+    """The kind of per-joint parameter that changed most (in noise units), its joint(s) and its sentence."""
+    kind = max(flagged, key=lambda f: f[2]["size_noise"])[0]
+    sig = [f for f in flagged if f[0] == kind]
+    joint = sig[0][2]["joint"] if len(sig) == 1 else None
+    what = "torque offsets" if kind == "offset" else "armatures (rotor inertias)"
+    text = (
+        f"Absorbed by the model's {kind} parameters: {what} "
+        + ", ".join(f"joint {r['joint']}: {r['change']:.3g} +- {r['std']:.2g} {unit}" for _, unit, r in sig)
+        + " (change from nominal)."
+    )
+    return _Finding(finding=kind, joint=joint, text=text)
