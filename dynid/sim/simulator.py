@@ -74,6 +74,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -181,28 +182,96 @@ def simulate(
     """
     started = time.perf_counter()
     if truth is not None:
-        given = [
-            name
-            for name, value, default in (
-                ("effects", effects, None),
-                ("friction", friction, "linear"),
-                ("perturb", perturb, 0.0),
-                ("truth_seed", truth_seed, None),
-            )
-            if value != default
-        ]
-        if given:
-            raise UsageError(
-                f"simulate got truth= and also {', '.join(given)}, which the truth fixes already; give "
-                f"{'them' if len(given) > 1 else 'it'} to build_truth(robot, ...) instead, or drop truth=."
-            )
+        _refuse_truth_options(effects, friction, perturb, truth_seed)
     noise = NoiseModel.parse(noise)
     n = robot.n
-    if trajectory.n != n:
+    _check_joint_count(robot, trajectory, source)
+    stride = _output_stride(rate, control_rate)
+    duration = _run_duration(trajectory, duration, control_rate, source)
+    _check_two_samples(trajectory, duration, rate, control_rate, stride, source)
+    _check_whole_numbers(substeps, seed, truth_seed)
+    seed = int(seed)
+
+    command = _command(robot, trajectory, duration, control_rate, source)
+    ticks = command.t.size
+    truth = _resolve_truth(robot, truth, effects, friction, perturb, seed, truth_seed)
+    if controller is None:
+        controller = ControllerGains.design(n)
+
+    run = TrackingLoop(truth, controller, noise, control_rate, substeps)
+    states = run.integrate(command.t, command.qd, command.dqd, command.ddqd)
+
+    # Sensor chain at the control rate, then decimation.
+    tau_meas = measured_torque(truth, noise, command.t, states["tau_drive"], seed)
+
+    pick = slice(0, ticks, stride)
+    return SimulationResult(
+        t=command.t[pick],
+        q=states["q_meas"][pick],
+        tau=tau_meas[pick],
+        q_true=states["q"][pick],
+        dq_true=states["dq"][pick],
+        ddq_true=states["ddq"][pick],
+        tau_drive=states["tau_drive"][pick],
+        q_desired=command.qd[pick],
+        dq_desired=command.dqd[pick],
+        ddq_desired=command.ddqd[pick],
+        theta=states["theta"][pick],
+        dtheta=states["dtheta"][pick],
+        ddtheta=states["ddtheta"][pick],
+        components={k: v[pick] for k, v in states["components"].items()},
+        truth=truth,
+        noise=noise,
+        controller=controller,
+        seed=seed,
+        rate=float(rate),
+        control_rate=float(control_rate),
+        substeps=run.substeps,
+        elapsed=time.perf_counter() - started,
+        meta=_run_meta(trajectory, source, truth),
+    )
+
+
+@dataclass(frozen=True)
+class _Command:
+    """The commanded motion at the control ticks: times (ticks,) and angles, speeds, accelerations (ticks, n)."""
+
+    t: np.ndarray
+    qd: np.ndarray
+    dqd: np.ndarray
+    ddqd: np.ndarray
+
+
+def _refuse_truth_options(effects, friction, perturb, truth_seed) -> None:
+    """Refuse the truth options that a given truth fixes already."""
+    given = [
+        name
+        for name, value, default in (
+            ("effects", effects, None),
+            ("friction", friction, "linear"),
+            ("perturb", perturb, 0.0),
+            ("truth_seed", truth_seed, None),
+        )
+        if value != default
+    ]
+    if given:
+        raise UsageError(
+            f"simulate got truth= and also {', '.join(given)}, which the truth fixes already; give "
+            f"{'them' if len(given) > 1 else 'it'} to build_truth(robot, ...) instead, or drop truth=."
+        )
+
+
+def _check_joint_count(robot: RobotModel, trajectory: Trajectory, source: str) -> None:
+    """Refuse a trajectory for another joint count than the robot's."""
+    if trajectory.n != robot.n:
         raise ShapeError(
-            f"{source} has {trajectory.n} joints; the robot '{robot.name}' has {n}: use a trajectory designed "
+            f"{source} has {trajectory.n} joints; the robot '{robot.name}' has {robot.n}: use a trajectory designed "
             "for this robot."
         )
+
+
+def _output_stride(rate: float, control_rate: float) -> int:
+    """The control ticks per output sample, after checking both rates."""
     if not (math.isfinite(control_rate) and control_rate > 0):
         raise UsageError(f"the control rate is {control_rate}; give a positive rate in Hz.")
     if not (math.isfinite(rate) and 0 < rate <= control_rate):
@@ -215,7 +284,11 @@ def simulate(
             f"the output rate {rate:g} Hz does not divide the control rate {control_rate:g} Hz; give e.g. "
             f"{control_rate:g}, {control_rate / 2:g} or {control_rate / 10:g} Hz."
         )
-    stride = round(stride)
+    return round(stride)
+
+
+def _run_duration(trajectory: Trajectory, duration: float | None, control_rate: float, source: str) -> float:
+    """The run's length (s), default the trajectory's, after checking it against the trajectory and memory."""
     if duration is None:
         duration = float(trajectory.duration)
     if not (math.isfinite(duration) and duration > 0):
@@ -231,6 +304,13 @@ def simulate(
             f"control ticks, beyond the {MAX_TICKS:,} that one run holds in memory; give at most "
             f"{(MAX_TICKS - 1) / control_rate:g} s, and simulate a longer experiment as several runs."
         )
+    return duration
+
+
+def _check_two_samples(
+    trajectory: Trajectory, duration: float, rate: float, control_rate: float, stride: int, source: str
+) -> None:
+    """Refuse a run of fewer than two output samples, blaming the trajectory when its period is too short."""
     if round(duration * control_rate) < stride:
         cause = (
             f", {duration * trajectory.base_freq:g} period(s) of {source} at its base frequency "
@@ -246,39 +326,54 @@ def simulate(
         raise UsageError(
             f"the run lasts {duration:g} s{cause}, 1 sample at {rate:g} Hz, but a dataset needs at least 2; {fix}."
         )
+
+
+def _check_whole_numbers(substeps: int | None, seed: int, truth_seed: int | None) -> None:
+    """Refuse a substep count below 1 and negative or fractional seeds."""
     if substeps is not None and (int(substeps) != substeps or substeps < 1):
         raise UsageError(f"substeps is {substeps}; give a whole number >= 1.")
     for label, value in (("seed", seed), ("truth seed", truth_seed)):
         if value is not None and (int(value) != value or value < 0):
             raise UsageError(f"the {label} is {value}; give a whole number of at least 0.")
-    seed = int(seed)
 
+
+def _command(
+    robot: RobotModel, trajectory: Trajectory, duration: float, control_rate: float, source: str
+) -> _Command:
+    """The trajectory evaluated at the control ticks, checked against the robot's limits."""
     ticks = round(duration * control_rate) + 1
     t_ctrl = np.arange(ticks) / control_rate
     qd, dqd, ddqd = (np.ascontiguousarray(a) for a in trajectory.evaluate(t_ctrl))
     _check_limits(robot, t_ctrl, qd, dqd, ddqd, source)
+    return _Command(t=t_ctrl, qd=qd, dqd=dqd, ddqd=ddqd)
 
+
+def _resolve_truth(
+    robot: RobotModel,
+    truth: Truth | None,
+    effects: str | Sequence[str | EffectRequest] | None,
+    friction: str | TruthFriction,
+    perturb: float,
+    seed: int,
+    truth_seed: int | None,
+) -> Truth:
+    """The given truth after checking its joint count, or one built from the truth options."""
     if truth is None:
-        truth = build_truth(
+        return build_truth(
             robot,
             effects=effects,
             friction=friction,
             perturb=perturb,
             truth_seed=seed if truth_seed is None else int(truth_seed),
         )
-    elif truth.nominal.n != n:
-        raise ShapeError(f"the truth has {truth.nominal.n} joints; the robot '{robot.name}' has {n}.")
-    if controller is None:
-        controller = ControllerGains.design(n)
+    if truth.nominal.n != robot.n:
+        raise ShapeError(f"the truth has {truth.nominal.n} joints; the robot '{robot.name}' has {robot.n}.")
+    return truth
 
-    run = TrackingLoop(truth, controller, noise, control_rate, substeps)
-    states = run.integrate(t_ctrl, qd, dqd, ddqd)
 
-    # Sensor chain at the control rate, then decimation.
-    tau_meas = measured_torque(truth, noise, t_ctrl, states["tau_drive"], seed)
-
-    pick = slice(0, ticks, stride)
-    meta = {
+def _run_meta(trajectory: Trajectory, source: str, truth: Truth) -> dict:
+    """The run's description for the result: the trajectory and the names of the truth's effects."""
+    return {
         "trajectory": {
             "source": source,
             "type": type(trajectory).__name__,
@@ -287,31 +382,6 @@ def simulate(
         },
         "effects": [e.name for e in truth.effects],
     }
-    return SimulationResult(
-        t=t_ctrl[pick],
-        q=states["q_meas"][pick],
-        tau=tau_meas[pick],
-        q_true=states["q"][pick],
-        dq_true=states["dq"][pick],
-        ddq_true=states["ddq"][pick],
-        tau_drive=states["tau_drive"][pick],
-        q_desired=qd[pick],
-        dq_desired=dqd[pick],
-        ddq_desired=ddqd[pick],
-        theta=states["theta"][pick],
-        dtheta=states["dtheta"][pick],
-        ddtheta=states["ddtheta"][pick],
-        components={k: v[pick] for k, v in states["components"].items()},
-        truth=truth,
-        noise=noise,
-        controller=controller,
-        seed=seed,
-        rate=float(rate),
-        control_rate=float(control_rate),
-        substeps=run.substeps,
-        elapsed=time.perf_counter() - started,
-        meta=meta,
-    )
 
 
 def _check_limits(robot: RobotModel, t: np.ndarray, q, dq, ddq, source: str) -> None:
