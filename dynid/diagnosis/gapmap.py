@@ -118,71 +118,106 @@ def gap_map(
     joints = []
     flags: dict[str, list[dict[str, Any]]] = {"whiteness": [], "delay": [], "cogging": []}
     for j in range(n):
-        r2 = residual[:, j] ** 2
-        v = dq[:, j]
-        vmax = max(float(np.max(np.abs(v))), 1e-9)
-        bins: dict[str, list[tuple[str, NDArray[np.bool_]]]] = {
-            "speed": [
-                ("stiction |dq| < 2 % of max", np.abs(v) < 0.02 * vmax),
-                ("low speed < 30 %", (np.abs(v) >= 0.02 * vmax) & (np.abs(v) < 0.3 * vmax)),
-                ("high speed >= 30 %", np.abs(v) >= 0.3 * vmax),
-            ],
-            "reversal": [],
-            "power": [
-                ("driving (dq tau > 0)", v * tau_pred[:, j] > 0),
-                ("back-driven (dq tau < 0)", v * tau_pred[:, j] <= 0),
-            ],
-            "gravity": _terciles(np.abs(g[:, j]), "|g|", "N m"),
-            "acceleration": _terciles(np.abs(ddq[:, j]), "|ddq|", "rad/s^2"),
-            "gear_phase": [],
-            "time": [],
-        }
-        tr = _reversal_time(t, v)
-        bins["reversal"] = [
-            ("< 50 ms from a reversal", tr < 0.05),
-            ("50-200 ms", (tr >= 0.05) & (tr < 0.2)),
-            (">= 200 ms", tr >= 0.2),
-        ]
-        phase = np.mod(gear_ratio * q[:, j], 2 * math.pi)
-        bins["gear_phase"] = [
-            (
-                f"N q mod 2pi in [{k / 2:.1f}, {(k + 1) / 2:.1f}) pi (N = {gear_ratio:g})",
-                (phase >= k * math.pi / 2) & (phase < (k + 1) * math.pi / 2),
-            )
-            for k in range(4)
-        ]
-        edges = np.linspace(t[0], t[-1], 5)
-        bins["time"] = [
-            (f"{edges[k] - t[0]:.1f}-{edges[k + 1] - t[0]:.1f} s", (t >= edges[k]) & (t <= edges[k + 1]))
-            for k in range(4)
-        ]
-        out_j: dict[str, list[dict[str, Any]]] = {}
-        for kind, items in bins.items():
-            rows = []
-            for label, mask in items:
-                cnt = int(mask.sum())
-                if cnt < 2:
-                    rows.append({"label": label, "count": cnt, "excess": None, "low": None, "high": None})
-                    continue
-                est, lo, hi = block_bootstrap_ci(r2[mask], float(sigma2[j]), block=max(1, block), rng=rng)
-                rows.append({"label": label, "count": cnt, "excess": est, "low": lo, "high": hi})
-            out_j[kind] = rows
+        bins = _joint_bins(t, q[:, j], dq[:, j], ddq[:, j], tau_pred[:, j], g[:, j], gear_ratio)
+        out_j = _bin_rows(bins, residual[:, j] ** 2, float(sigma2[j]), block, rng)
         out_j["frequency"] = _frequency_bins(
             residual[:, j], float(sigma2[j]), fs, filter_gain, noise_signal, j
         )
         joints.append(out_j)
-        # Whiteness on a series decimated to about the filter's bandwidth (a low-passed residual is never white).
-        stride = max(1, int(fs / 50.0))
-        qlb, plb = ljung_box(residual[::stride, j], lags=20)
-        flags["whiteness"].append({"joint": j + 1, "Q": qlb, "p_value": plb, "white": bool(plb >= 0.05)})
-        flags["delay"].append({"joint": j + 1, **_xcorr(residual[:, j], tau_pred[:, j], fs, block)})
-        flags["cogging"].append({"joint": j + 1, **_angle_spectrum(residual[:, j], q[:, j])})
+        for key, item in _joint_flags(residual[:, j], tau_pred[:, j], q[:, j], fs, block, j).items():
+            flags[key].append(item)
     return {
         "joints": joints,
         "flags": flags,
         "kinds": list(BIN_KINDS),
         "gear_ratio": gear_ratio,
         "units": "excess = mean(r^2) / noise variance (1: at the noise floor); 90 % moving-block bootstrap interval",
+    }
+
+
+def _joint_bins(
+    t: NDArray[np.float64],
+    q: NDArray[np.float64],
+    v: NDArray[np.float64],
+    ddq: NDArray[np.float64],
+    tau_pred: NDArray[np.float64],
+    g: NDArray[np.float64],
+    gear_ratio: float,
+) -> dict[str, list[tuple[str, NDArray[np.bool_]]]]:
+    """One joint's bins (label and sample mask) per condition, in the map's order (frequency aside)."""
+    vmax = max(float(np.max(np.abs(v))), 1e-9)
+    tr = _reversal_time(t, v)
+    phase = np.mod(gear_ratio * q, 2 * math.pi)
+    edges = np.linspace(t[0], t[-1], 5)
+    return {
+        "speed": [
+            ("stiction |dq| < 2 % of max", np.abs(v) < 0.02 * vmax),
+            ("low speed < 30 %", (np.abs(v) >= 0.02 * vmax) & (np.abs(v) < 0.3 * vmax)),
+            ("high speed >= 30 %", np.abs(v) >= 0.3 * vmax),
+        ],
+        "reversal": [
+            ("< 50 ms from a reversal", tr < 0.05),
+            ("50-200 ms", (tr >= 0.05) & (tr < 0.2)),
+            (">= 200 ms", tr >= 0.2),
+        ],
+        "power": [
+            ("driving (dq tau > 0)", v * tau_pred > 0),
+            ("back-driven (dq tau < 0)", v * tau_pred <= 0),
+        ],
+        "gravity": _terciles(np.abs(g), "|g|", "N m"),
+        "acceleration": _terciles(np.abs(ddq), "|ddq|", "rad/s^2"),
+        "gear_phase": [
+            (
+                f"N q mod 2pi in [{k / 2:.1f}, {(k + 1) / 2:.1f}) pi (N = {gear_ratio:g})",
+                (phase >= k * math.pi / 2) & (phase < (k + 1) * math.pi / 2),
+            )
+            for k in range(4)
+        ],
+        "time": [
+            (f"{edges[k] - t[0]:.1f}-{edges[k + 1] - t[0]:.1f} s", (t >= edges[k]) & (t <= edges[k + 1]))
+            for k in range(4)
+        ],
+    }
+
+
+def _bin_rows(
+    bins: dict[str, list[tuple[str, NDArray[np.bool_]]]],
+    r2: NDArray[np.float64],
+    sigma2: float,
+    block: int,
+    rng: np.random.Generator,
+) -> dict[str, list[dict[str, Any]]]:
+    """Each bin's count and bootstrapped excess of ``r2`` over ``sigma2`` (None below two samples)."""
+    out: dict[str, list[dict[str, Any]]] = {}
+    for kind, items in bins.items():
+        rows = []
+        for label, mask in items:
+            cnt = int(mask.sum())
+            if cnt < 2:
+                rows.append({"label": label, "count": cnt, "excess": None, "low": None, "high": None})
+                continue
+            est, lo, hi = block_bootstrap_ci(r2[mask], sigma2, block=max(1, block), rng=rng)
+            rows.append({"label": label, "count": cnt, "excess": est, "low": lo, "high": hi})
+        out[kind] = rows
+    return out
+
+
+def _joint_flags(
+    r: NDArray[np.float64],
+    tau_pred: NDArray[np.float64],
+    q: NDArray[np.float64],
+    fs: float,
+    block: int,
+    j: int,
+) -> dict[str, dict[str, Any]]:
+    """One joint's global flags: ``whiteness`` (Ljung-Box), ``delay`` (cross-correlation), ``cogging``."""
+    # Whiteness on a series decimated to about the filter's bandwidth (a low-passed residual is never white).
+    stride = max(1, int(fs / 50.0))
+    qlb, plb = ljung_box(r[::stride], lags=20)
+    return {
+        "whiteness": {"joint": j + 1, "Q": qlb, "p_value": plb, "white": bool(plb >= 0.05)},
+        "delay": {"joint": j + 1, **_xcorr(r, tau_pred, fs, block)},
+        "cogging": {"joint": j + 1, **_angle_spectrum(r, q)},
     }
 
 

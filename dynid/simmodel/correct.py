@@ -189,7 +189,6 @@ def correct_description(
         The written file failed its reload check (nothing is written).
     """
     from dynid.exceptions import UsageError
-    from dynid.identify.model import identify
 
     path = Path(path)
     if not is_description(path):
@@ -199,11 +198,57 @@ def correct_description(
     nominal = description_model(path, train)
     robot = nominal.robot
     n = robot.n
-    model = identify(robot, train, friction="linear", gmm="off", armature=fmt == "mjcf")
-    # The consistent fit's own standard set leaves what the data cannot see wherever its solver ended (the
-    # Panda's first link at 2800 kg); the closest consistent set pulled toward the file's bodies replaces it.
-    info = {k: v for k, v in model.info.items() if k != "consistency"}
-    model = replace(model, info=info)
+    fit = _fit_and_write(path, fmt, robot, train, heldout, out)
+    values = _group_values(path, robot, fit.params, fmt)
+    prep = nominal.prepare(heldout)
+    # what 'dynid validate --model FILE --data heldout' reports: the cut-off chosen on the held-out data
+    prep_own = description_model(path, heldout).prepare(heldout)
+    plain = column_set(robot.with_transmission(None), friction=True, armature=True)
+    fl = np.zeros(n) if floor is None else np.asarray(floor, dtype=float)
+    rms_nom = _heldout_rms(plain, values.file, prep)
+    rms_cor = _heldout_rms(plain, values.fixed, prep)
+    groups = _group_breakdown(plain, prep, values, fmt, rms_nom, fl)
+    per, total = _closure(rms_cor, rms_nom, fl)
+    params = fit.params
+    return Correction(
+        format=fmt,
+        nominal=_values(robot.params, robot.armature, values.damping, values.loss, n),
+        corrected=_values(params.standard, values.armature, params.damping, params.frictionloss, n),
+        rms_nominal=rms_nom,
+        rms_corrected=rms_cor,
+        groups=groups,
+        closure=per,
+        closure_overall=total,
+        floor=fl,
+        export=fit.export,
+        not_carried=fit.not_carried,
+        reference=str(prep.reference),
+        cutoff_hz=float(prep.settings.get("cutoff_hz") or float("nan")),
+        rms_validate={
+            "cutoff_hz": float(prep_own.settings.get("cutoff_hz") or float("nan")),
+            "nominal": _heldout_rms(plain, values.file, prep_own).tolist(),
+            "corrected": _heldout_rms(plain, values.fixed, prep_own).tolist(),
+        },
+        pull={
+            "reference_weight": fit.weight,
+            "mahalanobis": float(params.projection.get("mahalanobis", 0.0)),
+        },
+    )
+
+
+@dataclass(frozen=True)
+class _Fit:
+    """The corrected simulator parameters, the pull's weight, the file written (or None) and what it leaves out."""
+
+    params: Any
+    weight: float
+    export: Any
+    not_carried: list[dict[str, Any]]
+
+
+def _fit_and_write(path: Path, fmt: str, robot, train: Dataset, heldout: Dataset, out) -> _Fit:
+    """Fit what the format carries on ``train``, pull it toward the file's bodies, and write it to ``out`` if given."""
+    model = _consistent_fit(robot, train, fmt)
     weight, params = _pulled(model, robot)
     export = None
     if out is not None:
@@ -220,8 +265,34 @@ def correct_description(
         )
         params = export.params
     not_carried = params.not_carried if export is None else export.not_carried
-    armature = params.armature if fmt == "mjcf" else np.zeros(n)
+    return _Fit(params=params, weight=weight, export=export, not_carried=not_carried)
 
+
+def _consistent_fit(robot, train: Dataset, fmt: str):
+    """The physically consistent fit of what the format carries, without its own standard set."""
+    from dynid.identify.model import identify
+
+    model = identify(robot, train, friction="linear", gmm="off", armature=fmt == "mjcf")
+    # The consistent fit's own standard set leaves what the data cannot see wherever its solver ended (the
+    # Panda's first link at 2800 kg); the closest consistent set pulled toward the file's bodies replaces it.
+    info = {k: v for k, v in model.info.items() if k != "consistency"}
+    return replace(model, info=info)
+
+
+@dataclass(frozen=True)
+class _GroupValues:
+    """Each group's values as the file holds them and corrected, and the file's and corrected extras."""
+
+    file: dict[str, Any]
+    fixed: dict[str, Any]
+    damping: NDArray[np.float64]
+    loss: NDArray[np.float64]
+    armature: NDArray[np.float64]
+
+
+def _group_values(path: Path, robot, params, fmt: str) -> _GroupValues:
+    """The file's values and the corrected ones per group (no armature corrected for a URDF)."""
+    armature = params.armature if fmt == "mjcf" else np.zeros(robot.n)
     damping0, loss0 = description_friction(path, robot.joint_names)
     file_values = {
         "link bodies": np.asarray(robot.params, dtype=float),
@@ -233,60 +304,44 @@ def correct_description(
         "armature": armature,
         "friction": (params.frictionloss, params.damping),
     }
-    prep = nominal.prepare(heldout)
-    # what 'dynid validate --model FILE --data heldout' reports: the cut-off chosen on the held-out data
-    prep_own = description_model(path, heldout).prepare(heldout)
-    plain = column_set(robot.with_transmission(None), friction=True, armature=True)
-    zeros = np.zeros(n)
+    return _GroupValues(file=file_values, fixed=fixed, damping=damping0, loss=loss0, armature=armature)
 
-    def rms(values: dict[str, Any], prep=prep) -> NDArray[np.float64]:
-        loss, damp = values["friction"]
-        phi = np.concatenate([values["link bodies"], values["armature"], loss, damp, zeros])
-        tau = linear_torque(plain, plain.P @ phi, prep.q, prep.dq, prep.ddq)
-        return np.sqrt(np.mean((prep.tau_reference - prep.filter(tau)[prep.rows]) ** 2, axis=0))
 
-    fl = np.zeros(n) if floor is None else np.asarray(floor, dtype=float)
-    rms_nom = rms(file_values)
-    rms_cor = rms(fixed)
+def _heldout_rms(plain, values: dict[str, Any], prep) -> NDArray[np.float64]:
+    """Torque RMS per joint of the model with these group values against the prepared reference torque."""
+    loss, damp = values["friction"]
+    phi = np.concatenate([values["link bodies"], values["armature"], loss, damp, np.zeros(plain.n)])
+    tau = linear_torque(plain, plain.P @ phi, prep.q, prep.dq, prep.ddq)
+    return np.sqrt(np.mean((prep.tau_reference - prep.filter(tau)[prep.rows]) ** 2, axis=0))
 
-    def closure(r: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]:
-        gap = rms_nom**2 - fl**2
-        with np.errstate(divide="ignore", invalid="ignore"):
-            per = np.where(gap > 0.05 * np.maximum(fl**2, 1e-300), (rms_nom**2 - r**2) / gap, np.nan)
-        scale = 1.0 / np.maximum(fl, 1e-12) ** 2 if np.all(fl > 0) else 1.0 / np.maximum(rms_nom, 1e-12) ** 2
-        den = float(np.sum(np.maximum(rms_nom**2 - fl**2, 0.0) * scale))
-        total = float(np.sum((rms_nom**2 - r**2) * scale)) / den if den > 0 else float("nan")
-        return per, total
 
+def _closure(
+    r: NDArray[np.float64], rms_nom: NDArray[np.float64], fl: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], float]:
+    """Share of the nominal model's gap to the floor that RMS ``r`` closes: per joint and over all joints."""
+    gap = rms_nom**2 - fl**2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        per = np.where(gap > 0.05 * np.maximum(fl**2, 1e-300), (rms_nom**2 - r**2) / gap, np.nan)
+    scale = 1.0 / np.maximum(fl, 1e-12) ** 2 if np.all(fl > 0) else 1.0 / np.maximum(rms_nom, 1e-12) ** 2
+    den = float(np.sum(np.maximum(rms_nom**2 - fl**2, 0.0) * scale))
+    total = float(np.sum((rms_nom**2 - r**2) * scale)) / den if den > 0 else float("nan")
+    return per, total
+
+
+def _group_breakdown(
+    plain, prep, values: _GroupValues, fmt: str, rms_nom: NDArray[np.float64], fl: NDArray[np.float64]
+) -> list[dict[str, Any]]:
+    """The held-out RMS and overall closure with each group alone corrected, in :data:`GROUPS` order."""
     groups = []
     for g in GROUPS:
-        values = dict(file_values)
-        values[g] = fixed[g]
-        r = rms(values)
+        mixed = dict(values.file)
+        mixed[g] = values.fixed[g]
+        r = _heldout_rms(plain, mixed, prep)
         applies = not (g == "armature" and fmt == "urdf")
-        groups.append({"group": g, "rms": r.tolist(), "closure": closure(r)[1], "applies": applies})
-    per, total = closure(rms_cor)
-    return Correction(
-        format=fmt,
-        nominal=_values(robot.params, robot.armature, damping0, loss0, n),
-        corrected=_values(params.standard, armature, params.damping, params.frictionloss, n),
-        rms_nominal=rms_nom,
-        rms_corrected=rms_cor,
-        groups=groups,
-        closure=per,
-        closure_overall=total,
-        floor=fl,
-        export=export,
-        not_carried=not_carried,
-        reference=str(prep.reference),
-        cutoff_hz=float(prep.settings.get("cutoff_hz") or float("nan")),
-        rms_validate={
-            "cutoff_hz": float(prep_own.settings.get("cutoff_hz") or float("nan")),
-            "nominal": rms(file_values, prep_own).tolist(),
-            "corrected": rms(fixed, prep_own).tolist(),
-        },
-        pull={"reference_weight": weight, "mahalanobis": float(params.projection.get("mahalanobis", 0.0))},
-    )
+        groups.append(
+            {"group": g, "rms": r.tolist(), "closure": _closure(r, rms_nom, fl)[1], "applies": applies}
+        )
+    return groups
 
 
 _PULLS = (1e-2, 1e-3, 1e-4, 0.0)

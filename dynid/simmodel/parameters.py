@@ -203,59 +203,111 @@ def simulator_parameters(
     kinds = np.array(cols.kinds)
     mask = np.isin(kinds, ("link", "armature"))
     x = np.asarray(model.params, dtype=np.float64)
+    bodies, note = _stored_bodies(model, mask, x)
+    if bodies is None:
+        bodies = _closest_bodies(model, ref, mask, x, reference_weight, note)
+    standard, armature = bodies.standard, bodies.armature
+    _check_physical(standard)
+    phi_full = np.concatenate([standard, armature, np.zeros(3 * n)])
+    identified = np.where(mask, cols.P @ phi_full, 0.0)
+
+    damping, loss, left = _friction(model, n)
+    not_carried = list(left) + _extras_not_carried(model, n)
+    return SimParameters(
+        standard=standard,
+        armature=armature,
+        damping=damping,
+        frictionloss=loss,
+        identified=identified,
+        source=bodies.source,
+        projection=bodies.projection,
+        unidentifiable=unidentifiable_directions(model),
+        not_carried=not_carried,
+    )
+
+
+@dataclass(frozen=True)
+class _Bodies:
+    """Consistent standard parameters and armature, where they come from, and how far they moved."""
+
+    standard: NDArray[np.float64]
+    armature: NDArray[np.float64]
+    source: str
+    projection: dict[str, Any]
+
+
+def _stored_bodies(
+    model: IdentifiedModel, mask: NDArray[np.bool_], x: NDArray[np.float64]
+) -> tuple[_Bodies | None, str | None]:
+    """The consistent fit's stored bodies if they reproduce the base parameters, else None and why (or no note)."""
+    cols = model.columns
+    n = cols.n
     cons = model.info.get("consistency") or {}
     stored = cons.get("standard_params")
-    note = None
-    standard = None
-    if stored is not None and len(stored) == 10 * n:
-        standard = np.asarray(stored, dtype=np.float64)
-        # the armature: alone where it has a column, else read back from the base parameter it was folded in
-        arm_cols = cols.P[mask][:, 10 * n : 11 * n]
-        resid = x[mask] - cols.P[mask][:, : 10 * n] @ standard
-        used = np.any(arm_cols != 0, axis=0)
-        armature = np.zeros(n)
-        if used.any():
-            armature[used] = np.linalg.lstsq(arm_cols[:, used], resid, rcond=None)[0]
-        armature = np.maximum(armature, 0.0)
-        phi = np.concatenate([standard, armature, np.zeros(3 * n)])
-        gap = float(np.abs(cols.P[mask] @ phi - x[mask]).max() / max(np.abs(x[mask]).max(), 1e-300))
-        if gap <= _STORED_TOLERANCE and is_consistent(standard).all():
-            source = "consistent fit"
-            projection = {"relative": 0.0, "mahalanobis": 0.0, "solver": cons.get("solver")}
-        else:
-            note = (
-                f"the model's stored standard parameters miss its base parameters by {gap:.2g} (relative); "
-                "the closest consistent set was computed instead"
-            )
-            standard = None
-    if standard is None:
-        sub = model.cov[np.ix_(mask, mask)]
-        R = _whitened_factor(sub)
-        phi, solver = consistent_solution(
-            ref, cols, x, R, 1.0, mask=mask, reference_weight=reference_weight
-        )
-        standard = phi[: 10 * n]
-        armature = np.maximum(phi[10 * n : 11 * n], 0.0)
-        x_c = cols.P[mask] @ phi
-        projection = {
-            "relative": float(np.linalg.norm(x_c - x[mask]) / max(np.linalg.norm(x[mask]), 1e-300)),
-            "mahalanobis": float(np.linalg.norm(R @ (x_c - x[mask]))),
-            "solver": solver,
-        }
-        source = "closest consistent set"
+    if stored is None or len(stored) != 10 * n:
+        return None, None
+    standard = np.asarray(stored, dtype=np.float64)
+    # the armature: alone where it has a column, else read back from the base parameter it was folded in
+    arm_cols = cols.P[mask][:, 10 * n : 11 * n]
+    resid = x[mask] - cols.P[mask][:, : 10 * n] @ standard
+    used = np.any(arm_cols != 0, axis=0)
+    armature = np.zeros(n)
+    if used.any():
+        armature[used] = np.linalg.lstsq(arm_cols[:, used], resid, rcond=None)[0]
+    armature = np.maximum(armature, 0.0)
+    phi = np.concatenate([standard, armature, np.zeros(3 * n)])
+    gap = float(np.abs(cols.P[mask] @ phi - x[mask]).max() / max(np.abs(x[mask]).max(), 1e-300))
+    if gap <= _STORED_TOLERANCE and is_consistent(standard).all():
+        projection = {"relative": 0.0, "mahalanobis": 0.0, "solver": cons.get("solver")}
+        return _Bodies(standard, armature, "consistent fit", projection), None
+    note = (
+        f"the model's stored standard parameters miss its base parameters by {gap:.2g} (relative); "
+        "the closest consistent set was computed instead"
+    )
+    return None, note
+
+
+def _closest_bodies(
+    model: IdentifiedModel,
+    ref,
+    mask: NDArray[np.bool_],
+    x: NDArray[np.float64],
+    reference_weight: float,
+    note: str | None,
+) -> _Bodies:
+    """The consistent set closest to the identified parameters (Mahalanobis), pulled toward ``ref``'s bodies."""
+    cols = model.columns
+    n = cols.n
+    sub = model.cov[np.ix_(mask, mask)]
+    R = _whitened_factor(sub)
+    phi, solver = consistent_solution(ref, cols, x, R, 1.0, mask=mask, reference_weight=reference_weight)
+    standard = phi[: 10 * n]
+    armature = np.maximum(phi[10 * n : 11 * n], 0.0)
+    x_c = cols.P[mask] @ phi
+    projection = {
+        "relative": float(np.linalg.norm(x_c - x[mask]) / max(np.linalg.norm(x[mask]), 1e-300)),
+        "mahalanobis": float(np.linalg.norm(R @ (x_c - x[mask]))),
+        "solver": solver,
+    }
     if note is not None:
         projection["note"] = note
+    return _Bodies(standard, armature, "closest consistent set", projection)
+
+
+def _check_physical(standard: NDArray[np.float64]) -> None:
+    """Raise :class:`ModelFileError` naming the links whose standard parameters are no physical body."""
     if not is_consistent(standard).all():
         bad = ", ".join(str(j + 1) for j in np.flatnonzero(~is_consistent(standard)))
         raise ModelFileError(
             f"the standard parameters of link(s) {bad} are not a physical body; identify again with "
             "--method consistent"
         )
-    phi_full = np.concatenate([standard, armature, np.zeros(3 * n)])
-    identified = np.where(mask, cols.P @ phi_full, 0.0)
 
-    damping, loss, left = _friction(model, n)
-    not_carried = list(left)
+
+def _extras_not_carried(model: IdentifiedModel, n: int) -> list[dict[str, Any]]:
+    """What beyond friction a simulator leaves out: the mixture correction, effect terms, a coupled transmission."""
+    cols = model.columns
+    not_carried: list[dict[str, Any]] = []
     if model.gmr is not None and np.any(model.gmr.active_):
         joints = [j + 1 for j in range(n) if model.gmr.active_[j]]
         not_carried.append(
@@ -272,8 +324,8 @@ def simulator_parameters(
                     "detail": f"the identified {term.effect} term",
                 }
             )
-    if getattr(robot, "transmission", None) is not None:
-        T = np.asarray(robot.transmission)
+    if getattr(model.robot, "transmission", None) is not None:
+        T = np.asarray(model.robot.transmission)
         coupled = [i + 1 for i in range(n) if np.count_nonzero(T[i]) > 1]
         not_carried.append(
             {
@@ -283,14 +335,4 @@ def simulator_parameters(
                 "its own joint only; the cross terms are left out",
             }
         )
-    return SimParameters(
-        standard=standard,
-        armature=armature,
-        damping=damping,
-        frictionloss=loss,
-        identified=identified,
-        source=source,
-        projection=projection,
-        unidentifiable=unidentifiable_directions(model),
-        not_carried=not_carried,
-    )
+    return not_carried
