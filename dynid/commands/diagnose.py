@@ -5,6 +5,8 @@ shrinks the gap.  A simulator's description (URDF, MuJoCo .xml) is diagnosed as 
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass
+from typing import Any
 
 from dynid.commands.common import (
     add_degrees_argument,
@@ -75,19 +77,75 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from dynid._progress import say
-    from dynid.diagnosis.candidates import effect_names
     from dynid.diagnosis.core import diagnose
-    from dynid.diagnosis.report import write_diagnosis_report
-    from dynid.exceptions import UsageError
-    from dynid.identify.model import load_model
-    from dynid.simmodel.nominal import description_model, is_description
-    from dynid.validation.html_page import check_report_path
+    from dynid.simmodel.nominal import is_description
 
     described = is_description(args.model)
+    options = _check_options(args, described)
+    inputs = _read_inputs(args, described)
+    _check_held_out(args, described, inputs)
+    model, train, heldout = inputs.model, inputs.train, inputs.heldout
+    result = diagnose(
+        model,
+        train,
+        heldout,
+        effects=options.effects,
+        period=args.period,
+        alpha=args.alpha,
+        max_effects=args.max_effects,
+    )
+    _print_diagnosis(model, result)
+    figures = result.to_dict()
+    _add_settling(args, model, heldout, result, figures)
+    context = _add_corrections(args, described, inputs, result, figures)
+    write_figures(args.json, figures)
+    if options.report is not None:
+        _write_report(args, options.report, model, result, figures, context)
+    return 0
+
+
+@dataclass(frozen=True)
+class _Options:
+    """The checked options: the report's path (None without --report) and the effects to consider."""
+
+    report: Any
+    effects: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class _Inputs:
+    """The model diagnosed, the robot the data are read with, the training and the held-out data."""
+
+    model: Any
+    robot: Any
+    train: Any
+    heldout: Any
+
+
+def _check_options(args, described: bool) -> _Options:
+    """Refuse bad options and outputs, before any file is read; the report's path and the effects chosen."""
+    from dynid.exceptions import UsageError
+    from dynid.validation.html_page import check_report_path
+
     report = check_report_path(args.report, pdf=False) if args.report else None
     if described and args.out:
         _check_description_out(args)
+    _check_output_files(args, described)
+    effects = _chosen_effects(args.effects)
+    if not 0 < args.alpha < 1:
+        raise UsageError(f"--alpha is {args.alpha}; give a probability between 0 and 1, e.g. 0.05.")
+    if args.max_effects < 0:
+        raise UsageError(
+            f"--max-effects is {args.max_effects}; give a whole number of at least 0 (default 3)."
+        )
+    check_period_option(args.period)
+    if same_file(args.heldout, args.data):
+        raise UsageError(_NOT_HELD_OUT.format(heldout=args.heldout, what="the same file as --data"))
+    return _Options(report=report, effects=effects)
+
+
+def _check_output_files(args, described: bool) -> None:
+    """Refuse --report, --json and --out paths of the wrong kind, or that would overwrite an input."""
     check_outputs(
         [
             output("report", args.report, (".html", ".htm")),
@@ -104,9 +162,16 @@ def run(args: argparse.Namespace) -> int:
         ],
         {"model": args.model, "data": args.data, "heldout": args.heldout, "robot": robot_file(args)},
     )
+
+
+def _chosen_effects(text: str | None) -> tuple[str, ...]:
+    """The effects named by --effects (default: the whole catalogue); a name with joints or a value is refused."""
+    from dynid.diagnosis.candidates import effect_names
+    from dynid.exceptions import UsageError
+
     effects = effect_names()
-    if args.effects:
-        effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
+    if text:
+        effects = tuple(e.strip() for e in text.split(",") if e.strip())
         placed = next((e for e in effects if "@" in e or ":" in e), None)
         if placed is not None:
             name = placed.split("@")[0].split(":")[0]
@@ -114,15 +179,16 @@ def run(args: argparse.Namespace) -> int:
                 f"--effects names the effect '{placed}' with joints or a value, but the diagnosis tests each "
                 f"candidate on every joint and tunes its values on the data; give the name alone: --effects {name}"
             )
-    if not 0 < args.alpha < 1:
-        raise UsageError(f"--alpha is {args.alpha}; give a probability between 0 and 1, e.g. 0.05.")
-    if args.max_effects < 0:
-        raise UsageError(
-            f"--max-effects is {args.max_effects}; give a whole number of at least 0 (default 3)."
-        )
-    check_period_option(args.period)
-    if same_file(args.heldout, args.data):
-        raise UsageError(_NOT_HELD_OUT.format(heldout=args.heldout, what="the same file as --data"))
+    return effects
+
+
+def _read_inputs(args, described: bool) -> _Inputs:
+    """Load the model (a description: its nominal model, seen through the training data's filter) and read
+    the training and held-out data with its robot."""
+    from dynid.exceptions import UsageError
+    from dynid.identify.model import load_model
+    from dynid.simmodel.nominal import description_model
+
     robot = None
     if args.robot is not None:
         if described:
@@ -145,10 +211,19 @@ def run(args: argparse.Namespace) -> int:
         robot = model.robot
         train = read_dataset(args.data, robot=robot, **read)
     heldout = read_dataset(args.heldout, robot=robot, option="heldout", **read)
+    return _Inputs(model=model, robot=robot, train=train, heldout=heldout)
+
+
+def _check_held_out(args, described: bool, inputs: _Inputs) -> None:
+    """Refuse data that do not fit the model, held-out data that are the training data, and a --period the
+    held-out motion does not repeat with."""
+    from dynid.exceptions import UsageError
+
+    model, train, heldout = inputs.model, inputs.train, inputs.heldout
     check_data_fits_model(model, train, model_path=args.model, data_option="data")
     check_data_fits_model(model, heldout, model_path=args.model, data_option="heldout")
     # data of another joint count are refused by the diagnosis itself, naming both counts
-    if train.n == heldout.n == robot.n:
+    if train.n == heldout.n == inputs.robot.n:
         if _same_data(train, heldout):
             raise UsageError(_NOT_HELD_OUT.format(heldout=args.heldout, what="the same data as --data"))
         if not described and is_training_data(model, heldout):
@@ -161,15 +236,10 @@ def run(args: argparse.Namespace) -> int:
         from dynid.data.periodic import check_period
 
         check_period(heldout.t, heldout.q, args.period, source=Path(args.heldout).name)
-    result = diagnose(
-        model,
-        train,
-        heldout,
-        effects=effects,
-        period=args.period,
-        alpha=args.alpha,
-        max_effects=args.max_effects,
-    )
+
+
+def _print_diagnosis(model, result) -> None:
+    """Print the verdict, the summary and each joint's excess error and closure."""
     print(f"verdict: {', '.join(result.verdict)}")
     print(result.summary())
     dec = result.decomposition
@@ -177,44 +247,59 @@ def run(args: argparse.Namespace) -> int:
     for j in range(model.robot.n):
         c = dec["closure"][j]
         print(f"{j + 1:>5}  {result.excess['ratio'][j]:6.2f}  {'-' if c != c else f'{c:6.2f}'}")
-    figures = result.to_dict()
+
+
+def _add_settling(args, model, heldout, result, figures: dict) -> None:
+    """Print the commands that would settle a provisional verdict, and add them to the figures."""
     settle = _settling_commands(args, model, heldout, result)
     if settle:
         figures["settle"] = settle
         print(settle["reason"] + " To settle it, record it like this:")
         for line in settle["commands"]:
             print("  " + line)
+
+
+def _add_corrections(args, described: bool, inputs: _Inputs, result, figures: dict) -> dict:
+    """The description corrected from the data, or with --out the model refitted with the accepted effects:
+    added to the figures; the report's context lines that name what was written."""
+    from dynid._progress import say
+
     context = {}
     if described:
-        figures["correction"] = _correct_description(args, result, train, heldout)
+        figures["correction"] = _correct_description(args, result, inputs.train, inputs.heldout)
         if args.out and figures["correction"].get("out"):
             context["corrected description"] = f"{args.out} (held-out RMS per joint in the JSON figures)"
     elif args.out:
         say(f"refitting the model with the accepted effects for {args.out}")
-        refit = _write_refit(model, train, heldout, result, args.out)
+        refit = _write_refit(inputs.model, inputs.train, inputs.heldout, result, args.out)
         figures["refit"] = refit
         if refit.get("written"):
             context["refitted model"] = (
                 f"{args.out} with {', '.join(refit['effects'])} (held-out RMS per joint below)"
             )
-    write_figures(args.json, figures)
-    if report is not None:
-        say("drawing the report")
-        write_diagnosis_report(
-            result,
-            report,
-            context={
-                "model": args.model,
-                "training data": args.data,
-                "held-out data": args.heldout,
-                "robot": model.robot.name,
-                **context,
-            },
-            refit=figures.get("refit"),
-            settle=figures.get("settle"),
-        )
-        print(f"report written to {report}")
-    return 0
+    return context
+
+
+def _write_report(args, report, model, result, figures: dict, context: dict) -> None:
+    """Draw and write the HTML report."""
+    from dynid._progress import say
+    from dynid.diagnosis.report import write_diagnosis_report
+
+    say("drawing the report")
+    write_diagnosis_report(
+        result,
+        report,
+        context={
+            "model": args.model,
+            "training data": args.data,
+            "held-out data": args.heldout,
+            "robot": model.robot.name,
+            **context,
+        },
+        refit=figures.get("refit"),
+        settle=figures.get("settle"),
+    )
+    print(f"report written to {report}")
 
 
 _NOT_HELD_OUT = (

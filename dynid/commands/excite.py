@@ -229,13 +229,32 @@ def _check_csv_options(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import numpy as np
-
-    from dynid.optim.approach import check_pose, executable_trajectory
-    from dynid.optim.excitation import CartesianLimits, ExcitationProblem, check_harmonics, design_excitation
+    from dynid.optim.approach import check_pose
 
     out = Path(args.out)
     csv = None if args.csv is None else Path(args.csv)
+    _check_options(args, out, csv)
+    robot = robot_from_args(args)
+    home = _floats("home", args.home, robot.n)
+    home = check_pose(robot, home) if home is not None else None  # before the long design
+    if args.payload:
+        return _run_payload(args, robot, out, csv, home)
+    problem = _problem(args, robot)
+    print(
+        f"{robot.name}: {args.criterion} criterion, {problem.harmonics} harmonics at {problem.base_freq:g} Hz, "
+        f"{args.trajectories} trajectory(ies), {problem.grid} grid points per period"
+    )
+    result = _design(args, problem)
+    sampled = _sampled(args, robot, result, csv, home)
+    paths = _write_design(args, out, csv, result, sampled)
+    _print_design(args, result, paths, csv, sampled)
+    return 0
+
+
+def _check_options(args: argparse.Namespace, out: Path, csv: Path | None) -> None:
+    """Refuse bad options and outputs, before the robot is loaded and the long design starts."""
+    from dynid.optim.excitation import check_harmonics
+
     if args.trajectories < 1:
         raise UsageError(f"--trajectories is {args.trajectories}; give at least 1.")
     check_outputs(
@@ -269,11 +288,12 @@ def run(args: argparse.Namespace) -> int:
         check_harmonics(args.harmonics, args.base_freq, rate=args.rate)
     if csv is not None:  # the CSV's options, before the long design
         _check_csv_options(args)
-    robot = robot_from_args(args)
-    home = _floats("home", args.home, robot.n)
-    home = check_pose(robot, home) if home is not None else None  # before the long design
-    if args.payload:
-        return _run_payload(args, robot, out, csv, home)
+
+
+def _problem(args: argparse.Namespace, robot):
+    """The excitation problem of the options: harmonics, criterion, grid, noise and the tool's Cartesian limits."""
+    from dynid.optim.excitation import CartesianLimits, ExcitationProblem
+
     box = _floats("box", args.box, 6)
     cartesian = None
     if args.z_min is not None or box is not None:
@@ -281,7 +301,7 @@ def run(args: argparse.Namespace) -> int:
             z_min=args.z_min, box_min=None if box is None else box[:3], box_max=None if box is None else box[3:]
         )
     noise = _floats("noise-std", args.noise_std)
-    problem = ExcitationProblem(
+    return ExcitationProblem(
         robot=robot,
         harmonics=args.harmonics,
         base_freq=args.base_freq,
@@ -290,10 +310,13 @@ def run(args: argparse.Namespace) -> int:
         noise_std=noise,
         cartesian=cartesian,
     )
-    print(
-        f"{robot.name}: {args.criterion} criterion, {problem.harmonics} harmonics at {problem.base_freq:g} Hz, "
-        f"{args.trajectories} trajectory(ies), {problem.grid} grid points per period"
-    )
+
+
+def _design(args: argparse.Namespace, problem):
+    """Design the trajectories, here (joblib) or on a Dask cluster with --scheduler."""
+    from dynid._progress import say
+    from dynid.optim.excitation import design_excitation
+
     options = {
         "trajectories": args.trajectories,
         "seed": args.seed,
@@ -304,45 +327,59 @@ def run(args: argparse.Namespace) -> int:
         "polish": args.polish,
         "progress": _show,
     }
-    from dynid._progress import say
-
     say(
         f"designing {args.trajectories} trajectory(ies) for {problem.robot.name} "
         f"({args.harmonics} harmonics, criterion {args.criterion})"
     )
     if args.scheduler:
-        import joblib
+        return _design_on_cluster(args, problem, options)
+    return design_excitation(
+        problem, n_jobs=2 if args.n_jobs is None else args.n_jobs, backend=args.backend, **options
+    )
 
-        from dynid._cluster import cluster_client
 
-        with cluster_client(args.scheduler) as client, joblib.parallel_config(backend="dask"):
-            threads = sum(client.nthreads().values())
-            print(f"  tries on the Dask cluster at {args.scheduler} ({threads} worker threads)", flush=True)
-            try:
-                result = design_excitation(problem, n_jobs=-1 if args.n_jobs is None else args.n_jobs, **options)
-            except (DynidError, KeyboardInterrupt):
-                raise
-            except Exception as exc:  # a worker lost, or one without dynid: the cluster's fault, not a bug here
-                raise UsageError(
-                    f"the Dask cluster at {args.scheduler} failed during the design ({type(exc).__name__}: {exc}); "
-                    "check that its workers run and have dynid installed, or run without --scheduler"
-                ) from None
-    else:
-        result = design_excitation(
-            problem, n_jobs=2 if args.n_jobs is None else args.n_jobs, backend=args.backend, **options
-        )
-    sampled = None
-    if csv is not None:  # built before anything is written: a failure leaves no file behind
-        sampled = executable_trajectory(
-            robot,
-            result.trajectories,
-            rate=args.rate,
-            home=home,
-            periods=args.periods,
-            rest=args.rest,
-            speed_fraction=args.speed_fraction,
-            jerk_factor=args.jerk_factor,
-        )
+def _design_on_cluster(args: argparse.Namespace, problem, options: dict):
+    """Design the trajectories with the tries on the Dask scheduler of --scheduler; its failure is a usage error."""
+    import joblib
+
+    from dynid._cluster import cluster_client
+    from dynid.optim.excitation import design_excitation
+
+    with cluster_client(args.scheduler) as client, joblib.parallel_config(backend="dask"):
+        threads = sum(client.nthreads().values())
+        print(f"  tries on the Dask cluster at {args.scheduler} ({threads} worker threads)", flush=True)
+        try:
+            return design_excitation(problem, n_jobs=-1 if args.n_jobs is None else args.n_jobs, **options)
+        except (DynidError, KeyboardInterrupt):
+            raise
+        except Exception as exc:  # a worker lost, or one without dynid: the cluster's fault, not a bug here
+            raise UsageError(
+                f"the Dask cluster at {args.scheduler} failed during the design ({type(exc).__name__}: {exc}); "
+                "check that its workers run and have dynid installed, or run without --scheduler"
+            ) from None
+
+
+def _sampled(args: argparse.Namespace, robot, result, csv: Path | None, home):
+    """The executable CSV's samples (None without --csv), built before anything is written: a failure
+    leaves no file behind."""
+    from dynid.optim.approach import executable_trajectory
+
+    if csv is None:
+        return None
+    return executable_trajectory(
+        robot,
+        result.trajectories,
+        rate=args.rate,
+        home=home,
+        periods=args.periods,
+        rest=args.rest,
+        speed_fraction=args.speed_fraction,
+        jerk_factor=args.jerk_factor,
+    )
+
+
+def _write_design(args: argparse.Namespace, out: Path, csv: Path | None, result, sampled) -> list[Path]:
+    """Write the trajectories, the CSV and the figures together; the trajectories' paths."""
     paths = output_paths(out, len(result.trajectories))
     figures = result.to_dict()
     figures["files"] = [str(p) for p in paths]
@@ -351,6 +388,13 @@ def run(args: argparse.Namespace) -> int:
     if sampled is not None:
         figures["csv"] = {"path": str(csv), "rate": args.rate, "segments": sampled.meta["segments"]}
     _write_outputs(list(zip(paths, result.trajectories, strict=True)), csv, sampled, args.json, figures)
+    return paths
+
+
+def _print_design(args: argparse.Namespace, result, paths: list[Path], csv: Path | None, sampled) -> None:
+    """Print the design's condition against the random baseline, and the files written."""
+    import numpy as np
+
     ratio = result.cond / result.baseline_cond
     print(
         f"cond {result.cond:.4g} (best of {args.baseline} random feasible: {result.baseline_cond:.4g}, ratio "
@@ -361,4 +405,3 @@ def run(args: argparse.Namespace) -> int:
     if sampled is not None:
         parts = ", ".join(f"{s['kind']} {s['duration']:.2f} s" for s in sampled.meta["segments"])
         print(f"wrote {csv}: {sampled.t.size} samples at {args.rate:g} Hz ({parts}); home {np.round(sampled.q[0], 3)}")
-    return 0

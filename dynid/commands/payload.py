@@ -79,13 +79,25 @@ def _num(value, fmt: str = "{:.4g}") -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    import dataclasses
+    from dynid.identify.model import load_model
 
-    from dynid._progress import say
-    from dynid.identify.model import load_model, save_model
-    from dynid.identify.payload import attach_payload, identify_payload
+    report_path = _check_options(args)
+    model = load_model(args.model)
+    loaded = _read(args, model, args.data, "data")
+    reference = None if args.reference is None else _read(args, model, args.reference, "reference")
+    result = _identify(args, model, loaded, reference)
+    figures = result.figures()
+    figures.update({"model": str(args.model), "data": str(args.data), "out": args.out, "report": args.report})
+    _print_header(args, model, figures)
+    _print_body(args, figures)
+    _print_fit(figures)
+    _write_outputs(args, model, result, figures, report_path)
+    return 0
+
+
+def _check_options(args: argparse.Namespace):
+    """Refuse a bad --report, --json or --out before any file is read; the report's path (None without one)."""
     from dynid.validation.html_page import check_report_path
-    from dynid.validation.payload_report import payload_report
 
     report_path = None if args.report is None else check_report_path(args.report, pdf=False)
     outs = [
@@ -106,16 +118,23 @@ def run(args: argparse.Namespace) -> int:
         outs,
         {"model": args.model, "data": args.data, "reference": args.reference},
     )
-    model = load_model(args.model)
+    return report_path
 
-    def read(path: str, option: str):
-        data = read_dataset(path, model.robot.n, robot_name=model.robot.name, degrees=args.degrees,
-                            topic=args.topic, joint_names=model.robot.joint_names)  # fmt: skip
-        check_data_fits_model(model, data, model_path=args.model, data_option=option)
-        return data
 
-    loaded = read(args.data, "data")
-    reference = None if args.reference is None else read(args.reference, "reference")
+def _read(args: argparse.Namespace, model, path: str, option: str):
+    """Read a run with the model's robot and refuse one that does not fit the model."""
+    data = read_dataset(path, model.robot.n, robot_name=model.robot.name, degrees=args.degrees,
+                        topic=args.topic, joint_names=model.robot.joint_names)  # fmt: skip
+    check_data_fits_model(model, data, model_path=args.model, data_option=option)
+    return data
+
+
+def _identify(args: argparse.Namespace, model, loaded, reference):
+    """Identify the payload on the loaded run (against the reference run, if any)."""
+    import dataclasses
+
+    from dynid.identify.payload import identify_payload
+
     result = identify_payload(
         model,
         loaded,
@@ -126,9 +145,11 @@ def run(args: argparse.Namespace) -> int:
     )
     if args.reference is not None:
         result = dataclasses.replace(result, reference=str(args.reference))
-    figures = result.figures()
-    figures.update({"model": str(args.model), "data": str(args.data), "out": args.out, "report": args.report})
+    return result
 
+
+def _print_header(args: argparse.Namespace, model, figures: dict) -> None:
+    """Print where the payload was identified, from which run and against which reference."""
     print(
         f"{model.robot.name}: payload at frame '{figures['frame']}' (link {figures['link']}) from {args.data}, "
         f"{figures['samples']} samples; "
@@ -138,6 +159,10 @@ def run(args: argparse.Namespace) -> int:
             else "the arm model's prediction as reference"
         )
     )
+
+
+def _print_body(args: argparse.Namespace, figures: dict) -> None:
+    """Print the payload's mass, centre of mass and inertia, with their standard deviations."""
     mass_line = f"mass {_num(figures['mass'])} kg +- {_num(figures['mass_std'], '{:.2g}')}"
     if args.mass is not None:
         mass_line = (
@@ -159,6 +184,10 @@ def run(args: argparse.Namespace) -> int:
                 for v, s in zip(row, srow, strict=True)
             )
         )
+
+
+def _print_fit(figures: dict) -> None:
+    """Print the drive gains (with --mass), the arm model's error on the loaded run and the notes."""
     gains = figures["drive_gains"]
     if gains is not None:
         print(
@@ -178,7 +207,14 @@ def run(args: argparse.Namespace) -> int:
     for note in figures["notes"]:
         print(f"  note: {note}")
 
-    # every output computed first, then written: the model pair, then the report and the figures together
+
+def _write_outputs(args: argparse.Namespace, model, result, figures: dict, report_path) -> None:
+    """Every output computed first, then written: the model pair, then the report and the figures together."""
+    from dynid._progress import say
+    from dynid.identify.model import save_model
+    from dynid.identify.payload import attach_payload
+    from dynid.validation.payload_report import payload_report
+
     writers = []
     if report_path is not None:
         say(f"drawing the report {report_path}")
@@ -200,4 +236,3 @@ def run(args: argparse.Namespace) -> int:
         write_together(writers)
         for path, _ in writers:
             print(f"wrote {path}")
-    return 0
