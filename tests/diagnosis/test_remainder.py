@@ -99,7 +99,7 @@ def test_on_a_spectral_floor_a_verdict_is_provisional_exactly_where_it_rests_on_
     floor enters there either).  A measured floor is never provisional."""
     from types import SimpleNamespace
 
-    from dynid.diagnosis.core import _provisional
+    from dynid.diagnosis.verdict import provisional_status as _provisional
 
     settings = SimpleNamespace(min_closure=0.5)
     mse = np.array([4.0, 10.0, 2.0])
