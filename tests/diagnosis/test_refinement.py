@@ -20,7 +20,10 @@ from dynid.diagnosis.fitting import losses, mse, predict
 from dynid.diagnosis.refinement import _LEADERS, KEPT, fitted_delay, refine, refine_leaders
 from dynid.diagnosis.result import RankedCandidate
 from dynid.diagnosis.screening import Context, Current, score
-from tests.diagnosis.test_selection import FS, SIGMA, X_TRUE, N, _base_columns, _side, _states
+from tests.diagnosis.synthetic_arm import FS, SIGMA, X_TRUE, N
+from tests.diagnosis.synthetic_arm import base_columns as _base_columns
+from tests.diagnosis.synthetic_arm import side as _side
+from tests.diagnosis.synthetic_arm import states as _states
 
 
 def _context(effect, *, seed=1, seconds=20.0):
@@ -98,8 +101,9 @@ def test_refine_recovers_a_long_delay_that_the_first_order_column_underestimates
     assert info["effective"]["d"] == pytest.approx(info["parameters"]["d"] * info["coefficient"])
     assert info["effective"]["d"] == pytest.approx(d, rel=0.05)
     assert abs(info["effective"]["d"] - d) < 0.5 * abs(first - d)  # the first order is 20 % short
-    assert fitted_delay(ctx, current.fit, replace(RankedCandidate(DELAY, 1.0, 1.0, 0.0), refit=info), C) == (
-        info["effective"]["d"]
+    assert (
+        fitted_delay(ctx, current.fit, replace(RankedCandidate(DELAY, 1.0, 1.0, 0.0), refit=info), C)
+        == (info["effective"]["d"])
     )
     # the columns returned are the refined candidate's, on both sides
     np.testing.assert_array_equal(C_tr, ctx.tr.columns(best))

@@ -17,61 +17,19 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from dynid.diagnosis.baseline import HeldOutBaseline, Side, refit_baseline
-from dynid.diagnosis.candidates import Candidate, FeatureSource, enumerate_candidates
+from dynid.diagnosis.baseline import HeldOutBaseline, refit_baseline
+from dynid.diagnosis.candidates import Candidate, enumerate_candidates
 from dynid.diagnosis.fitting import losses, mse, predict
 from dynid.diagnosis.result import RankedCandidate
 from dynid.diagnosis.screening import TRAINING, Context, Scored
 from dynid.diagnosis.selection import _acceptable, _choose, _shown_accepted, select
 from dynid.diagnosis.settings import DiagnosisSettings
+from tests.diagnosis.synthetic_arm import FS, SIGMA, X_TRUE, N
+from tests.diagnosis.synthetic_arm import base_columns as _base_columns
+from tests.diagnosis.synthetic_arm import side as _side
+from tests.diagnosis.synthetic_arm import states as _states
 
-FS = 200.0
-N = 2
-SIGMA = 0.05
-X_TRUE = np.array([0.8, 1.5, 0.6, 4.0, 0.4, 0.9, 0.3, 2.0])
 EFFECTS = ("offset", "stribeck", "nonlinear_viscous", "delay")
-
-
-# ---------------------------------------------------------------------------- a synthetic arm
-def _states(t, phase):
-    w = np.array([[0.5, 0.9], [1.3, 0.7], [2.1, 1.7]])
-    a = np.array([[0.6, 0.5], [0.3, 0.4], [0.15, 0.2]])
-    arg = w[None] * t[:, None, None] + (np.array([[0.0, 1.0], [0.4, 2.0], [1.1, 0.3]]) + phase)[None]
-    return (
-        np.sum(a * np.sin(arg), axis=1),
-        np.sum(a * w * np.cos(arg), axis=1),
-        -np.sum(a * w**2 * np.sin(arg), axis=1),
-    )
-
-
-def _base_columns(q, dq, ddq):
-    X = np.zeros((q.shape[0], N, 4 * N))
-    for j in range(N):
-        X[:, j, 4 * j : 4 * j + 4] = np.stack(
-            [ddq[:, j], np.tanh(dq[:, j] / 0.01), dq[:, j], np.sin(q[:, j])], axis=1
-        )
-    return X
-
-
-class _Prep(SimpleNamespace):
-    def filter(self, A):  # no filter: the columns are exact
-        return A
-
-
-def _side(t, q, dq, ddq, y, x) -> Side:
-    X = _base_columns(q, dq, ddq)
-    src = FeatureSource(
-        t=t,
-        q=q,
-        dq=dq,
-        ddq=ddq,
-        tau_pred=np.einsum("mnk,k->mn", X, x),
-        robot=None,
-        fs=FS,
-        runs=[slice(0, len(t))],
-        torque_at=lambda q2, dq2, ddq2: np.einsum("mnk,k->mn", _base_columns(q2, dq2, ddq2), x),
-    )
-    return Side(prep=_Prep(t=t), rows=np.arange(len(t)), y=y, X0=X, moving=np.ones_like(y), src=src)
 
 
 def _stribeck(j, size, vs):
@@ -194,7 +152,9 @@ def test_a_candidate_must_close_half_the_gap_where_its_joint_shows_no_significan
 
 
 # ---------------------------------------------------------------------------- helpers
-def _scored(effect, joint, *, closure=0.9, significant=True, n_columns=1, gain_all=1.0, loss=None, refit=None):
+def _scored(
+    effect, joint, *, closure=0.9, significant=True, n_columns=1, gain_all=1.0, loss=None, refit=None
+):
     cand = Candidate(effect, joint, (joint,), {}, f"{effect} on joint {joint + 1}")
     loss = np.zeros((400, N)) if loss is None else loss
     rc = RankedCandidate(
