@@ -86,7 +86,6 @@ IMPORTED_BY = {
 }
 
 PART_OF = {
-    "dynid.diagnosis.verdict": "dynid.diagnosis.core",
     "dynid.identify.effect_builders": "dynid.identify.effect_terms",
     "dynid.identify.friction_base": "dynid.identify.friction",
     "dynid.identify.friction_fitting": "dynid.identify.friction",

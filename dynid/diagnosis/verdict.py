@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynid.diagnosis import baseline as bl
+from dynid.diagnosis.candidates import excitation_hint
 from dynid.diagnosis.consistency import Consistency
 from dynid.diagnosis.lack_of_fit import LackOfFit
 from dynid.diagnosis.refinement import fitted_delay
@@ -32,6 +33,7 @@ __all__ = [
     "lack_of_fit_notes",
     "provisional_status",
     "remainder_notes",
+    "small_candidate_notes",
     "undecided_candidates",
     "verdict_and_notes",
 ]
@@ -158,6 +160,7 @@ def verdict_and_notes(
             )
     else:
         verdict = ["none"]
+        notes.extend(small_candidate_notes(sel, excess, settings))
         _, high = noise.std_interval(0.95)
         reach = np.square(high / np.maximum(noise.std, 1e-300))
         if np.isfinite(reach).any():
@@ -179,6 +182,31 @@ def verdict_and_notes(
         )
     notes.extend(confound_note(a) for a in sel.accepted if a.confounded_with)
     return verdict, notes
+
+
+def small_candidate_notes(sel: Selection, excess: dict[str, Any], settings: DiagnosisSettings) -> list[str]:
+    """Under a "none" verdict: the candidates significant on their own that close too little to be named.
+
+    A candidate can lower the held-out error beyond chance and still close less of its joints' gap than
+    a cause must (``min_closure``, and half where no joint's excess is significant): a verdict of none
+    beside a significant finding says why it is not named, and which motion would show it larger.
+    """
+    significant_joint = np.asarray(excess["significant_joint"], dtype=bool)
+    notes = []
+    for r in [r for r in sel.ranking if r.significant and not r.accepted][:UNDECIDED_SHOWN]:
+        joints = list(r.candidate.scored or range(significant_joint.size))
+        on_significant = bool(significant_joint[joints].any())
+        need = settings.min_closure if on_significant else max(settings.min_closure, 0.5)
+        notes.append(
+            f"{r.candidate.label} lowers the held-out error beyond chance (adjusted p = {r.p_holm:.2g}) but "
+            f"closes {100 * max(r.closure, 0.0):.0f} % of the gap to the floor on its joints, less than the "
+            f"{100 * need:.0f} % a cause must close"
+            + ("" if on_significant else " where no joint's excess is significant")
+            + ": it is not named.  If it is there, a recording with "
+            + excitation_hint(r.candidate)
+            + " would show it larger."
+        )
+    return notes
 
 
 def provisional_status(
