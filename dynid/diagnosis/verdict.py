@@ -193,7 +193,7 @@ def small_candidate_notes(sel: Selection, excess: dict[str, Any], settings: Diag
     """
     significant_joint = np.asarray(excess["significant_joint"], dtype=bool)
     notes = []
-    for r in [r for r in sel.ranking if r.significant and not r.accepted][:UNDECIDED_SHOWN]:
+    for r in [r for r in sel.ranking if r.significant][:UNDECIDED_SHOWN]:
         joints = list(r.candidate.scored or range(significant_joint.size))
         on_significant = bool(significant_joint[joints].any())
         need = settings.min_closure if on_significant else max(settings.min_closure, 0.5)
