@@ -75,7 +75,8 @@ class ThreeLayerModel:
         pipeline chosen from the recording (:mod:`dynid.identify.pipeline`): among OLS or IRLS with linear
         friction, OLS with the paper's friction and the paper's IRLS + nonlinear friction + mixture, the
         simplest within 5 points of the one that predicts each half of the training recording from the
-        other best (none with a joint more than 5 % worse than OLS with linear friction);
+        other best (none with a joint more than 5 % worse than OLS with linear friction), with a drive
+        gain on the joints that earn one (:func:`dynid.identify.pipeline.choose_gains`);
         ``model_.info["pipeline"]`` records the choice and its reason.
     friction : str
         Friction model (layer 2): a name of :data:`~dynid.identify.registry.FRICTION_MODELS` (``none``,
@@ -322,6 +323,7 @@ class ThreeLayerModel:
             return self._fit_chosen_shared(data)
 
     def _fit_chosen_shared(self, data: Dataset) -> ThreeLayerModel:
+        from dynid.identify import pipeline as _pl
         from dynid.identify.pipeline import candidates, choose_pipeline, coarse_recording
 
         weight = self.reference_weight
@@ -359,10 +361,27 @@ class ThreeLayerModel:
             cv_data,
             candidates(self.friction, self.gmm),
         )
+        if not self.effects:  # a drive gain per joint where the halves show one (none beside the user's effects)
+            screen = build_system(self.robot, cv_data, preprocessing=cv_pre, friction=True, armature=self.armature)
+            joints = _pl.gain_screen(screen)
+            del screen
+            choice = _pl.choose_gains(
+                lambda m, f, g, e: self._with(
+                    method=m, friction=f, gmm=g, reference_weight=half, preprocessing=cv_pre, effects=e
+                ),
+                cv_data,
+                choice,
+                joints,
+            )
         say(f"pipeline: {choice.reason}")
         give_back()
         chosen = self._with(
-            method=choice.method, friction=choice.friction, gmm=choice.gmm, reference_weight=weight
+            method=choice.method,
+            friction=choice.friction,
+            gmm=choice.gmm,
+            # with drive gains the prior's strength is chosen again, on the system that holds them
+            reference_weight=self.reference_weight if choice.gains else weight,
+            effects=choice.effects if choice.gains else self.effects,
         ).fit(data)
         info = dict(chosen.model_.info)
         info["pipeline"] = choice.to_dict()

@@ -166,3 +166,57 @@ def test_a_candidate_a_half_could_not_support_is_out_quietly():
         warnings.simplefilter("error")  # no "Mean of empty slice" for the failed row
         choice = decide(opts, cv)
     assert (choice.method, choice.friction, choice.gmm) == ("irls", "linear", "off")
+
+
+def test_the_gain_screen_lists_the_joint_whose_torque_reads_high(ur5, linear_run):
+    """In-sample forward selection on the recording's system: the scaled joint alone, in either place;
+    nothing on the recording as it is, nor on the last joint, whose parameters no other joint sees (a
+    gain there is their scale: the link parameters take it whole)."""
+    from dynid.identify.linear_system import build_system
+    from dynid.identify.pipeline import gain_screen
+
+    def screen(ds):
+        return gain_screen(build_system(ur5, ds, friction=True, armature=True))
+
+    assert screen(linear_run) == []
+    assert screen(_scaled(linear_run, 1, 1.06)) == [1]
+    assert screen(_scaled(linear_run, 2, 0.94)) == [2]
+    assert screen(_scaled(_scaled(linear_run, 0, 1.08), 2, 0.94)) in ([0, 2], [2, 0])
+    from dynid.identify.estimators import ESTIMATORS
+
+    def fit_rms(ds):
+        system = build_system(ur5, ds, friction=True, armature=True)
+        return system.rms(ESTIMATORS["ols"](robot=ur5).fit(system).params_)
+
+    last = _scaled(linear_run, 5, 1.06)
+    assert 0.06 * np.std(linear_run.tau[:, 5]) > 3 * 0.05  # well above the noise, yet ...
+    # ... taken whole: what is left is the noise, scaled with the torque
+    np.testing.assert_allclose(fit_rms(last), fit_rms(linear_run) * [1, 1, 1, 1, 1, 1.06], rtol=2e-3)
+    assert screen(last) == []
+
+
+def _scaled(ds, joint: int, gain: float):
+    from dataclasses import replace
+
+    tau = ds.tau.copy()
+    tau[:, joint] *= gain
+    return replace(ds, tau=tau)
+
+
+def test_a_drive_gain_the_halves_show_is_identified_with_its_value(ur5, linear_run):
+    """Joint 3's torque read 6 % high (a torque constant off): the default finds it on the halves and
+    identifies it; the same recording unscaled gets no gain."""
+    model = identify(ur5, linear_run)
+    assert model.info["pipeline"]["drive_gains"] == [] and model.info["pipeline"]["drive_gain_cv_rms"] is None
+    scaled = identify(ur5, _scaled(linear_run, 2, 1.06))
+    pipe = scaled.info["pipeline"]
+    assert pipe["drive_gains"] == [3], pipe["reason"]
+    assert "a drive gain (measured torque a constant times the model's) on joint(s) 3" in pipe["reason"]
+    pick = [tuple(c) for c in pipe["candidates"]].index((pipe["method"], pipe["friction"], pipe["gmm"]))
+    before, after = np.asarray(pipe["cv_rms"])[pick], np.asarray(pipe["drive_gain_cv_rms"])
+    assert after[2] < 0.5 * before[2] and np.all(after <= (1 + JOINT_TOLERANCE) * before)
+    g = scaled.params[list(scaled.columns.names).index("drive_gain@3.g")]
+    assert g == pytest.approx(0.06, abs=0.006)  # measured = (1 + g) x the first fit's torque
+    # the other joints keep the unscaled recording's link parameters: the gain took joint 3's share
+    nb = scaled.columns.n_base
+    np.testing.assert_allclose(scaled.params[:nb], model.params[:nb], rtol=0.05, atol=0.05 * np.abs(model.params[:nb]).max())
