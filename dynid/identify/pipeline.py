@@ -383,7 +383,9 @@ def choose_gains(make, data, choice: PipelineChoice, joints: list[int]) -> Pipel
     with stage(f"trying a drive gain on joint(s) {', '.join(str(j + 1) for j in joints)}", total=4):
         for attempt in range(2):
             effects = ",".join(f"drive_gain@{j + 1}" for j in joints)
-            mse = _cross_fit(lambda *s: make(*s, effects), halves, [setting], lambda k: advance(2 * attempt + k))
+            mse = _cross_fit(
+                lambda *s, e=effects: make(*s, e), halves, [setting], lambda k, a=attempt: advance(2 * a + k)
+            )
             after = np.sqrt(mse[0])
             if not np.all(np.isfinite(after)):
                 break

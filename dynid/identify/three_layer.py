@@ -323,8 +323,13 @@ class ThreeLayerModel:
             return self._fit_chosen_shared(data)
 
     def _fit_chosen_shared(self, data: Dataset) -> ThreeLayerModel:
-        from dynid.identify import pipeline as _pl
-        from dynid.identify.pipeline import candidates, choose_pipeline, coarse_recording
+        from dynid.identify.pipeline import (
+            candidates,
+            choose_gains,
+            choose_pipeline,
+            coarse_recording,
+            gain_screen,
+        )
 
         weight = self.reference_weight
         if weight == "auto" and self.physical and not self.effects and self.friction != "none":
@@ -363,9 +368,9 @@ class ThreeLayerModel:
         )
         if not self.effects:  # a drive gain per joint where the halves show one (none beside the user's effects)
             screen = build_system(self.robot, cv_data, preprocessing=cv_pre, friction=True, armature=self.armature)
-            joints = _pl.gain_screen(screen)
+            joints = gain_screen(screen)
             del screen
-            choice = _pl.choose_gains(
+            choice = choose_gains(
                 lambda m, f, g, e: self._with(
                     method=m, friction=f, gmm=g, reference_weight=half, preprocessing=cv_pre, effects=e
                 ),
