@@ -124,6 +124,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "names those held at 0)",
     )
     parser.add_argument(
+        "--no-drive-gains",
+        action="store_true",
+        help="give no joint a drive gain (default: a joint whose measured torque reads a constant factor off "
+        "the model's gets one when the recording's halves confirm it; a URDF cannot carry it)",
+    )
+    parser.add_argument(
         "--effects",
         metavar="NAME[@JOINTS],...",
         help="effects of the catalogue identified as model terms with the link parameters, e.g. "
@@ -248,6 +254,7 @@ def run(args: argparse.Namespace) -> int:
         gmm_mode=args.gmm_mode,
         physical=not args.unconstrained,
         effects=args.effects,
+        drive_gains=not args.no_drive_gains,
     )
     json_path, arrays_path = save_model(model, args.out)
     elapsed = time.perf_counter() - start

@@ -86,6 +86,7 @@ def identify(
     rounds: int = 2,
     physical: bool = True,
     effects: str | Sequence[Any] | None = None,
+    drive_gains: bool = True,
 ) -> IdentifiedModel:
     """Identify a robot's dynamic model from data in three layers (see :class:`ThreeLayerModel`).
 
@@ -118,6 +119,9 @@ def identify(
     effects : str or sequence, optional
         Effects of the catalogue added as identified terms (``"coupled_friction@5+6"``; see
         :class:`ThreeLayerModel`).
+    drive_gains : bool
+        With ``method="auto"``, a drive gain on the joints that earn one (default); False: none (a model
+        for a URDF, which cannot carry one).
 
     Returns
     -------
@@ -137,6 +141,7 @@ def identify(
             rounds=rounds,
             physical=physical,
             effects=effects,
+            drive_gains=drive_gains,
         )
         .fit(data)
         .model_

@@ -107,6 +107,11 @@ class ThreeLayerModel:
         Effects of the catalogue added as identified terms, ``"coupled_friction@5+6,stribeck@3"``
         (:func:`dynid.identify.effect_terms.parse_effect_terms`), refitted with the link parameters; their
         hyper-parameters, when not given, are tuned on the training data.
+    drive_gains : bool
+        With ``method="auto"`` and no ``effects``, a drive gain (``drive_gain@j``: the measured torque a
+        constant times the model's) on each joint whose gain the recording shows and its halves confirm
+        (:func:`dynid.identify.pipeline.choose_gains`; default).  False: none, for a model whose bodies
+        go into a description that cannot carry a gain (a URDF).
     physical : bool
         Keep armature, Coulomb and viscous coefficients non-negative (default; bounded-variable least
         squares on the same weighted system).  False: the unconstrained fit.  ``info["bounds"]`` names
@@ -135,6 +140,7 @@ class ThreeLayerModel:
         rounds: int = 2,
         physical: bool = True,
         effects: str | Sequence[Any] | None = None,
+        drive_gains: bool = True,
     ) -> None:
         self.robot = robot
         self.method = method
@@ -148,6 +154,7 @@ class ThreeLayerModel:
         self.rounds = rounds
         self.physical = physical
         self.effects = effects
+        self.drive_gains = drive_gains
 
     def __repr__(self) -> str:
         return (
@@ -366,7 +373,7 @@ class ThreeLayerModel:
             cv_data,
             candidates(self.friction, self.gmm),
         )
-        if not self.effects:  # a drive gain per joint where the halves show one (none beside the user's effects)
+        if self.drive_gains and not self.effects:  # a gain per joint where the halves show one
             screen = build_system(self.robot, cv_data, preprocessing=cv_pre, friction=True, armature=self.armature)
             joints = gain_screen(screen)
             del screen

@@ -272,7 +272,9 @@ def _consistent_fit(robot, train: Dataset, fmt: str):
     """The physically consistent fit of what the format carries, without its own standard set."""
     from dynid.identify.model import identify
 
-    model = identify(robot, train, friction="linear", gmm="off", armature=fmt == "mjcf")
+    # no drive gain: the corrected description carries the bodies, and a gain it cannot carry would leave
+    # them fitted to a torque the file does not predict
+    model = identify(robot, train, friction="linear", gmm="off", armature=fmt == "mjcf", drive_gains=False)
     # The consistent fit's own standard set leaves what the data cannot see wherever its solver ended (the
     # Panda's first link at 2800 kg); the closest consistent set pulled toward the file's bodies replaces it.
     info = {k: v for k, v in model.info.items() if k != "consistency"}

@@ -215,6 +215,8 @@ def test_a_drive_gain_the_halves_show_is_identified_with_its_value(ur5, linear_r
     pick = [tuple(c) for c in pipe["candidates"]].index((pipe["method"], pipe["friction"], pipe["gmm"]))
     before, after = np.asarray(pipe["cv_rms"])[pick], np.asarray(pipe["drive_gain_cv_rms"])
     assert after[2] < 0.5 * before[2] and np.all(after <= (1 + JOINT_TOLERANCE) * before)
+    off = identify(ur5, _scaled(linear_run, 2, 1.06), drive_gains=False)  # for a URDF: no gain
+    assert off.info["pipeline"]["drive_gains"] == [] and "drive_gain@3.g" not in off.columns.names
     g = scaled.params[list(scaled.columns.names).index("drive_gain@3.g")]
     assert g == pytest.approx(0.06, abs=0.006)  # measured = (1 + g) x the first fit's torque
     # the other joints keep the unscaled recording's link parameters: the gain took joint 3's share

@@ -173,6 +173,10 @@ def panda_defaults(shared_data):
 def test_panda_defaults_beat_the_published_model_with_physical_layers_that_stand_alone(panda_defaults):
     model, rms = panda_defaults
     assert np.all(rms["full"] < rms["ref"]), rms  # Gaz et al.'s URDF + Table I friction, all 7 joints
+    # joint 6 reads about 6 % above what any rigid body predicts (fitted on the whole recording too): the
+    # default gives it a drive gain, 0.089 -> 0.028 N m held out; the mean ratio 0.62 -> 0.53
+    assert model.info["pipeline"]["drive_gains"] == [6], model.info["pipeline"]["reason"]
+    assert rms["full"][5] < 0.4 * rms["ref"][5] and np.mean(rms["full"] / rms["ref"]) < 0.56, rms
     # link + friction alone: a good model by itself.  1.1x before the links were kept consistent; real
     # bodies cost joint 4 12 % held out (0.161 -> 0.180 N m against 0.161 unconstrained, whatever the
     # projection's metric, margin, friction bounds or pull toward the URDF), the price of a model a
