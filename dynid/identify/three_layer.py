@@ -457,6 +457,18 @@ class ThreeLayerModel:
         else:
             terms = parse_effect_terms(spec, self.robot.n)
         names = {t.effect for t in terms}
+        R = getattr(self.robot, "transmission", None)
+        for t in terms:
+            if t.effect == "coupled_friction" and R is not None and t.joints is not None:
+                pair = set(t.joints)
+                for i, row in enumerate(np.asarray(R, dtype=np.float64)):
+                    if set(np.flatnonzero(np.abs(row) > 1e-12).tolist()) == pair:
+                        a, b = sorted(pair)
+                        raise UsageError(
+                            f"the effect '{t.key}' is the friction of motor {i + 1}, which the robot's transmission "
+                            f"already turns with joints {a + 1} and {b + 1} (its Coulomb and viscous friction are "
+                            "identified on that motor's speed); drop the effect, or identify without the transmission"
+                        )
         if "offset" in names and layer1_friction:
             raise UsageError(
                 "the effect 'offset' is identified already as the offset fo_j of the linear friction; drop it from "

@@ -130,6 +130,20 @@ def test_terms_the_model_identifies_anyway_are_refused(ur5, coupled) -> None:
         identify(ur5, train, method="ols", friction="linear", gmm="off", effects="offset@2")
 
 
+def test_a_coupled_friction_the_transmission_holds_already_is_refused(ur5, coupled) -> None:
+    """Motor 6 declared turning with joints 5 and 6: the effect would be its friction a second time (with
+    the paper's friction on the TX40 the pair predicted 26 and 57 N m held out on joints 5 and 6)."""
+    _, train, _, _ = coupled
+    R = np.eye(6)
+    R[5, 4] = 1.0  # motor 6 turns with q5 + q6
+    wrist = ur5.with_transmission(R)
+    with pytest.raises(UsageError, match="the friction of motor 6, which the robot's transmission already turns"):
+        identify(wrist, train, method="ols", friction="linear", gmm="off", effects="coupled_friction@5+6")
+    # a pair no motor couples stays allowed
+    model = identify(wrist, train, method="ols", friction="linear", gmm="off", effects="coupled_friction@4+5")
+    assert [t.key for t in model.effects] == ["coupled_friction@4+5"]
+
+
 def test_a_term_that_needs_time_is_predicted_from_a_dataset(ur5, coupled) -> None:
     _, train, held, _ = coupled
     with warnings.catch_warnings():
