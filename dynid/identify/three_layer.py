@@ -21,7 +21,7 @@ from dynid._progress import say
 from dynid._threads import single_blas_thread
 from dynid.data.dataset import Dataset
 from dynid.data.preparation import Preprocessing
-from dynid.exceptions import UsageError
+from dynid.exceptions import DynidError, UsageError
 from dynid.identify.columns import ColumnSet, linear_torque
 from dynid.identify.consistent import ConsistentLS, consistent_projection
 from dynid.identify.effect_terms import (
@@ -374,9 +374,14 @@ class ThreeLayerModel:
             candidates(self.friction, self.gmm),
         )
         if self.drive_gains and not self.effects:  # a gain per joint where the halves show one
-            screen = build_system(self.robot, cv_data, preprocessing=cv_pre, friction=True, armature=self.armature)
-            joints = gain_screen(screen)
-            del screen
+            try:
+                joints = gain_screen(
+                    build_system(self.robot, cv_data, preprocessing=cv_pre, friction=True, armature=self.armature)
+                )
+            except DynidError:  # a recording whose system cannot be solved has no gain to screen
+                joints = []
+            forget_shared(cv_data)  # not held beside the halves' systems
+            give_back()
             choice = choose_gains(
                 lambda m, f, g, e: self._with(
                     method=m, friction=f, gmm=g, reference_weight=half, preprocessing=cv_pre, effects=e
