@@ -101,8 +101,9 @@ def run_arm(name: str, folder: Path) -> None:
         ratio = rms[0] / rms[1]
         pipe = json.loads((folder / f"{sc}_def.json").read_text())["pipeline"]
         mass = urdf_mass(str(folder / f"{sc}_def.urdf")) / urdf_mass(robot)
+        gains = "".join(f"+gain{j}" for j in pipe.get("drive_gains", []))
         print(
-            f"{name:6s} {sc}  {pipe['method']}+{pipe['friction']}+{pipe['gmm']:<5}  worst {ratio.max():5.2f} "
+            f"{name:6s} {sc}  {pipe['method']}+{pipe['friction']}+{pipe['gmm']:<5}{gains}  worst {ratio.max():5.2f} "
             f"(joint {int(ratio.argmax()) + 1})  ratios {' '.join(f'{r:.2f}' for r in ratio)}  "
             f"mass x{mass:.2f}  identify {t_def:.0f} s / {t_ols:.0f} s",
             flush=True,

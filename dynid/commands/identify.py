@@ -288,6 +288,12 @@ def run(args: argparse.Namespace) -> int:
         hyper = ", ".join(f"{k} {v:.4g}" for k, v in effect["hyper"].items() if k != "exact")
         coefs = ", ".join(f"{k} {v:.4g} +- {effect['std'][k]:.2g}" for k, v in effect["coefficients"].items())
         print(f"effect {effect['key']}{' (' + hyper + ')' if hyper else ''}: {coefs}")
+        if effect["name"] == "drive_gain" and "g" in effect["coefficients"]:
+            g = effect["coefficients"]["g"]
+            print(
+                f"  joint {effect['joint']} reads {1 + g:.3g} times the torque of a fit without the gain "
+                "(a torque sensor or constant off); a URDF cannot carry it (--no-drive-gains fits without it)"
+            )
     bounds = figures.get("bounds", {})
     if bounds.get("physical"):
         active = bounds.get("active", [])

@@ -222,3 +222,16 @@ def test_a_drive_gain_the_halves_show_is_identified_with_its_value(ur5, linear_r
     # the other joints keep the unscaled recording's link parameters: the gain took joint 3's share
     nb = scaled.columns.n_base
     np.testing.assert_allclose(scaled.params[:nb], model.params[:nb], rtol=0.05, atol=0.05 * np.abs(model.params[:nb]).max())
+
+
+def test_the_command_says_what_the_gain_means_and_how_to_fit_without_it(linear_run, tmp_path, capsys):
+    from dynid.cli import main
+    from dynid.data.files import save_dataset
+
+    save_dataset(_scaled(linear_run, 2, 1.06), tmp_path / "D.csv")
+    assert main(["identify", "--robot", "ur5", "--data", str(tmp_path / "D.csv"), "--out", str(tmp_path / "M.json")]) == 0
+    out = capsys.readouterr().out
+    assert "joint 3 reads 1.06 times the torque of a fit without the gain" in out and "--no-drive-gains" in out
+    assert main(["identify", "--robot", "ur5", "--data", str(tmp_path / "D.csv"), "--out", str(tmp_path / "N.json"),
+                 "--no-drive-gains"]) == 0  # fmt: skip
+    assert "reads" not in capsys.readouterr().out
