@@ -127,7 +127,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--no-drive-gains",
         action="store_true",
         help="give no joint a drive gain (default: a joint whose measured torque reads a constant factor off "
-        "the model's gets one when the recording's halves confirm it; a URDF cannot carry it)",
+        "the model's gets one when the recording's halves confirm it, unless --effects is given; a URDF "
+        "cannot carry it)",
     )
     parser.add_argument(
         "--effects",

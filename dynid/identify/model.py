@@ -120,8 +120,8 @@ def identify(
         Effects of the catalogue added as identified terms (``"coupled_friction@5+6"``; see
         :class:`ThreeLayerModel`).
     drive_gains : bool
-        With ``method="auto"``, a drive gain on the joints that earn one (default); False: none (a model
-        for a URDF, which cannot carry one).
+        With ``method="auto"`` and no ``effects``, a drive gain on the joints that earn one (default);
+        False: none (a model for a URDF, which cannot carry one).
 
     Returns
     -------

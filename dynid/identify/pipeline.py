@@ -115,7 +115,7 @@ class PipelineChoice:
     gains : tuple of int
         Joints (0-based) given a drive gain (:func:`choose_gains`; empty: none).
     gain_cv_rms : ndarray, shape (n,), or None
-        Cross-validated RMS per joint of the chosen pipeline with those gains (None: not tried).
+        Cross-validated RMS per joint of the chosen pipeline with those gains (None: no gain kept).
     """
 
     method: str
@@ -354,6 +354,7 @@ def choose_gains(make, data, choice: PipelineChoice, joints: list[int]) -> Pipel
     effects)``, the effect ``drive_gain@j``) on each half and scored on the other.  Gains that lower
     their joint's cross-validated RMS by :data:`GAIN_GAIN` are kept, refitted once more if some were
     dropped, and kept only when no joint ends more than :data:`JOINT_TOLERANCE` worse than without them.
+    Nothing is tried when the pipeline was not scored (a recording too short for two halves).
 
     Parameters
     ----------
@@ -373,13 +374,13 @@ def choose_gains(make, data, choice: PipelineChoice, joints: list[int]) -> Pipel
         kept; else ``choice`` (its reason saying which screened gains did not earn their place).
     """
     joints = list(joints)
-    if not joints:
-        return choice
     pick = choice.candidates.index((choice.method, choice.friction, choice.gmm))
     before = choice.cv_rms[pick]
+    if not joints or not np.all(np.isfinite(before) & (before > 0)):  # nothing screened, or nothing scored
+        return choice
     halves = _halves(data)
     setting = (choice.method, choice.friction, choice.gmm)
-    tried: list[int] = []
+    dropped: list[int] = []
     with stage(f"trying a drive gain on joint(s) {', '.join(str(j + 1) for j in joints)}", total=4):
         for attempt in range(2):
             effects = ",".join(f"drive_gain@{j + 1}" for j in joints)
@@ -388,29 +389,44 @@ def choose_gains(make, data, choice: PipelineChoice, joints: list[int]) -> Pipel
             )
             after = np.sqrt(mse[0])
             if not np.all(np.isfinite(after)):
-                break
+                return replace(
+                    choice,
+                    reason=f"{choice.reason}; a drive gain on joint(s) {_joints(joints)} could not be fitted on "
+                    "a half of the recording",
+                )
             earned = [j for j in joints if after[j] <= (1 - GAIN_GAIN) * before[j]]
             if earned == joints:
-                if np.all(after <= (1 + JOINT_TOLERANCE) * before):
-                    listed = ", ".join(f"{j + 1} ({100 * (1 - after[j] / before[j]):.0f} % lower)" for j in joints)
+                if not np.all(after <= (1 + JOINT_TOLERANCE) * before):
+                    worse = np.flatnonzero(after > (1 + JOINT_TOLERANCE) * before)
                     return replace(
                         choice,
-                        gains=tuple(joints),
-                        gain_cv_rms=after,
-                        reason=f"{choice.reason}; a drive gain (measured torque a constant times the model's) on "
-                        f"joint(s) {listed} on the halves, no joint {100 * JOINT_TOLERANCE:.0f} % worse",
+                        reason=f"{choice.reason}; a drive gain on joint(s) {_joints(joints)} would leave joint(s) "
+                        f"{_joints(worse)} more than {100 * JOINT_TOLERANCE:.0f} % worse on the halves",
                     )
-                break
-            tried = sorted(set(tried) | set(joints))
+                listed = ", ".join(f"{j + 1} ({100 * (1 - after[j] / before[j]):.0f} % lower)" for j in joints)
+                also = (
+                    f" (screened too, not {100 * GAIN_GAIN:.0f} % lower: joint(s) {_joints(dropped)})" if dropped else ""
+                )
+                return replace(
+                    choice,
+                    gains=tuple(joints),
+                    gain_cv_rms=after,
+                    reason=f"{choice.reason}; a drive gain (measured torque a constant times the model's) on "
+                    f"joint(s) {listed} on the halves, no joint {100 * JOINT_TOLERANCE:.0f} % worse{also}",
+                )
+            dropped = sorted(set(dropped) | (set(joints) - set(earned)))
             joints = earned
             if not joints:
                 break
-    tried = sorted(set(tried) | set(joints))
     return replace(
         choice,
-        reason=f"{choice.reason}; a drive gain on joint(s) {', '.join(str(j + 1) for j in tried)} did not lower "
-        f"its cross-validated error by {100 * GAIN_GAIN:.0f} % without another joint {100 * JOINT_TOLERANCE:.0f} % worse",
+        reason=f"{choice.reason}; a drive gain on joint(s) {_joints(dropped)} did not lower its cross-validated "
+        f"error by {100 * GAIN_GAIN:.0f} %",
     )
+
+
+def _joints(joints) -> str:
+    return ", ".join(str(int(j) + 1) for j in joints)
 
 
 def decide(

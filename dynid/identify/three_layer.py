@@ -380,8 +380,9 @@ class ThreeLayerModel:
                 )
             except DynidError:  # a recording whose system cannot be solved has no gain to screen
                 joints = []
-            forget_shared(cv_data)  # not held beside the halves' systems
-            give_back()
+            if joints:  # refits on the halves follow: the system is not held beside theirs
+                forget_shared(cv_data)
+                give_back()
             choice = choose_gains(
                 lambda m, f, g, e: self._with(
                     method=m, friction=f, gmm=g, reference_weight=half, preprocessing=cv_pre, effects=e
@@ -466,8 +467,11 @@ class ThreeLayerModel:
         for t in terms:
             if t.effect == "coupled_friction" and R is not None and t.joints is not None:
                 pair = set(t.joints)
+                a, b = t.joints
+                sign = t.hyper.get("sign")  # None: tuned on the data, either sign
                 for i, row in enumerate(np.asarray(R, dtype=np.float64)):
-                    if set(np.flatnonzero(np.abs(row) > 1e-12).tolist()) == pair:
+                    same = sign is None or np.sign(row[b] * row[a]) == np.sign(sign)
+                    if set(np.flatnonzero(np.abs(row) > 1e-12).tolist()) == pair and same:
                         a, b = sorted(pair)
                         raise UsageError(
                             f"the effect '{t.key}' is the friction of motor {i + 1}, which the robot's transmission "

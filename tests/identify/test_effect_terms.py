@@ -139,9 +139,11 @@ def test_a_coupled_friction_the_transmission_holds_already_is_refused(ur5, coupl
     wrist = ur5.with_transmission(R)
     with pytest.raises(UsageError, match="the friction of motor 6, which the robot's transmission already turns"):
         identify(wrist, train, method="ols", friction="linear", gmm="off", effects="coupled_friction@5+6")
-    # a pair no motor couples stays allowed
+    # a pair no motor couples, and the other sign of the coupled pair (q5 - q6, another speed), stay allowed
     model = identify(wrist, train, method="ols", friction="linear", gmm="off", effects="coupled_friction@4+5")
     assert [t.key for t in model.effects] == ["coupled_friction@4+5"]
+    other = identify(wrist, train, method="ols", friction="linear", gmm="off", effects="coupled_friction@5+6:sign=-1")
+    assert [t.hyper["sign"] for t in other.effects] == [-1.0]
 
 
 def test_a_term_that_needs_time_is_predicted_from_a_dataset(ur5, coupled) -> None:

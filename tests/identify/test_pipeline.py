@@ -61,6 +61,9 @@ def test_a_recording_too_short_for_two_halves_keeps_the_full_pipeline(ur5):
     assert short.duration < 4
     model = identify(ur5, short, gmm="off")
     assert model.info["pipeline"]["method"] == "irls" and "too short" in model.info["pipeline"]["reason"]
+    # nothing scored, so no gain tried either (even where the screen lists one) and none said to fail
+    scaled = identify(ur5, _scaled(short, 2, 1.06), gmm="off")
+    assert scaled.info["pipeline"]["drive_gains"] == [] and "drive gain" not in scaled.info["pipeline"]["reason"]
 
 
 @pytest.mark.slow
@@ -171,7 +174,7 @@ def test_a_candidate_a_half_could_not_support_is_out_quietly():
 def test_the_gain_screen_lists_the_joint_whose_torque_reads_high(ur5, linear_run):
     """In-sample forward selection on the recording's system: the scaled joint alone, in either place;
     nothing on the recording as it is, nor on the last joint, whose parameters no other joint sees (a
-    gain there is their scale: the link parameters take it whole)."""
+    gain there is almost wholly their scale: the link parameters take it)."""
     from dynid.identify.linear_system import build_system
     from dynid.identify.pipeline import gain_screen
 
@@ -221,7 +224,8 @@ def test_a_drive_gain_the_halves_show_is_identified_with_its_value(ur5, linear_r
     assert g == pytest.approx(0.06, abs=0.006)  # measured = (1 + g) x the first fit's torque
     # the other joints keep the unscaled recording's link parameters: the gain took joint 3's share
     nb = scaled.columns.n_base
-    np.testing.assert_allclose(scaled.params[:nb], model.params[:nb], rtol=0.05, atol=0.05 * np.abs(model.params[:nb]).max())
+    # (without the gain they move: 0.42 of this tolerance x 20, measured)
+    np.testing.assert_allclose(scaled.params[:nb], model.params[:nb], rtol=1e-2, atol=1e-3 * np.abs(model.params[:nb]).max())
 
 
 def test_the_command_says_what_the_gain_means_and_how_to_fit_without_it(linear_run, tmp_path, capsys):
