@@ -300,7 +300,9 @@ def gain_screen(system) -> list[int]:
     :data:`GAIN_SCREEN` fall of one joint's RMS would; at most ``n - 1`` (a gain on every joint is a
     scale of every parameter).  The link parameters are refitted with each gain, so a gain they can
     take over is not listed; one number on thousands of samples gains little from fitting it in-sample,
-    and the refit of :func:`choose_gains` on halves decides.
+    and the refit of :func:`choose_gains` on halves decides.  Gains on the other joints with every body
+    scaled fit exactly alike; where that set is as small (half the joints: on a two-joint arm, always),
+    the set whose link parameters keep the description's scale is listed.
 
     Parameters
     ----------
@@ -344,7 +346,29 @@ def gain_screen(system) -> list[int]:
         u = G_perp[:, j] / norms[j]
         r = r - u * (u @ r)
         G_perp = G_perp - np.outer(u, u @ G_perp)
+    if out and 2 * len(out) == n:  # the other joints' gains, every body scaled, fit alike: the description decides
+        out = _nearer_the_description(system, A, b, G, out)
     return out
+
+
+def _nearer_the_description(system, A, b, G, joints: list[int]) -> list[int]:
+    """Of gains on ``joints`` and on the other joints (the same fit, every body scaled), the set whose link
+    parameters keep the scale of the description's (base parameters projected on the description's)."""
+    cols = system.columns
+    n, nb = system.n, cols.n_base
+    phi = np.zeros(cols.P.shape[1])
+    phi[: 10 * n] = np.asarray(cols.robot.params, dtype=np.float64)
+    x_desc = (cols.P @ phi)[:nb]
+    if not np.any(x_desc):
+        return joints
+
+    def off_scale(js: list[int]) -> float:
+        x = np.linalg.lstsq(np.hstack([A, G[:, js]]), b, rcond=None)[0][:nb]
+        s = float(x @ x_desc / (x_desc @ x_desc))
+        return abs(np.log(abs(s))) if s != 0 else np.inf
+
+    others = [j for j in range(n) if j not in joints]
+    return others if off_scale(others) < off_scale(joints) else joints
 
 
 def choose_gains(make, data, choice: PipelineChoice, joints: list[int]) -> PipelineChoice:
@@ -380,43 +404,58 @@ def choose_gains(make, data, choice: PipelineChoice, joints: list[int]) -> Pipel
         return choice
     halves = _halves(data)
     setting = (choice.method, choice.friction, choice.gmm)
+    n = len(before)
     dropped: list[int] = []
-    with stage(f"trying a drive gain on joint(s) {', '.join(str(j + 1) for j in joints)}", total=4):
-        for attempt in range(2):
-            effects = ",".join(f"drive_gain@{j + 1}" for j in joints)
-            mse = _cross_fit(
-                lambda *s, e=effects: make(*s, e), halves, [setting], lambda k, a=attempt: advance(2 * a + k)
+    twin = ""
+
+    def scored(js: list[int], first: int) -> NDArray[np.float64]:
+        effects = ",".join(f"drive_gain@{j + 1}" for j in js)
+        mse = _cross_fit(lambda *s: make(*s, effects), halves, [setting], lambda k: advance(first + k))
+        return np.sqrt(mse[0])
+
+    with stage(f"trying a drive gain on joint(s) {_joints(joints)}", total=2):
+        after = scored(joints, 0)
+        gains = joints
+        if 2 * len(joints) == n:
+            # gains on these joints explain the torques exactly as the inverse gains on the others with every
+            # body scaled (a gain on every joint is a scale of every parameter): the screen took the set that
+            # keeps the description's scale
+            twin = (
+                f" (or, alike in the torques, joint(s) {_joints(j for j in range(n) if j not in joints)} with every "
+                "body scaled: the description's bodies decided)"
             )
-            after = np.sqrt(mse[0])
+        for attempt in range(2):
+            if attempt:
+                after, gains = scored(joints, 0), joints
             if not np.all(np.isfinite(after)):
                 return replace(
                     choice,
-                    reason=f"{choice.reason}; a drive gain on joint(s) {_joints(joints)} could not be fitted on "
+                    reason=f"{choice.reason}; a drive gain on joint(s) {_joints(gains)} could not be fitted on "
                     "a half of the recording",
                 )
-            earned = [j for j in joints if after[j] <= (1 - GAIN_GAIN) * before[j]]
+            earned = [j for j in joints if after[j] <= (1 - GAIN_GAIN) * before[j]]  # the screened joints' errors
             if earned == joints:
                 if not np.all(after <= (1 + JOINT_TOLERANCE) * before):
                     worse = np.flatnonzero(after > (1 + JOINT_TOLERANCE) * before)
                     return replace(
                         choice,
-                        reason=f"{choice.reason}; a drive gain on joint(s) {_joints(joints)} would leave joint(s) "
+                        reason=f"{choice.reason}; a drive gain on joint(s) {_joints(gains)} would leave joint(s) "
                         f"{_joints(worse)} more than {100 * JOINT_TOLERANCE:.0f} % worse on the halves",
                     )
-                listed = ", ".join(f"{j + 1} ({100 * (1 - after[j] / before[j]):.0f} % lower)" for j in joints)
+                listed = ", ".join(f"{j + 1} ({100 * (1 - after[j] / before[j]):.0f} % lower)" for j in gains)
                 also = (
                     f" (screened too, not {100 * GAIN_GAIN:.0f} % lower: joint(s) {_joints(dropped)})" if dropped else ""
                 )
                 return replace(
                     choice,
-                    gains=tuple(joints),
+                    gains=tuple(gains),
                     gain_cv_rms=after,
                     reason=f"{choice.reason}; a drive gain (measured torque a constant times the model's) on "
-                    f"joint(s) {listed} on the halves, no joint {100 * JOINT_TOLERANCE:.0f} % worse{also}",
+                    f"joint(s) {listed} on the halves, no joint {100 * JOINT_TOLERANCE:.0f} % worse{also}{twin}",
                 )
             dropped = sorted(set(dropped) | (set(joints) - set(earned)))
             joints = earned
-            if not joints:
+            if not joints or twin:  # a twin pair is kept whole or not at all
                 break
     return replace(
         choice,

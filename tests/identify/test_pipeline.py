@@ -239,3 +239,31 @@ def test_the_command_says_what_the_gain_means_and_how_to_fit_without_it(linear_r
     assert main(["identify", "--robot", "ur5", "--data", str(tmp_path / "D.csv"), "--out", str(tmp_path / "N.json"),
                  "--no-drive-gains"]) == 0  # fmt: skip
     assert "reads" not in capsys.readouterr().out
+
+
+def test_on_two_joints_the_gain_and_its_twin_are_both_tried_and_the_description_decides(tmp_path):
+    """On two joints a gain on one explains the torques exactly as the inverse gain on the other with every
+    body scaled: the screen cannot tell them apart (it listed whichever round-off favoured); both are
+    refitted on the halves, where the pull toward the description's bodies decides, and the reason says so."""
+    from dataclasses import replace as with_
+
+    from dynid.symbolic.robot import example_robot_data_dir, load_robot
+
+    text = (example_robot_data_dir() / "double_pendulum_description" / "urdf" / "double_pendulum.urdf").read_text()
+    text = text.replace('lower="0"', 'lower="-3.14"').replace('upper="0"', 'upper="3.14"')
+    text = text.replace('effort="0"', 'effort="5"').replace('velocity="0"', 'velocity="6"')
+    (tmp_path / "dp.urdf").write_text(text)
+    dp = load_robot(str(tmp_path / "dp.urdf"))
+    rng = np.random.default_rng(5)
+    cols = column_set(dp)
+    x = np.asarray(cols.P @ np.concatenate([dp.params, np.zeros(cols.P.shape[1] - dp.params.size)]))
+    run = synthetic_dataset(cols, x, random_fourier(dp, rng, periods=2), rate=200, rng=rng, noise=0.002)
+    for joint in (0, 1):
+        tau = run.tau.copy()
+        tau[:, joint] *= 0.9
+        model = identify(dp, with_(run, tau=tau))
+        pipe = model.info["pipeline"]
+        assert pipe["drive_gains"] == [joint + 1], pipe["reason"]
+        assert f"(or, alike in the torques, joint(s) {2 - joint} with every body scaled" in pipe["reason"]
+        g = model.params[list(model.columns.names).index(f"drive_gain@{joint + 1}.g")]
+        assert g == pytest.approx(-0.1, abs=0.01)
