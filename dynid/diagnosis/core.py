@@ -278,6 +278,7 @@ def _run(model, train: Dataset, heldout: Dataset, settings: DiagnosisSettings, r
     gmap = _heldout_gap_map(ho, held, noise, block, robot, sel)
     say("[6/6] the verdict")
     verdict, notes = verdict_and_notes(sel, gap.excess, gap.consistency, refit.lack, noise, base, settings, robot.joint_names)
+    notes = _held_by_the_model(model, sel) + notes
     measured = noise.method in MEASURED_FLOORS
     remainder = None
     if verdict == ["unexplained"] or not measured:
@@ -542,6 +543,24 @@ def _block_rows(ho: bl.Sample, block_seconds: float) -> int:
             f"too short for the tests on blocks of {block_seconds:g} s; give at least {8 * block_seconds:g} s."
         )
     return block
+
+
+def _held_by_the_model(model, sel: Selection) -> list[str]:
+    """A note for each accepted effect that the model carries already as an effect term.
+
+    The baseline refits the model's link and friction columns without its effect terms, which are then
+    screened like any other candidate: an accepted one is the model's own term at work, not a gap the
+    model leaves (a default identification gives a joint a drive gain, for one).
+    """
+    own = {t.key for t in getattr(model, "effects", ())} if model is not None else set()
+    held = [a.candidate.key for a in sel.accepted if a.candidate.key in own]
+    if not held:
+        return []
+    return [
+        f"The model carries {', '.join(held)} already as effect term(s): the diagnosis refits the model without "
+        "its effect terms and tests them as candidates like any other, so what is named there is what those "
+        "terms do, not a gap the model leaves."
+    ]
 
 
 def _in_model(structure: bl.ModelStructure) -> tuple[str, ...]:

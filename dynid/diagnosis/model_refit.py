@@ -272,7 +272,10 @@ def refit_with_effects(
         if cand.effect == "armature" and settings["armature"]:
             notes.append(f"{cand.key}: the model identifies the armature already")
             continue
-        if any(t.key == cand.key for t in [*terms, *new]):
+        if any(t.key == cand.key for t in terms):
+            notes.append(f"{cand.key}: the model carries it already (an effect term refitted with the links)")
+            continue
+        if any(t.key == cand.key for t in new):
             continue
         new.append(_as_term(effect, notes))
     measured = {getattr(e, "candidate", e).key for e in effects if _measured_delay(e) is not None}

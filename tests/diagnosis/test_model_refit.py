@@ -123,3 +123,28 @@ def test_an_effect_the_heldout_run_does_not_show_stays_out(ur5):
         notes
     )
     assert np.all(_rms(refitted, held) / before <= 1.0 + MAX_RISE)
+
+
+def test_an_effect_the_model_carries_already_is_said_so(ur5):
+    """A default model gives a joint a drive gain; the diagnosis screens the model's own effect terms like
+    any other candidate, so it can accept drive_gain@2 on such a model.  --out adds nothing then, and the
+    note and the diagnosis both say the model carries it (before: no note, and a verdict that read as a gap)."""
+    from types import SimpleNamespace
+
+    from dynid.diagnosis.core import _held_by_the_model
+
+    train, _ = _runs(ur5, 3, "drive_gain@2:1.5")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = identify(ur5, train, method="ols", friction="linear", gmm="off", effects="drive_gain@2")
+    (term,) = parse_effect_terms("drive_gain@2", ur5.n)
+    accepted = RankedCandidate(candidate=term, gain=1.0, closure=0.99, p_value=1e-9, accepted=True)
+    refitted, notes = refit_with_effects(model, train, [accepted])
+    assert refitted is model
+    assert notes == ["drive_gain@2: the model carries it already (an effect term refitted with the links)"]
+    said = _held_by_the_model(model, SimpleNamespace(accepted=[accepted]))
+    assert len(said) == 1 and said[0].startswith("The model carries drive_gain@2 already as effect term(s)")
+    other = RankedCandidate(candidate=parse_effect_terms("stribeck@3", ur5.n)[0], gain=1.0, closure=0.9,
+                            p_value=1e-9, accepted=True)  # fmt: skip
+    assert _held_by_the_model(model, SimpleNamespace(accepted=[other])) == []
+    assert _held_by_the_model(None, SimpleNamespace(accepted=[accepted])) == []
