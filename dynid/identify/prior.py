@@ -259,7 +259,8 @@ def choose_prior(robot, system, *, grid: tuple[float, ...] = GRID, tolerance: fl
         share[link] = float(np.clip(1.0 - post / prior_var, 0.0, 1.0))
     rule = (
         f"{FOLDS}-fold blocked cross-validation on the training recording: the strongest pull whose mean "
-        f"relative fold error is within {100 * tolerance:g} % of the best (weight {w:g} of {len(grid)} tried)"
+        f"relative fold error is within {100 * tolerance:g} % of the best (weight {w:g}; {len(grid)} weights tried, "
+        f"{', '.join(f'{g:g}' for g in grid)})"
     )
     return PriorChoice(
         weight=w,
