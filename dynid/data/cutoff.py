@@ -22,15 +22,35 @@ SIGNAL_DB = 30.0
 """How far (dB) above its high-frequency noise floor a spectrum counts as signal in :func:`choose_cutoff`."""
 
 
-def _signal_edge(x: NDArray[np.float64], fs: float) -> tuple[float, float]:
-    """Median over columns of the highest frequency (Hz) at which the spectrum of ``x`` stands
-    :data:`SIGNAL_DB` above its noise floor (the median of the upper half of the band), and the
-    frequency below which 99.9 % of its power lies."""
+def _spectrum(x: NDArray[np.float64], fs: float, runs: list[slice] | None = None):
+    """Welch power spectrum of each column of ``x``, run by run (the runs' spectra averaged by length).
+
+    A recording joined from runs jumps where they meet; a spectrum across the join reads that step as
+    broadband motion (a 10 s run joined to another: a "bandwidth" of 297 Hz, the cut-off at its cap).
+    """
     from scipy.signal import welch
 
-    m = len(x)
-    nper = int(max(16, min(m // 4, round(2.0 * fs))))
-    f, P = welch(x, fs=fs, nperseg=nper, axis=0, detrend="linear")
+    runs = [slice(0, len(x))] if not runs else list(runs)
+    longest = max(r.stop - r.start for r in runs)
+    nper = int(max(16, min(longest // 4, round(2.0 * fs))))
+    usable = [r for r in runs if r.stop - r.start >= nper] or [max(runs, key=lambda r: r.stop - r.start)]
+    if len(usable) == 1:
+        r = usable[0]
+        return welch(x[r], fs=fs, nperseg=min(nper, r.stop - r.start), axis=0, detrend="linear")
+    total, weight, f = None, 0, None
+    for r in usable:
+        seg = x[r]
+        f, P = welch(seg, fs=fs, nperseg=min(nper, len(seg)), axis=0, detrend="linear")
+        total = P * len(seg) if total is None else total + P * len(seg)
+        weight += len(seg)
+    return f, total / weight
+
+
+def _signal_edge(x: NDArray[np.float64], fs: float, runs: list[slice] | None = None) -> tuple[float, float]:
+    """Median over columns of the highest frequency (Hz) at which the spectrum of ``x`` stands
+    :data:`SIGNAL_DB` above its noise floor (the median of the upper half of the band), and the
+    frequency below which 99.9 % of its power lies (spectra taken run by run)."""
+    f, P = _spectrum(x, fs, runs)
     floor = np.median(P[f >= fs / 4], axis=0)
     edges, bands = [], []
     for j in range(P.shape[1]):
@@ -85,8 +105,9 @@ def choose_cutoff(ds: Dataset, *, upper: float) -> tuple[float, dict[str, Any]]:
         ``rule`` (one sentence).
     """
     fs = 1.0 / ds.dt
-    motion, bandwidth = _signal_edge(np.asarray(ds.q, dtype=np.float64), fs)
-    torque, _ = _signal_edge(np.asarray(ds.tau, dtype=np.float64), fs)
+    runs = ds.runs
+    motion, bandwidth = _signal_edge(np.asarray(ds.q, dtype=np.float64), fs, runs)
+    torque, _ = _signal_edge(np.asarray(ds.tau, dtype=np.float64), fs, runs)
     if not np.isfinite(motion):
         return float(upper), {
             "motion_hz": None,

@@ -73,3 +73,20 @@ def test_a_measured_velocity_is_used_only_when_it_agrees_with_the_angles() -> No
     # the settings describe the preparation again (a model file applies them to new data)
     again = Preprocessing.from_settings(bad.settings)
     assert again.velocity == "differentiate" and again.cutoff == bad.settings["cutoff_hz"]
+
+
+def test_a_recording_joined_from_runs_is_read_run_by_run() -> None:
+    """Two runs joined (the angles jump where they meet): a spectrum across the join read the step as
+    broadband motion, a bandwidth of hundreds of Hz and the cut-off at its cap (a UR5 recording joined
+    across a 0.5 s gap: 200 Hz, and link + friction 2.9-5 N m off instead of 0.2-0.4)."""
+    a = _recording(freqs=(0.5, 0.7), q_noise=1e-4, seconds=10.0, seed=1)
+    b = _recording(freqs=(0.5, 0.7), q_noise=1e-4, seconds=10.0, seed=2)
+    b = Dataset(b.t + a.t[-1] + 0.5, b.q + np.array([1.5, -2.0]), b.tau)  # another pose, after a gap
+    joined = Dataset.concat([a, b])
+    assert len(joined.runs) == 2
+    one, d_one = choose_cutoff(a, upper=RATE / 5)
+    both, d_both = choose_cutoff(joined, upper=RATE / 5)
+    assert d_both["bandwidth_hz"] < 2 * d_one["bandwidth_hz"] and both < 2 * one < RATE / 5, (d_one, d_both)
+    # read as one run, the join is the broadband step that set the cap
+    whole = Dataset(np.arange(joined.m) / RATE, joined.q, joined.tau)
+    assert choose_cutoff(whole, upper=RATE / 5)[1]["bandwidth_hz"] > 10 * d_one["bandwidth_hz"]
