@@ -34,16 +34,11 @@ def _spectrum(x: NDArray[np.float64], fs: float, runs: list[slice] | None = None
     longest = max(r.stop - r.start for r in runs)
     nper = int(max(16, min(longest // 4, round(2.0 * fs))))
     usable = [r for r in runs if r.stop - r.start >= nper] or [max(runs, key=lambda r: r.stop - r.start)]
-    if len(usable) == 1:
-        r = usable[0]
-        return welch(x[r], fs=fs, nperseg=min(nper, r.stop - r.start), axis=0, detrend="linear")
-    total, weight, f = None, 0, None
-    for r in usable:
-        seg = x[r]
-        f, P = welch(seg, fs=fs, nperseg=min(nper, len(seg)), axis=0, detrend="linear")
-        total = P * len(seg) if total is None else total + P * len(seg)
-        weight += len(seg)
-    return f, total / weight
+    spectra = [welch(x[r], fs=fs, nperseg=min(nper, r.stop - r.start), axis=0, detrend="linear") for r in usable]
+    if len(spectra) == 1:  # one run: its spectrum as it is
+        return spectra[0]
+    lengths = [r.stop - r.start for r in usable]
+    return spectra[0][0], sum(P * w for (_, P), w in zip(spectra, lengths, strict=True)) / sum(lengths)
 
 
 def _signal_edge(x: NDArray[np.float64], fs: float, runs: list[slice] | None = None) -> tuple[float, float]:

@@ -408,29 +408,25 @@ def choose_gains(make, data, choice: PipelineChoice, joints: list[int]) -> Pipel
     dropped: list[int] = []
     twin = ""
 
-    def scored(js: list[int], first: int) -> NDArray[np.float64]:
+    def scored(js: list[int]) -> NDArray[np.float64]:
         effects = ",".join(f"drive_gain@{j + 1}" for j in js)
-        mse = _cross_fit(lambda *s: make(*s, effects), halves, [setting], lambda k: advance(first + k))
-        return np.sqrt(mse[0])
+        return np.sqrt(_cross_fit(lambda *s: make(*s, effects), halves, [setting], advance)[0])
 
+    if 2 * len(joints) == n:
+        # gains on these joints explain the torques exactly as the inverse gains on the others with every
+        # body scaled (a gain on every joint is a scale of every parameter): the screen took the set that
+        # keeps the description's scale
+        twin = (
+            f" (or, alike in the torques, joint(s) {_joints(j for j in range(n) if j not in joints)} with every "
+            "body scaled: the description's bodies decided)"
+        )
     with stage(f"trying a drive gain on joint(s) {_joints(joints)}", total=2):
-        after = scored(joints, 0)
-        gains = joints
-        if 2 * len(joints) == n:
-            # gains on these joints explain the torques exactly as the inverse gains on the others with every
-            # body scaled (a gain on every joint is a scale of every parameter): the screen took the set that
-            # keeps the description's scale
-            twin = (
-                f" (or, alike in the torques, joint(s) {_joints(j for j in range(n) if j not in joints)} with every "
-                "body scaled: the description's bodies decided)"
-            )
-        for attempt in range(2):
-            if attempt:
-                after, gains = scored(joints, 0), joints
+        for _ in range(2):
+            after = scored(joints)
             if not np.all(np.isfinite(after)):
                 return replace(
                     choice,
-                    reason=f"{choice.reason}; a drive gain on joint(s) {_joints(gains)} could not be fitted on "
+                    reason=f"{choice.reason}; a drive gain on joint(s) {_joints(joints)} could not be fitted on "
                     "a half of the recording",
                 )
             earned = [j for j in joints if after[j] <= (1 - GAIN_GAIN) * before[j]]  # the screened joints' errors
@@ -439,16 +435,16 @@ def choose_gains(make, data, choice: PipelineChoice, joints: list[int]) -> Pipel
                     worse = np.flatnonzero(after > (1 + JOINT_TOLERANCE) * before)
                     return replace(
                         choice,
-                        reason=f"{choice.reason}; a drive gain on joint(s) {_joints(gains)} would leave joint(s) "
+                        reason=f"{choice.reason}; a drive gain on joint(s) {_joints(joints)} would leave joint(s) "
                         f"{_joints(worse)} more than {100 * JOINT_TOLERANCE:.0f} % worse on the halves",
                     )
-                listed = ", ".join(f"{j + 1} ({100 * (1 - after[j] / before[j]):.0f} % lower)" for j in gains)
+                listed = ", ".join(f"{j + 1} ({100 * (1 - after[j] / before[j]):.0f} % lower)" for j in joints)
                 also = (
                     f" (screened too, not {100 * GAIN_GAIN:.0f} % lower: joint(s) {_joints(dropped)})" if dropped else ""
                 )
                 return replace(
                     choice,
-                    gains=tuple(gains),
+                    gains=tuple(joints),
                     gain_cv_rms=after,
                     reason=f"{choice.reason}; a drive gain (measured torque a constant times the model's) on "
                     f"joint(s) {listed} on the halves, no joint {100 * JOINT_TOLERANCE:.0f} % worse{also}{twin}",

@@ -22,7 +22,7 @@ from dynid._threads import single_blas_thread
 from dynid.data.dataset import Dataset
 from dynid.data.preparation import Preprocessing
 from dynid.exceptions import DynidError, UsageError
-from dynid.identify.columns import ColumnSet, linear_torque
+from dynid.identify.columns import ColumnSet, linear_torque, robot_coupling
 from dynid.identify.consistent import ConsistentLS, consistent_projection
 from dynid.identify.effect_terms import (
     Candidate,
@@ -463,13 +463,13 @@ class ThreeLayerModel:
         else:
             terms = parse_effect_terms(spec, self.robot.n)
         names = {t.effect for t in terms}
-        R = getattr(self.robot, "transmission", None)
+        R = robot_coupling(self.robot)
         for t in terms:
             if t.effect == "coupled_friction" and R is not None and t.joints is not None:
                 pair = set(t.joints)
                 a, b = t.joints
                 sign = t.hyper.get("sign")  # None: tuned on the data, either sign
-                for i, row in enumerate(np.asarray(R, dtype=np.float64)):
+                for i, row in enumerate(R):
                     same = sign is None or np.sign(row[b] * row[a]) == np.sign(sign)
                     if set(np.flatnonzero(np.abs(row) > 1e-12).tolist()) == pair and same:
                         a, b = sorted(pair)
