@@ -13,6 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynid.data.dataset import Dataset
+from dynid.data.dsp import welch
 
 __all__ = ["BANDWIDTH_FACTOR", "SIGNAL_DB", "choose_cutoff"]
 
@@ -28,13 +29,11 @@ def _spectrum(x: NDArray[np.float64], fs: float, runs: list[slice] | None = None
     A recording joined from runs jumps where they meet; a spectrum across the join reads that step as
     broadband motion (a 10 s run joined to another: a "bandwidth" of 297 Hz, the cut-off at its cap).
     """
-    from scipy.signal import welch
-
     runs = [slice(0, len(x))] if not runs else list(runs)
     longest = max(r.stop - r.start for r in runs)
     nper = int(max(16, min(longest // 4, round(2.0 * fs))))
     usable = [r for r in runs if r.stop - r.start >= nper] or [max(runs, key=lambda r: r.stop - r.start)]
-    spectra = [welch(x[r], fs=fs, nperseg=min(nper, r.stop - r.start), axis=0, detrend="linear") for r in usable]
+    spectra = [welch(x[r], fs, min(nper, r.stop - r.start), detrend="linear") for r in usable]
     if len(spectra) == 1:  # one run: its spectrum as it is
         return spectra[0]
     lengths = [r.stop - r.start for r in usable]

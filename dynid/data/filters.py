@@ -1,7 +1,8 @@
 """The zero-phase Butterworth low-pass: its design and the filtering of signals laid out in rows.
 
 :func:`butter_sos` designs the filter (cached per cut-off, rate and order), :func:`filtfilt_rows` runs
-it forward and backward along each row exactly as :func:`scipy.signal.sosfiltfilt` does,
+it forward and backward along each row exactly as :func:`scipy.signal.sosfiltfilt` does (on
+:mod:`dynid.data.dsp`, which spares every command scipy.signal's import),
 :func:`filter_padding` and :func:`filter_order` describe it for the checks before filtering.  The
 filtering of data run by run (:func:`dynid.data.preprocess.lowpass`,
 :func:`dynid.data.preprocess.parallel_filter`) builds on these.  Split out of
@@ -14,8 +15,8 @@ import functools
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.signal import butter, sosfilt, sosfilt_zi
 
+from dynid.data import dsp
 from dynid.exceptions import DataError
 
 __all__ = ["butter_sos", "filter_order", "filter_padding", "filtfilt_rows"]
@@ -57,7 +58,7 @@ def _butter_sos(cutoff: float, fs: float, order: int) -> NDArray[np.float64]:
     A default identification filters about a thousand times with the same filter (the friction shape
     searches filter their candidates' columns); designing it each time was 9 % of the run.
     """
-    sos = np.asarray(butter(order, cutoff, btype="low", fs=fs, output="sos"), dtype=np.float64)
+    sos = dsp.butter_lowpass(order, cutoff, fs)
     sos.setflags(write=False)
     return sos
 
@@ -72,17 +73,18 @@ def _filtfilt_setup(key: bytes, shape: tuple[int, int]) -> tuple[int, NDArray[np
     """
     sos = np.frombuffer(key, dtype=np.float64).reshape(shape)
     ntaps = 2 * len(sos) + 1 - min(int((sos[:, 2] == 0).sum()), int((sos[:, 5] == 0).sum()))
-    zi = np.ascontiguousarray(sosfilt_zi(sos), dtype=np.float64)
+    zi = dsp.sosfilt_zi(sos)
     zi.setflags(write=False)
     return 3 * ntaps, zi
 
 
-def filtfilt_rows(sos: NDArray[np.float64], x: NDArray[np.float64]) -> NDArray[np.float64]:
+def filtfilt_rows(sos: NDArray[np.float64], x: NDArray[np.float64], padded: bool = True) -> NDArray[np.float64]:
     """Zero-phase filter of each row of ``x`` (k, L): :func:`scipy.signal.sosfiltfilt` along the last axis.
 
-    The same arithmetic as ``sosfiltfilt(sos, x, axis=-1)`` with its default odd padding, so the same
-    values to the bit; its setup (padding length, initial conditions) is computed once per filter and
-    time runs along contiguous memory (no transposed copies).
+    ``sosfiltfilt(sos, x, axis=-1)`` with its default odd padding (``padded=False``: ``padlen=0``), the
+    same arithmetic, so the same values to the bit (:func:`dynid.data.dsp.sosfilt_inplace`); its setup
+    (padding length, initial conditions) is computed once per filter, and the signals are filtered
+    side by side, time-major, without reversed copies.
 
     Parameters
     ----------
@@ -91,28 +93,31 @@ def filtfilt_rows(sos: NDArray[np.float64], x: NDArray[np.float64]) -> NDArray[n
     x : ndarray, shape (k, L)
         Signals, one per row, time along axis 1; ``L`` must exceed the padding (``3 (2 n_sections + 1)``
         at most).
+    padded : bool
+        Pad each end by odd extension as scipy does by default; False filters the signal as it is.
 
     Returns
     -------
     ndarray, shape (k, L)
-        The filtered signals (a view of a new array, time reversed twice).
+        The filtered signals (a transposed view of a new time-major array).
     """
     sos = np.ascontiguousarray(sos, dtype=np.float64)
     edge, zi = _filtfilt_setup(sos.tobytes(), sos.shape)
+    edge = edge if padded else 0
     k, length = x.shape
     if length <= edge:
         raise DataError(
             f"{length} samples are too short for an order-{filter_order(sos)} zero-phase filter (it pads with {edge}); "
             "record longer"
         )
-    ext = np.empty((k, length + 2 * edge))
-    ext[:, edge : edge + length] = x
+    ext = np.empty((length + 2 * edge, k))  # time-major: the signals of one sample side by side
+    ext[edge : edge + length] = x.T
     if edge > 0:  # odd extension at both ends (scipy.signal's odd_ext)
-        ext[:, :edge] = 2 * x[:, 0:1] - x[:, edge:0:-1]
-        ext[:, edge + length :] = 2 * x[:, -1:] - x[:, -2 : -(edge + 2) : -1]
-    y = sosfilt(sos, ext, axis=-1, zi=zi[:, None, :] * ext[None, :, 0:1])[0]
-    y = sosfilt(sos, y[:, ::-1], axis=-1, zi=zi[:, None, :] * y[None, :, -1:])[0][:, ::-1]
-    return y[:, edge : edge + length] if edge > 0 else y
+        ext[:edge] = 2 * ext[edge] - ext[2 * edge : edge : -1]
+        ext[edge + length :] = 2 * ext[edge + length - 1] - ext[edge + length - 2 : length - 2 : -1]
+    dsp.sosfilt_inplace(sos, ext, zi[:, :, None] * ext[0])
+    dsp.sosfilt_inplace(sos, ext, zi[:, :, None] * ext[-1], reverse=True)
+    return ext[edge : edge + length].T
 
 
 def filter_padding(sos: NDArray[np.float64]) -> int:

@@ -16,13 +16,13 @@ from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.signal import sosfiltfilt
 
 from dynid.data.dataset import Dataset
 from dynid.data.preprocess import (
     butter_sos,
     central_difference,
     choose_cutoff,
+    filtfilt_rows,
     kept_rows,
     lowpass,
     preprocess,
@@ -236,7 +236,7 @@ class Prepared:
         half = int(np.ceil(40 * self.fs / cutoff)) + 64  # the impulse response has died out by then
         impulse = np.zeros(2 * half + 1)
         impulse[half] = 1.0
-        h = sosfiltfilt(sos, impulse, padlen=0)
+        h = filtfilt_rows(sos, impulse[None, :], padded=False)[0]
         acf = np.correlate(h, h, mode="full")[len(h) - 1 :]
         rho = acf / acf[0]
         D = int(self.settings["decimate"])

@@ -13,7 +13,6 @@ from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.interpolate import CubicSpline
 
 from dynid.data.dataset import Dataset
 from dynid.exceptions import DataError, DataWarning
@@ -98,6 +97,8 @@ def resample_uniform(
         w = ((t_new - t[i]) / (t[i + 1] - t[i])).reshape((-1,) + (1,) * (y.ndim - 1))
         y_new = y[i] + w * (y[i + 1] - y[i])
     else:
+        from scipy.interpolate import CubicSpline  # here: only a recording that needs it pays the import
+
         y_new = CubicSpline(t, y, axis=0)(t_new)
     return t_new, np.asarray(y_new, dtype=np.float64)
 

@@ -586,12 +586,11 @@ def _filter_gain_function(prep: Prepared):
     """``f -> |H(f)|^4``: power gain of the zero-phase torque filter (None without a filter)."""
     if prep.sos is None:
         return None
-    from scipy.signal import sosfreqz
+    from dynid.data.dsp import frequency_response
 
     sos, fs = prep.sos, prep.fs
 
     def gain(f):
-        _, h = sosfreqz(sos, worN=np.asarray(f, dtype=float), fs=fs)
-        return np.abs(h) ** 4
+        return np.abs(frequency_response(sos, f, fs)) ** 4
 
     return gain

@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.signal import welch
 
+from dynid.data.dsp import welch
 from dynid.diagnosis.stats import block_bootstrap_ci, ljung_box
 from dynid.validation.metrics import NoiseFloor
 
@@ -226,9 +226,9 @@ def _frequency_bins(r, sigma2, fs, filter_gain, noise_signal, j) -> list[dict[st
     nper = int(min(m, 2048))
     if nper < 16:
         return []
-    f, p = welch(r, fs=fs, nperseg=nper, detrend="constant")
+    f, p = welch(r, fs, nper, detrend="constant")
     if noise_signal is not None:
-        _, pn = welch(noise_signal[:, j], fs=fs, nperseg=nper, detrend="constant")
+        _, pn = welch(noise_signal[:, j], fs, nper, detrend="constant")
     else:
         shape = np.ones_like(f) if filter_gain is None else np.maximum(filter_gain(f), 0.0)
         df = f[1] - f[0]

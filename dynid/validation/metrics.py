@@ -10,8 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import welch
 
+from dynid.data.dsp import welch
 from dynid.exceptions import DataError, ShapeError
 
 __all__ = ["NoiseFloor", "noise_floor", "period_stack", "torque_metrics", "variance_rel_se"]
@@ -265,7 +265,7 @@ def noise_floor(
             f"band_start is {start_f:g} Hz; give a frequency between 0 and the Nyquist {nyquist:g} Hz."
         )
     nper = min(t.size, 1024)
-    freqs, psd = welch(tau, fs=fs, nperseg=nper, axis=0, detrend="constant")
+    freqs, psd = welch(tau, fs, nper, detrend="constant")
     band = freqs >= start_f
     if band.sum() < 4:
         raise DataError("too few samples to measure a noise floor from the spectrum; record a longer run.")

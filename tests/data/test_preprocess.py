@@ -324,13 +324,15 @@ def test_trim_and_decimate_run_by_run(rng: np.random.Generator) -> None:
 
 @pytest.mark.parametrize("order", [1, 2, 5, 8])
 def test_filtfilt_rows_is_scipys_sosfiltfilt_to_the_bit(order: int) -> None:
-    from scipy.signal import sosfiltfilt
+    from scipy.signal import butter, sosfiltfilt
 
     rng = np.random.default_rng(order)
     sos = pp.butter_sos(35.0, 5000.0, order)
+    np.testing.assert_allclose(sos, butter(order, 35.0, fs=5000.0, output="sos"), rtol=1e-12, atol=0)
     for length in (40, 3000):
         x = rng.standard_normal((length, 5)).cumsum(axis=0)
         assert np.array_equal(pp.filtfilt_rows(sos, x.T).T, sosfiltfilt(sos, x, axis=0))
+        assert np.array_equal(pp.filtfilt_rows(sos, x.T, padded=False).T, sosfiltfilt(sos, x, axis=0, padlen=0))
 
 
 def test_filtfilt_rows_refuses_a_signal_shorter_than_its_padding() -> None:
