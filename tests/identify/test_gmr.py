@@ -72,6 +72,35 @@ def test_the_mixture_em_is_scikit_learns(rng, d, K) -> None:
     np.testing.assert_allclose(got.covariances_, ref.covariances_, rtol=0, atol=1e-11)
 
 
+def test_the_kmeans_start_is_scikit_learns_to_the_label(rng) -> None:
+    """The mixture's k-means start (scikit-learn is not imported for it): the same labels from the same
+    seed, on clustered, plain and rounded data (ties), one to three coordinates, 2 to 8 clusters."""
+    import warnings
+
+    from sklearn.cluster import KMeans
+
+    from dynid.identify.mixture import kmeans_labels
+
+    for case in range(24):
+        m, d, K = int(rng.integers(20, 3000)), int(rng.integers(1, 4)), int(rng.integers(2, 9))
+        X = rng.standard_normal((m, d))
+        if case % 3 == 0:
+            X[: m // 2] += 3.0
+        if case % 4 == 0:
+            X = np.round(X, 1)  # many equal samples and equidistant ones
+        for seed in (0, 7):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # fewer distinct points than clusters, on rounded data
+                want = KMeans(n_clusters=K, n_init=1, random_state=np.random.RandomState(seed)).fit(X).labels_
+            assert np.array_equal(kmeans_labels(X, K, np.random.RandomState(seed)), want), (case, seed, m, d, K)
+    # two distinct points and four clusters: empty clusters take the farthest samples, as scikit-learn's do
+    X = np.repeat([[0.0, 0.0], [1.0, 1.0]], 10, axis=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        want = KMeans(n_clusters=4, n_init=1, random_state=np.random.RandomState(1)).fit(X).labels_
+    assert np.array_equal(kmeans_labels(X, 4, np.random.RandomState(1)), want)
+
+
 def test_stacked_component_densities_equal_one_at_a_time(rng, monkeypatch) -> None:
     from scipy.special import logsumexp
 
