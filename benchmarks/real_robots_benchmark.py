@@ -14,8 +14,14 @@ the measured ``q`` and ``dq`` low-passed at 10 Hz (4th order) and ``ddq`` their 
 
 TX40 (``../shared/data/tx40``): FIGAROH's split, rows [0, 24750) identify, [29250, 45000) held out;
 predictions and the raw held-out torque through a 100 Hz zero-phase 4th-order Butterworth, scored at
-500 Hz (one sample in 10), 0.02 s trimmed at both ends.  The reference is FIGAROH 0.2.4's own TX40
-example on this split, quoted: held-out RMS [5.34 6.94 4.02 1.67 2.49 1.70] N m.
+500 Hz (one sample in 10), 0.02 s trimmed at both ends.  The reference is FIGAROH's own TX40 example on
+this split, computed in the same run when ``--figaroh-example DIR --figaroh-python PY`` are given
+(figaroh-examples' ``examples/staubli_tx40`` folder and a Python with figaroh installed;
+``_figaroh_tx40.py`` identifies on the training rows as the example does and predicts every row): rows
+``figaroh``, the example as FIGAROH 1.0.2 runs it, and ``fig+hook``, with the example's wrist-coupling
+hook called as it was before 1.0.2, each scored like dynid's models; their own joint torque is checked
+to be the recording's.  Without them, FIGAROH 0.2.4's figures on this split are quoted: [5.34 6.94
+4.02 1.67 2.49 1.70] N m.
 
 Models, each identified on the training part only:
 
@@ -38,7 +44,8 @@ A model predicts from the states of the whole recording prepared as its identifi
 own torque filter; the scoring filter above is then applied to prediction and torque alike.
 
 Run:  OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python benchmarks/real_robots_benchmark.py --robot panda
-      (or ``--robot tx40``; each takes a few minutes on 2 cores; ``--spring`` adds half a minute)
+      (or ``--robot tx40 [--figaroh-example DIR --figaroh-python PY]``, ``--robot kuka``; each takes
+      under a minute on 2 cores; ``--spring`` adds half a minute)
 """
 
 from __future__ import annotations
@@ -49,8 +56,10 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import argparse  # noqa: E402
+import sys  # noqa: E402
 import time  # noqa: E402
 import warnings  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -235,11 +244,51 @@ def spring_check(robot, full, train_end: float, held: tuple[float, float], cutof
         print("  " + note)
 
 
+def figaroh_rows(example, python, train_end, full, score) -> dict[str, np.ndarray]:
+    """FIGAROH's TX40 example identified on the training rows and scored as dynid's models are (see the
+    module docstring): ``{"figaroh": rms, "fig+hook": rms}``, or {} (said) without its example."""
+    if not example:
+        print("FIGAROH: quoted (give --figaroh-example DIR and --figaroh-python PY to run it on the split here)")
+        return {}
+    import subprocess
+    import tempfile
+
+    script = Path(__file__).with_name("_figaroh_tx40.py")
+    out: dict[str, np.ndarray] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for label, flags in (("figaroh", ()), ("fig+hook", ("--coupled",))):
+            path = Path(tmp, f"{label}.npz")
+            run = subprocess.run(
+                [python, str(script), str(example), str(path), "--train-end", str(train_end), *flags],
+                capture_output=True, text=True,
+            )  # fmt: skip
+            if run.returncode != 0:
+                print(f"FIGAROH ({label}) failed, quoted figures used: {run.stderr.strip().splitlines()[-1:]}")
+                return {}
+            print(run.stdout.strip())
+            z = np.load(path)
+            rows, tau = z["rows"], z["tau"]
+            gap = float(np.max(np.abs(z["tau_measured"] - full.tau[rows])))
+            if gap > 1e-9 * max(1.0, float(np.max(np.abs(full.tau)))):
+                print(f"FIGAROH ({label}) reads another torque than the recording's (max gap {gap:.3g} N m): not scored")
+                return {}
+            out[label] = score(full.t[rows], tau)
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
     parser.add_argument("--robot", choices=sorted(SETUPS), default="panda")
     parser.add_argument(
         "--spring", action="store_true", help="also what consistent links cost a linear model (spring_check)"
+    )
+    parser.add_argument(
+        "--figaroh-example",
+        metavar="DIR",
+        help="TX40: figaroh-examples' examples/staubli_tx40 folder, to run FIGAROH on the split in this run",
+    )
+    parser.add_argument(
+        "--figaroh-python", metavar="PY", default=sys.executable, help="the Python that has figaroh installed"
     )
     args = parser.parse_args()
     setup = SETUPS[args.robot]
@@ -327,8 +376,15 @@ def main() -> None:
         rows["ref"] = score(t, tau)
         ref_label = "Gaz et al. 2019 (URDF + Table I friction, pin.rnea)"
     elif args.robot == "tx40":
-        rows["ref"] = FIGAROH_TX40
-        ref_label = "FIGAROH 0.2.4 (quoted)"
+        peer = figaroh_rows(args.figaroh_example, args.figaroh_python, setup["train"][1], full, score)
+        if peer:
+            rows.update(peer)
+            rows["ref"] = peer["figaroh"]
+            extra = (*extra, "fig+hook")
+            ref_label = "FIGAROH 1.0.2's TX40 example, run on the split here (figaroh; fig+hook: its wrist hook)"
+        else:
+            rows["ref"] = FIGAROH_TX40
+            ref_label = "FIGAROH 0.2.4 (quoted)"
     else:
         rows["ref"] = rows["plain"]
         ref_label = "the plain least-squares fit above (no published model for this recording)"
@@ -371,7 +427,8 @@ def main() -> None:
         ("defaults", "plain"),
         ("phys", "ols+lin"),
         ("defaults", "phys"),
-        *((e, "ref") for e in extra),
+        *((e, "ref") for e in extra if e != "fig+hook"),
+        *((e, "fig+hook") for e in ("defaults", "wrist") if "fig+hook" in rows),
     ]
     for num, den in pairs:
         r = rows[num] / rows[den]
