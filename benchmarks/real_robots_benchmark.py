@@ -31,7 +31,9 @@ Models, each identified on the training part only:
 - ``phys``: the default model's link + friction layers alone (no mixture correction);
 - ``ref``: the reference above;
 - TX40 only: ``wrist``, the defaults with the coupled wrist declared (the recording's robot from
-  :func:`dynid.data.adapters.recording_robot`, as ``dynid identify --transmission`` takes it), and
+  :func:`dynid.data.adapters.recording_robot`, as ``dynid identify --transmission`` takes it),
+  ``wrist+out``, the same with the friction of joint 6's output stage that motor 6 drives
+  (``effects="coupled_friction@5+6:mix=0"``: on dq6, felt by joints 5 and 6), and
   ``+cfric``, the defaults with the effect the diagnosis ranks first on this recording added as a model
   term (``identify(..., effects="coupled_friction@5+6")``, as ``dynid identify --effects`` takes it).
 
@@ -366,11 +368,15 @@ def main() -> None:
     if args.robot == "tx40":
         from dynid.data.adapters import recording_robot
 
-        t, _, total = model_parts(identify(recording_robot("tx40"), train), full)
+        wrist = recording_robot("tx40")
+        t, _, total = model_parts(identify(wrist, train), full)
         rows["wrist"] = score(t, total)
+        # and with the friction of joint 6's output stage, which motor 6 drives (on dq6, felt by 5 and 6)
+        t, _, total = model_parts(identify(wrist, train, effects="coupled_friction@5+6:mix=0"), full)
+        rows["wrist+out"] = score(t, total)
         t, _, total = model_parts(identify(robot, train, effects="coupled_friction@5+6"), full)
         rows["+cfric"] = score(t, total)
-        extra = ("wrist", "+cfric")
+        extra = ("wrist", "wrist+out", "+cfric")
     if args.robot == "panda":
         t, tau = gaz_reference(urdf, full)
         rows["ref"] = score(t, tau)
@@ -428,7 +434,7 @@ def main() -> None:
         ("phys", "ols+lin"),
         ("defaults", "phys"),
         *((e, "ref") for e in extra if e != "fig+hook"),
-        *((e, "fig+hook") for e in ("defaults", "wrist") if "fig+hook" in rows),
+        *((e, "fig+hook") for e in ("defaults", "wrist", "wrist+out") if "fig+hook" in rows),
     ]
     for num, den in pairs:
         r = rows[num] / rows[den]

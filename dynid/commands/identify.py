@@ -134,7 +134,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--effects",
         metavar="NAME[@JOINTS],...",
         help="effects of the catalogue identified as model terms with the link parameters, e.g. "
-        "coupled_friction@5+6,stribeck@3 (hyper-parameters tuned on the data unless given: cogging@2:N=100)",
+        "coupled_friction@5+6,stribeck@3 (hyper-parameters tuned on the data unless given: cogging@2:N=100; "
+        "coupled_friction@5+6:mix=0 is the friction of joint 6's output stage, on dq6, felt by joints 5 and 6)",
     )
     parser.add_argument(
         "--transmission",

@@ -30,7 +30,9 @@ backlash                  M(q)[:, j] d^2 b_j / dt^2, M(q)[:, j] d^2 tau_j /    e
 delay                     d tau_j / dt (first order of tau(t - d))             -
 drive_gain                tau_j                                                -
 base_tilt                 d g(q) / d alpha about two horizontal axes (all j)   -
-coupled_friction          s(w), w on joints a and b, w = dq_a +- dq_b          pair and sign
+coupled_friction          s(w), w on joints a and b, w = m dq_a +- dq_b        pair, sign, mix m
+                          (m = 1: a coupled motor's speed; m = 0: joint b's     (default 1)
+                          output stage, driven by that motor)
 nonlinear_viscous         dq_j |dq_j|,  dq_j^3                                 -
 payload                   (absorbed by the base parameters: parametric test)   -
 ========================  ===================================================  ===================
@@ -244,7 +246,9 @@ class Candidate:
             return f"{self.effect}@all"
         if self.joint is not None:
             return f"{self.effect}@{self.joint + 1}"
-        return f"{self.effect}@" + "+".join(str(j + 1) for j in self.joints)
+        key = f"{self.effect}@" + "+".join(str(j + 1) for j in self.joints)
+        mix = self.hyper.get("mix", 1.0)
+        return key if mix == 1.0 else f"{key}:mix={mix:g}"  # the output stage's friction beside the motor's
 
 
 def _on_joint(src: FeatureSource, j: int, cols: Sequence[NDArray[np.float64]]) -> NDArray[np.float64]:
@@ -463,7 +467,8 @@ def _base_tilt(src, c):
 
 def _coupled(src, c):
     a, b = c.joints
-    w = src.dq[:, a] + c.hyper["sign"] * src.dq[:, b]
+    # mix 1: the coupled motor's own speed; 0: joint b's output stage, which the same motor drives
+    w = c.hyper.get("mix", 1.0) * src.dq[:, a] + c.hyper["sign"] * src.dq[:, b]
     s = src.sign(w)
     out = np.zeros((src.m, src.n, 2))
     out[:, a, 0] = s

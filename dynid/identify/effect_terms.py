@@ -161,7 +161,14 @@ _HYPER_RULES: dict[str, dict[str, tuple[Callable[[float], bool], str]]] = {
             "a delay in s, non-zero and within +-1 s (the diagnosis measures a sensor that leads as negative)",
         )
     },
-    "coupled_friction": {"sign": (lambda v: v in (1.0, -1.0), "the coupling sign, 1 or -1")},
+    "coupled_friction": {
+        "sign": (lambda v: v in (1.0, -1.0), "the coupling sign, 1 or -1"),
+        "mix": (
+            lambda v: math.isfinite(v) and 0 <= v <= 1,
+            "the weight of the first joint's speed, from 0 (the second joint's own output stage) to 1 (the "
+            "coupled motor's speed, the default)",
+        ),
+    },
     "load_friction": {"asymmetric": (_flag, "0 or 1")},
 }
 
@@ -272,7 +279,8 @@ def parse_effect_terms(spec: str | Sequence[str] | None, n: int) -> tuple[Candid
                     None,
                     (pair[0], pair[1]),
                     hyper,
-                    f"coupled friction of joints {pair[0] + 1} and {pair[1] + 1}",
+                    f"coupled friction of joints {pair[0] + 1} and {pair[1] + 1}"
+                    + ("" if hyper.get("mix", 1.0) == 1.0 else f" on joint {pair[1] + 1}'s output stage"),
                 )
             ]
         else:

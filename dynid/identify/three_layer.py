@@ -464,13 +464,18 @@ class ThreeLayerModel:
             terms = parse_effect_terms(spec, self.robot.n)
         names = {t.effect for t in terms}
         R = robot_coupling(self.robot)
+        if R is not None:
+            terms = tuple(_transmission_sign(t, R) for t in terms)
         for t in terms:
             if t.effect == "coupled_friction" and R is not None and t.joints is not None:
                 pair = set(t.joints)
                 a, b = t.joints
-                sign = t.hyper.get("sign")  # None: tuned on the data, either sign
+                signs = (1.0, -1.0) if t.hyper.get("sign") is None else (t.hyper["sign"],)  # None: tuned
+                mix = t.hyper.get("mix", 1.0)
                 for i, row in enumerate(R):
-                    same = sign is None or np.sign(row[b] * row[a]) == np.sign(sign)
+                    # the term's speed mix dq_a + sign dq_b is motor i's, row[a] dq_a + row[b] dq_b, when
+                    # proportional (the output stage's friction, mix 0, is another column)
+                    same = any(np.isclose(mix * row[b], s * row[a]) for s in signs)
                     if set(np.flatnonzero(np.abs(row) > 1e-12).tolist()) == pair and same:
                         a, b = sorted(pair)
                         raise UsageError(
@@ -722,3 +727,18 @@ def data_fingerprint(data: Dataset) -> str:
     for a in (data.t, data.q, data.tau):
         digest.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
     return digest.hexdigest()
+
+
+def _transmission_sign(term: Candidate, R: NDArray[np.float64]) -> Candidate:
+    """A coupled pair's output-stage friction (``coupled_friction`` with mix < 1, sign not given) on a robot
+    whose transmission has a motor turning with exactly that pair: that motor drives the stage, so its
+    torque reaches the two joints with the transmission's sign, which the term takes instead of tuning it."""
+    if term.effect != "coupled_friction" or term.joints is None or "sign" in term.hyper:
+        return term
+    if term.hyper.get("mix", 1.0) == 1.0:
+        return term
+    a, b = term.joints
+    for row in R:
+        if set(np.flatnonzero(np.abs(row) > 1e-12).tolist()) == {a, b}:
+            return replace(term, hyper={**term.hyper, "sign": float(np.sign(row[a] * row[b]))})
+    return term

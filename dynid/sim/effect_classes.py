@@ -529,7 +529,8 @@ class Cogging(Effect):
 
 @dataclass(frozen=True, eq=False)
 class CoupledFriction(Effect):
-    """Friction on ``w = dq_a + dq_b`` (a coupled wrist's motor) felt by both joints."""
+    """Friction on ``w = m dq_a + dq_b`` felt by both joints: a coupled wrist's motor (``m = 1``), or with
+    ``m = 0`` the output stage of joint b that the same motor drives."""
 
     name: ClassVar[str] = "coupled_friction"
     role: ClassVar[str] = "drive"
@@ -539,6 +540,7 @@ class CoupledFriction(Effect):
     coulomb: float = 0.0
     viscous: float = 0.0
     eps: float = SMOOTHING
+    mix: float = 1.0
 
     @classmethod
     def build(cls, ctx, value, joints, rng):
@@ -556,7 +558,7 @@ class CoupledFriction(Effect):
 
     def drive(self, t, x, dx, tau_m):
         a, b = self.joints
-        w = dx[a] + dx[b]
+        w = self.mix * dx[a] + dx[b]
         s, ds = smooth_sign(w, self.eps)
         g = self.coulomb * s + self.viscous * w
         dg = self.coulomb * ds + self.viscous
@@ -564,14 +566,15 @@ class CoupledFriction(Effect):
         f = np.zeros(n)
         f[a] = f[b] = g
         J = np.zeros((n, n))
-        J[a, a] = J[a, b] = J[b, a] = J[b, b] = dg
+        J[a, a] = J[b, a] = self.mix * dg
+        J[a, b] = J[b, b] = dg
         return f, J
 
     def details(self):
         return {
             "Fc": self.coulomb,
             "Fv": self.viscous,
-            "coupling": "w = dq_a + dq_b",
+            "coupling": "w = dq_a + dq_b" if self.mix == 1.0 else f"w = {self.mix:g} dq_a + dq_b",
             "units": "N m, N m s/rad",
         }
 

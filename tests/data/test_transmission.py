@@ -155,6 +155,15 @@ def test_the_tx40_wrist_declared_coupled_predicts_joint_5(shared_data) -> None:
         rms[coupled] = np.sqrt(np.mean((v.tau - v.tau_pred) ** 2, axis=0))
     assert rms[True][4] < 2.49 < 0.5 * rms[False][4], rms
     assert rms[True][5] < rms[False][5], rms
+    # the friction of joint 6's output stage, which motor 6 drives (on dq6, felt by joints 5 and 6), on top
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        robot = recording_robot("tx40", shared_data)
+        model = identify(robot, train, friction="linear", gmm="off", preprocessing=None, effects="coupled_friction@5+6:mix=0")
+        v = validate(model, held)
+    out = np.sqrt(np.mean((v.tau - v.tau_pred) ** 2, axis=0))
+    assert model.effects[0].hyper["sign"] == 1.0  # the transmission's: motor 6 turns with q5 + q6
+    assert out[4] < rms[True][4] and out[5] < 0.9 * rms[True][5], (out, rms[True])
 
 
 def test_identify_takes_a_transmission_file_beside_the_robot(coupled_data, tmp_path, capsys) -> None:

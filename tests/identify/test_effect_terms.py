@@ -146,6 +146,66 @@ def test_a_coupled_friction_the_transmission_holds_already_is_refused(ur5, coupl
     assert [t.hyper["sign"] for t in other.effects] == [-1.0]
 
 
+@pytest.fixture(scope="module")
+def output_stage(ur5):
+    """A UR5 whose wrist motor drives a stage turning with dq6 alone: its friction reaches joints 5 and 6
+    (the simulator's coupled_friction with mix 0)."""
+    import dataclasses
+
+    truth = build_truth(ur5, effects="coupled_friction:4", friction="linear", truth_seed=5)
+    (effect,) = truth.effects
+    effect = dataclasses.replace(effect, mix=0.0)
+    truth = dataclasses.replace(truth, effects=(effect,))
+    train = simulate(ur5, case_excitation(ur5, 31, base_freq=0.5), duration=8.0, truth=truth, seed=31)
+    held = simulate(ur5, case_excitation(ur5, 32, base_freq=0.5), duration=6.0, truth=truth, seed=32)
+    return effect, train.to_dataset(), held.to_dataset()
+
+
+def test_an_output_stage_friction_is_recovered_and_the_motor_speed_form_is_not(ur5, output_stage) -> None:
+    """``coupled_friction@5+6:mix=0``: friction on dq6 felt by joints 5 and 6 (on the TX40's declared wrist
+    it takes joints 5 and 6 held out from 2.15 and 1.55 to 2.03 and 1.32 N m, below FIGAROH with its hook)."""
+    effect, train, held = output_stage
+    fit = dict(method="ols", friction="linear", gmm="off")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = identify(ur5, train, effects="coupled_friction@5+6:mix=0", **fit)
+        motor = identify(ur5, train, effects="coupled_friction@5+6", **fit)  # w = dq5 + dq6: the wrong speed
+    (fig,) = model.figures()["effects"]
+    assert fig["key"] == "coupled_friction@5+6:mix=0" and fig["hyper"]["sign"] == 1.0  # tuned: both joints alike
+    fc, std = fig["coefficients"]["fc"], fig["std"]["fc"]
+    assert abs(fc - effect.coulomb) < 3 * std and abs(fc - effect.coulomb) < 0.2 * effect.coulomb, (fc, std)
+    assert abs(motor.figures()["effects"][0]["coefficients"]["fc"] - effect.coulomb) > 0.3 * effect.coulomb
+    right, wrong = _heldout_rms(model, held), _heldout_rms(motor, held)
+    assert np.all(right[4:] < 0.8 * wrong[4:]), (right, wrong)
+
+
+def test_on_a_declared_wrist_the_output_stage_takes_the_transmissions_sign(ur5, output_stage) -> None:
+    """Motor 6 turns with q5 + q6 and drives joint 6's output stage: the stage's friction is not the motor's
+    (allowed beside it) and reaches joints 5 and 6 with the transmission's sign, not a tuned one."""
+    _, train, _ = output_stage
+    R = np.eye(6)
+    R[5, 4] = 1.0
+    wrist = ur5.with_transmission(R)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = identify(wrist, train, method="ols", friction="linear", gmm="off", effects="coupled_friction@5+6:mix=0")
+    (term,) = model.effects
+    assert term.hyper == {"mix": 0.0, "sign": 1.0}
+    R[5, 4] = -1.0  # motor 6 turns with q6 - q5: its torque reaches joint 5 with the other sign
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = identify(
+            ur5.with_transmission(R), train, method="ols", friction="linear", gmm="off",
+            effects="coupled_friction@5+6:mix=0",
+        )  # fmt: skip
+    assert model.effects[0].hyper["sign"] == -1.0
+    with pytest.raises(UsageError, match="the friction of motor 6"):  # mix 1 with the sign: the motor's own
+        identify(
+            ur5.with_transmission(R), train, method="ols", friction="linear", gmm="off",
+            effects="coupled_friction@5+6:sign=-1",
+        )  # fmt: skip
+
+
 def test_a_term_that_needs_time_is_predicted_from_a_dataset(ur5, coupled) -> None:
     _, train, held, _ = coupled
     with warnings.catch_warnings():
