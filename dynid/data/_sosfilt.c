@@ -15,16 +15,17 @@
  */
 #include <stddef.h>
 
-void dynid_sosfilt(const double *sos, long n_sections, double *x, long length, long k, double *zi, int reverse)
+void dynid_sosfilt(const double *sos, ptrdiff_t n_sections, double *x, ptrdiff_t length, ptrdiff_t k, double *zi,
+                   int reverse)
 {
-    for (long step = 0; step < length; ++step) {
-        long n = reverse ? length - 1 - step : step;
-        double *row = x + (ptrdiff_t)n * k;
-        for (long s = 0; s < n_sections; ++s) {
+    for (ptrdiff_t step = 0; step < length; ++step) {
+        ptrdiff_t n = reverse ? length - 1 - step : step;
+        double *row = x + n * k;
+        for (ptrdiff_t s = 0; s < n_sections; ++s) {
             const double b0 = sos[6 * s], b1 = sos[6 * s + 1], b2 = sos[6 * s + 2];
             const double a1 = sos[6 * s + 4], a2 = sos[6 * s + 5];
-            double *z0 = zi + (ptrdiff_t)(2 * s) * k, *z1 = z0 + k;
-            for (long c = 0; c < k; ++c) {
+            double *z0 = zi + 2 * s * k, *z1 = z0 + k;
+            for (ptrdiff_t c = 0; c < k; ++c) {
                 const double xc = row[c];
                 const double y = b0 * xc + z0[c];
                 z0[c] = b1 * xc - a1 * y + z1[c];

@@ -24,6 +24,7 @@ import functools
 import hashlib
 import os
 import platform
+import shlex
 import subprocess
 import sys
 import tempfile
@@ -48,6 +49,12 @@ def butter_lowpass(order: int, cutoff: float, fs: float) -> NDArray[np.float64]:
     ndarray, shape (ceil(order / 2), 6)
         Rows ``[b0, b1, b2, 1, a1, a2]``.
     """
+    if not (int(order) == order and order >= 1 and np.isfinite(fs) and fs > 0 and 0 < cutoff < fs / 2):
+        raise ValueError(
+            f"a Butterworth low-pass needs an order of 1 or more and a cut-off between 0 and the Nyquist "
+            f"frequency {fs / 2:g} Hz; got order {order!r} and {cutoff!r} Hz"
+        )
+    order = int(order)
     k = np.arange(-order + 1, order, 2)
     analog = -np.exp(1j * np.pi * k / (2 * order))  # unit-cutoff prototype, left half plane
     warped = 4.0 * np.tan(np.pi * (2.0 * cutoff / fs) / 2.0)  # scipy's pre-warping at fs = 2
@@ -91,7 +98,7 @@ def sosfilt_zi(sos: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 _SOURCE = Path(__file__).with_name("_sosfilt.c")
-_FLAGS = ("-O2", "-fPIC", "-shared", "-ffp-contract=off")
+_FLAGS = ("-x", "c", "-O2", "-fPIC", "-shared", "-ffp-contract=off")
 """How the section loop is compiled: no floating-point contraction, so its values are scipy's to the bit."""
 
 
@@ -102,29 +109,41 @@ def _compiled() -> Any:
     try:
         from dynid.symbolic.build import cache_dir, find_compiler
 
-        compiler = find_compiler("c")
+        given = shlex.split(os.environ.get("CC", ""))  # "ccache gcc" stays whole
+        compiler = [find_compiler("c"), *given[1:]] if given else [find_compiler("c")]
         digest = hashlib.sha256(_SOURCE.read_bytes())
-        digest.update(" ".join((compiler, *_FLAGS, sys.platform, platform.machine())).encode())
+        digest.update(" ".join((*compiler, *_FLAGS, sys.platform, platform.machine())).encode())
         lib = cache_dir() / "dsp" / f"sosfilt-{digest.hexdigest()[:16]}.so"
-        if not lib.exists():
-            lib.parent.mkdir(parents=True, exist_ok=True)
-            handle, tmp = tempfile.mkstemp(dir=lib.parent, prefix=".sosfilt-", suffix=".so")
-            os.close(handle)
+        for attempt in range(2):
+            if not lib.exists():
+                _build(compiler, lib)
             try:
-                subprocess.run(
-                    [compiler, *_FLAGS, str(_SOURCE), "-o", tmp], check=True, capture_output=True, timeout=120
-                )
-                os.replace(tmp, lib)  # atomic: a parallel build writes the same bytes
-            finally:
-                if os.path.exists(tmp):
-                    os.unlink(tmp)
-        function = ctypes.CDLL(str(lib)).dynid_sosfilt
+                function = ctypes.CDLL(str(lib)).dynid_sosfilt
+                break
+            except (OSError, AttributeError):  # a damaged library: built once more
+                if attempt:
+                    raise
+                lib.unlink(missing_ok=True)
     except Exception:  # no compiler, a read-only cache, a failed build: scipy.signal's loop instead
         return None
     double_p = ctypes.POINTER(ctypes.c_double)
     function.restype = None
-    function.argtypes = [double_p, ctypes.c_long, double_p, ctypes.c_long, ctypes.c_long, double_p, ctypes.c_int]
+    size = ctypes.c_ssize_t
+    function.argtypes = [double_p, size, double_p, size, size, double_p, ctypes.c_int]
     return function
+
+
+def _build(compiler: list[str], lib: Path) -> None:
+    """Compile the section loop into ``lib``, atomically (parallel builds write the same bytes)."""
+    lib.parent.mkdir(parents=True, exist_ok=True)
+    handle, tmp = tempfile.mkstemp(dir=lib.parent, prefix=".sosfilt-", suffix=".so")
+    os.close(handle)
+    try:
+        subprocess.run([*compiler, *_FLAGS, str(_SOURCE), "-o", tmp], check=True, capture_output=True, timeout=120)
+        os.replace(tmp, lib)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
 
 
 def sosfilt_inplace(
@@ -141,10 +160,13 @@ def sosfilt_inplace(
     if x.dtype != np.float64 or not x.flags.c_contiguous or not x.flags.writeable or x.ndim != 2:
         raise ValueError("x must be a writeable C-contiguous float64 array of shape (L, k)")
     sos = np.ascontiguousarray(sos, dtype=np.float64)
+    if sos.ndim != 2 or sos.shape[1] != 6 or len(sos) == 0:
+        raise ValueError(f"sos must be second-order sections of shape (n_sections, 6); got shape {sos.shape}")
     if np.any(sos[:, 3] != 1.0):
         sos = sos / sos[:, 3:4]
-    if zi.shape != (len(sos), 2, x.shape[1]) or zi.dtype != np.float64 or not zi.flags.c_contiguous:
-        raise ValueError(f"zi must be a C-contiguous float64 array of shape {(len(sos), 2, x.shape[1])}")
+    shape = (len(sos), 2, x.shape[1])
+    if zi.shape != shape or zi.dtype != np.float64 or not zi.flags.c_contiguous or not zi.flags.writeable:
+        raise ValueError(f"zi must be a writeable C-contiguous float64 array of shape {shape}")
     function = _compiled()
     if function is not None:
         double_p = ctypes.POINTER(ctypes.c_double)
@@ -164,6 +186,8 @@ def sosfilt(sos: NDArray[np.float64], x: NDArray[np.float64], zi: NDArray[np.flo
     """``scipy.signal.sosfilt(sos, x, axis=0, zi=zi)[0]`` for ``x`` (L, k): the filtered copy (zero
     initial states when ``zi`` is None; ``zi`` broadcast to (n_sections, 2, k) and not changed)."""
     y = np.array(x, dtype=np.float64, order="C", copy=True)
+    if y.ndim == 1:  # one signal
+        return sosfilt(sos, y[:, None], None if zi is None else np.asarray(zi)[..., None])[:, 0]
     states = np.zeros((len(sos), 2, y.shape[1])) if zi is None else np.ascontiguousarray(
         np.broadcast_to(zi, (len(sos), 2, y.shape[1])), dtype=np.float64
     ).copy()
@@ -197,6 +221,8 @@ def welch(
     """
     x = np.asarray(x, dtype=np.float64)
     nperseg = int(min(nperseg, x.shape[0]))
+    if nperseg < 1:
+        raise ValueError(f"welch needs at least one sample per segment; got a signal of {x.shape[0]} samples")
     step = nperseg - nperseg // 2
     count = (x.shape[0] - nperseg) // step + 1
     starts = np.arange(count) * step
@@ -214,6 +240,8 @@ def welch(
     else:
         raise ValueError(f"detrend must be 'constant' or 'linear'; got {detrend!r}")
     window = 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(nperseg) / nperseg)  # periodic Hann
+    if nperseg == 1:
+        window = np.ones(1)  # scipy's Hann window of one sample
     shape = (1, nperseg) + (1,) * (x.ndim - 1)
     spectrum = np.fft.rfft(segments * window.reshape(shape), n=nperseg, axis=1)
     power = (spectrum.real**2 + spectrum.imag**2) / (fs * float(window @ window))

@@ -214,10 +214,13 @@ def describe_hyper(cand: Candidate) -> str:
     units = {"vs": "rad/s", "T": "s", "N": "", "eps": "N m", "sign": ""}
     parts = []
     for k, v in cand.hyper.items():
-        if k in ("motor", "exact", "asymmetric"):
+        if k in ("motor", "exact", "asymmetric", "mix"):
             continue
         if k == "sign":
-            parts.append("w = dq_a + dq_b" if v > 0 else "w = dq_a - dq_b")
+            mix = cand.hyper.get("mix", 1.0)
+            a = "dq_a" if mix == 1.0 else ("" if mix == 0.0 else f"{mix:g} dq_a")
+            b = ("+ dq_b" if v > 0 else "- dq_b") if a else ("dq_b" if v > 0 else "-dq_b")
+            parts.append(f"w = {a} {b}".replace("  ", " ").strip() + ("" if a else " (felt by both joints)"))
         else:
             parts.append(f"{k} = {v:.3g}{(' ' + units[k]) if units.get(k) else ''}")
     return ", ".join(parts)

@@ -332,7 +332,7 @@ def effect_spec(terms: Sequence[Candidate]) -> str:
     """``--effects`` text of terms with their hyper-parameters (``delay@5:d=0.0049,stribeck@3:vs=0.05``)."""
     items = []
     for t in terms:
-        where = "" if t.joint is None and t.effect == "base_tilt" else "@" + t.key.split("@", 1)[1]
-        hyper = ";".join(f"{k}={v:.6g}" for k, v in t.hyper.items() if k != "exact")
+        where = "" if t.joint is None and t.effect == "base_tilt" else "@" + t.key.split("@", 1)[1].split(":", 1)[0]
+        hyper = ";".join(f"{k}={v!r}" if k == "mix" else f"{k}={v:.6g}" for k, v in t.hyper.items() if k != "exact")
         items.append(t.effect + where + (f":{hyper}" if hyper else ""))
     return ",".join(items)

@@ -247,8 +247,9 @@ class Candidate:
         if self.joint is not None:
             return f"{self.effect}@{self.joint + 1}"
         key = f"{self.effect}@" + "+".join(str(j + 1) for j in self.joints)
-        mix = self.hyper.get("mix", 1.0)
-        return key if mix == 1.0 else f"{key}:mix={mix:g}"  # the output stage's friction beside the motor's
+        mix = float(self.hyper.get("mix", 1.0)) + 0.0  # (-0 is 0)
+        text = repr(mix).removesuffix(".0")  # to the bit: two mixes are one key only when equal
+        return key if mix == 1.0 else f"{key}:mix={text}"  # the output stage's friction beside the motor's
 
 
 def _on_joint(src: FeatureSource, j: int, cols: Sequence[NDArray[np.float64]]) -> NDArray[np.float64]:

@@ -51,9 +51,9 @@ def kmeans_labels(X: NDArray[np.float64], K: int, random_state: np.random.Random
     a tenth of a default identification; tests/identify/test_mixture.py compares the labels with
     scikit-learn's own.
     """
+    tol = float(np.mean(np.var(X, axis=0))) * 1e-4  # on the data as given, before centring
     X = X - X.mean(axis=0)
     m, d = X.shape
-    tol = float(np.mean(np.var(X, axis=0))) * 1e-4
     norms = np.einsum("ij,ij->i", X, X)
     weight = np.ones(m)
 
@@ -89,13 +89,20 @@ def kmeans_labels(X: NDArray[np.float64], K: int, random_state: np.random.Random
         np.add.at(sums, labels, X)
         empty = np.flatnonzero(counts == 0)
         if len(empty):  # each empty cluster takes one of the samples farthest from their centres
-            far = np.argpartition(((X - centers[labels]) ** 2).sum(axis=1), -len(empty))[: -len(empty) - 1 : -1]
-            for e, f in zip(empty, far, strict=True):
-                sums[labels[f]] -= X[f]
-                sums[e] = X[f]
-                counts[e] = 1.0
-                counts[labels[f]] -= 1.0
-        new = np.where(counts[:, None] > 0, sums / np.maximum(counts, 1.0)[:, None], sums)  # as scikit-learn: a cluster left empty sits at 0
+            dist = ((X - centers[labels]) ** 2).sum(axis=1)
+            far = np.argpartition(dist, -len(empty))[: -len(empty) - 1 : -1]
+            if np.max(dist) != 0:  # all samples on their centres (fewer distinct samples than clusters): none
+                for e, f in zip(empty, far, strict=True):
+                    sums[labels[f]] -= X[f]
+                    sums[e] = X[f]
+                    counts[e] = 1.0
+                    counts[labels[f]] -= 1.0
+        new, biggest = sums, int(np.argmax(counts))
+        for k in range(K):  # in order, as scikit-learn averages: a cluster still empty takes the biggest one's
+            if counts[k] > 0:
+                new[k] *= 1.0 / counts[k]
+            else:
+                new[k] = new[biggest]
         shift = float((np.linalg.norm(new - centers, axis=1) ** 2).sum())
         centers = new
         if old is not None and np.array_equal(labels, old):

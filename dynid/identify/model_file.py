@@ -39,10 +39,19 @@ from dynid.identify.identified import IdentifiedModel
 __all__ = ["FORMAT", "VERSION", "load_model", "save_model"]
 
 FORMAT = "dynid-model"
-VERSION = 3
+VERSION = 4
 """Model file version: 2 adds effect terms and a coupled transmission; 3 the links' consistent standard
 parameters (``links``: mass, centre of mass and inertia of each body, as a URDF inertial takes them) and the
-links held at the consistency bound; version-1 and -2 files still load."""
+links held at the consistency bound; 4 a coupled friction's ``mix`` (an output stage's friction, which a
+version-3 reader would take for the motor's).  A file is written at the lowest version that holds it (4
+only with a mix other than 1), so older readers refuse what they would misread and read the rest;
+version-1 to -3 files still load."""
+
+
+def _file_version(model: IdentifiedModel) -> int:
+    """The lowest version that holds the model (see :data:`VERSION`)."""
+    terms = getattr(model, "effects", None) or ()
+    return VERSION if any(t.hyper.get("mix", 1.0) != 1.0 for t in terms) else 3
 
 
 def _recorded_robot(info_robot: dict[str, Any], path: Path, name: str, load_robot) -> Any:
@@ -119,7 +128,7 @@ def save_model(model: IdentifiedModel, path: str | os.PathLike[str]) -> tuple[Pa
         figures["robot"]["source_from_model"] = os.path.relpath(source.resolve(), path.parent.resolve())
     doc = {
         "format": FORMAT,
-        "version": VERSION,
+        "version": _file_version(model),
         **figures,
         "arrays": arrays_path.name,
         "arrays_sha256": hashlib.sha256(blob).hexdigest(),

@@ -44,6 +44,39 @@ def test_sosfilt_with_initial_states_is_scipys_to_the_bit(order: int, cutoff: fl
     np.testing.assert_allclose(step, 1.0, rtol=0, atol=1e-9)
     with pytest.raises(ValueError, match="C-contiguous float64"):
         dsp.sosfilt_inplace(sos, np.asfortranarray(x), states.copy())
+    frozen = states.copy()
+    frozen.setflags(write=False)
+    with pytest.raises(ValueError, match="writeable C-contiguous"):  # the final states are written there
+        dsp.sosfilt_inplace(sos, x.copy(), frozen)
+    with pytest.raises(ValueError, match="shape \\(n_sections, 6\\)"):  # the loop would read past it
+        dsp.sosfilt_inplace(sos[:, :5], x.copy(), states.copy())
+    assert np.array_equal(dsp.sosfilt(sos, x[:, 0]), ss.sosfilt(sos, x[:, 0]))  # one signal, 1-D
+
+
+def test_a_damaged_library_in_the_cache_is_built_again(tmp_path) -> None:
+    code = (
+        "import numpy as np, scipy.signal as ss\n"
+        "from dynid.data import dsp, filters\n"
+        "assert dsp._compiled() is not None\n"
+        "sos = filters.butter_sos(20.0, 1000.0, 5)\n"
+        "x = np.random.default_rng(0).standard_normal((3, 2000)).cumsum(axis=1)\n"
+        "assert np.array_equal(filters.filtfilt_rows(sos, x), ss.sosfiltfilt(sos, x, axis=-1))\n"
+        "print('ok')\n"
+    )
+    env = {**os.environ, "DYNID_CACHE_DIR": str(tmp_path)}
+    first = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    assert first.returncode == 0 and first.stdout.strip() == "ok", first.stderr[-2000:]
+    (lib,) = (tmp_path / "dsp").glob("sosfilt-*.so")
+    lib.write_bytes(b"not a shared library")  # a disk that lost it, a copy cut short
+    again = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    assert again.returncode == 0 and again.stdout.strip() == "ok", again.stderr[-2000:]
+    assert lib.read_bytes()[:4] == b"\x7fELF"
+
+
+def test_a_design_outside_the_band_is_refused() -> None:
+    for order, cutoff in ((5, 0.0), (5, 500.0), (5, 700.0), (0, 10.0)):
+        with pytest.raises(ValueError, match="order of 1 or more and a cut-off between 0 and the Nyquist"):
+            dsp.butter_lowpass(order, cutoff, 1000.0)
 
 
 def test_without_a_c_compiler_the_filter_is_scipys_own(tmp_path) -> None:
@@ -72,6 +105,9 @@ def test_welch_is_scipys_density(detrend: str) -> None:
         g, Q = dsp.welch(x, 500.0, nperseg, detrend=detrend)
         np.testing.assert_allclose(g, f, rtol=1e-15)
         np.testing.assert_allclose(Q, P, rtol=1e-9, atol=1e-12 * P.max())
+    f, P = ss.welch(x[:1], fs=500.0, nperseg=1, axis=0, detrend=detrend)  # one sample: scipy's window [1]
+    g, Q = dsp.welch(x[:1], 500.0, 1, detrend=detrend)
+    np.testing.assert_allclose(Q, P, atol=1e-30)  # zero (scipy: its linear detrend leaves 1e-33)
     f, P = ss.welch(x[:300, 0], fs=500.0, nperseg=300, detrend=detrend)  # one segment, 1-D
     g, Q = dsp.welch(x[:300, 0], 500.0, 300, detrend=detrend)
     np.testing.assert_allclose(Q, P, rtol=1e-9, atol=1e-12 * P.max())

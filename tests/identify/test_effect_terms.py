@@ -179,6 +179,30 @@ def test_an_output_stage_friction_is_recovered_and_the_motor_speed_form_is_not(u
     assert np.all(right[4:] < 0.8 * wrong[4:]), (right, wrong)
 
 
+def test_an_output_stage_term_round_trips_in_a_version_4_file(ur5, output_stage, tmp_path) -> None:
+    """The mix reaches the model file (version 4, which a version-3 reader refuses: it would take the stage
+    for the motor's friction), the diagnosis' --effects text and the key, to the bit."""
+    from dynid.diagnosis.model_refit import effect_spec
+    from dynid.identify.model_file import VERSION
+
+    _, train, held = output_stage
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = identify(ur5, train, method="ols", friction="linear", gmm="off", effects="coupled_friction@5+6:mix=0")
+    save_model(model, tmp_path / "M.json")
+    doc = json.loads((tmp_path / "M.json").read_text())
+    assert doc["version"] == VERSION == 4 and doc["effects"][0]["hyper"]["mix"] == 0.0
+    again = load_model(tmp_path / "M.json")
+    assert again.effects[0].hyper == model.effects[0].hyper
+    np.testing.assert_allclose(_heldout_rms(again, held), _heldout_rms(model, held), rtol=1e-12)
+    spec = effect_spec(model.effects)
+    head, _, hyper = spec.partition(":")
+    assert head == "coupled_friction@5+6" and sorted(hyper.split(";")) == ["mix=0.0", "sign=1"]
+    assert parse_effect_terms(spec, 6)[0].hyper == {"sign": 1.0, "mix": 0.0}
+    assert parse_effect_terms("coupled_friction@5+6:mix=0.1234567", 6)[0].key == "coupled_friction@5+6:mix=0.1234567"
+    assert parse_effect_terms("coupled_friction@5+6:mix=-0", 6)[0].key == "coupled_friction@5+6:mix=0"
+
+
 def test_on_a_declared_wrist_the_output_stage_takes_the_transmissions_sign(ur5, output_stage) -> None:
     """Motor 6 turns with q5 + q6 and drives joint 6's output stage: the stage's friction is not the motor's
     (allowed beside it) and reaches joints 5 and 6 with the transmission's sign, not a tuned one."""

@@ -88,6 +88,8 @@ def test_the_kmeans_start_is_scikit_learns_to_the_label(rng) -> None:
             X[: m // 2] += 3.0
         if case % 4 == 0:
             X = np.round(X, 1)  # many equal samples and equidistant ones
+        if case % 5 == 0:  # fewer distinct samples than clusters: empty clusters stay where scikit-learn puts them
+            X = np.repeat(X[: max(1, K // 2)], m // max(1, K // 2) + 1, axis=0)[:m]
         for seed in (0, 7):
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # fewer distinct points than clusters, on rounded data
