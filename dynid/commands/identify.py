@@ -286,6 +286,15 @@ def run(args: argparse.Namespace) -> int:
     print(f"friction: {figures['friction']['model']} ({figures['friction']['source']})")
     if figures["robot"].get("transmission") is not None:
         print("transmission: coupled (motor-side armature and friction of the coupled motors)")
+        held = {e["key"] for e in figures.get("effects", [])}
+        for a, b in _coupled_pairs(figures["robot"]["transmission"]):
+            key = f"coupled_friction@{a + 1}+{b + 1}:mix=0"
+            if key not in held:
+                print(
+                    f"  joint {b + 1}'s output stage, driven by motor {b + 1} (friction on dq{b + 1} felt by joints "
+                    f"{a + 1} and {b + 1}), is not modelled: --effects {key} adds it (on the TX40's wrist it lowered "
+                    "joints 5 and 6 held out by 6 and 15 %)"
+                )
     for effect in figures.get("effects", []):
         hyper = ", ".join(f"{k} {v:.4g}" for k, v in effect["hyper"].items() if k != "exact")
         coefs = ", ".join(f"{k} {v:.4g} +- {effect['std'][k]:.2g}" for k, v in effect["coefficients"].items())
@@ -324,3 +333,13 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {json_path} and {arrays_path}")
     write_figures(args.json, {**figures, "elapsed_s": elapsed, "model": str(json_path)})
     return 0
+
+
+def _coupled_pairs(transmission) -> list[tuple[int, int]]:
+    """(a, b), 0-based, for each motor b of the transmission that turns with exactly joints a and b."""
+    pairs = []
+    for b, row in enumerate(transmission):
+        moved = [j for j, v in enumerate(row) if abs(float(v)) > 1e-12]
+        if len(moved) == 2 and b in moved:
+            pairs.append((moved[0] if moved[1] == b else moved[1], b))
+    return pairs

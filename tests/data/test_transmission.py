@@ -176,7 +176,10 @@ def test_identify_takes_a_transmission_file_beside_the_robot(coupled_data, tmp_p
     argv = ["identify", "--robot", str(DATA / "rrpr_mdh.toml"), "--data", str(tmp_path / "D.csv")]
     argv += ["--transmission", str(tmp_path / "wrist.toml"), "--friction", "linear", "--gmm", "off"]
     assert main([*argv, "--method", "ols", "--out", str(tmp_path / "M.json")]) == 0
-    assert "transmission: coupled" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "transmission: coupled" in out
+    # the coupled motor's output stage is named with the flag that adds it
+    assert "--effects coupled_friction@2+4:mix=0 adds it" in out, out
     model = load_model(tmp_path / "M.json")  # the robot from the file, the transmission from the model
     assert model.robot.transmission[3, 1] == 0.5
     k = model.columns.names.index("fc4")
