@@ -109,11 +109,11 @@ def bounded_triangular(
     lower : ndarray, shape (p,)
         Lower bounds (-inf: none).
     """
-    from scipy.optimize import lsq_linear
-
     x = scipy.linalg.lstsq(R, rhs, cond=1e-13, check_finite=False)[0]
     if not np.any(np.isfinite(lower)) or np.all(x >= lower):
         return x
+    from scipy.optimize import lsq_linear  # only when a bound is active (its import is 0.3 s)
+
     return lsq_linear(R, rhs, bounds=(lower, np.inf), method="bvls", lsq_solver="exact").x
 
 

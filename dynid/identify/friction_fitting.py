@@ -13,7 +13,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import lsq_linear, nnls
 
 from dynid.data.preprocess import filtfilt_rows
 from dynid.exceptions import DataError
@@ -161,6 +160,8 @@ def bounded_solve(
     R: NDArray[np.float64], qtb: NDArray[np.float64], rest: float, bounds: tuple[float, ...]
 ) -> tuple[NDArray[np.float64], float]:
     """:func:`bounded_lsq` on the compressed problem ``(R, Q^T b, rest)`` of :func:`_compress`."""
+    from scipy.optimize import lsq_linear, nnls  # here: a linear friction pays no scipy.optimize import
+
     lb = np.asarray(bounds, dtype=np.float64)
     if np.all(lb == 0):
         coef, res = nnls(R, qtb, maxiter=50 * R.shape[1])

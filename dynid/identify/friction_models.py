@@ -22,7 +22,6 @@ from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import least_squares
 from scipy.special import expit
 
 from dynid.exceptions import DataError
@@ -469,6 +468,8 @@ class SigmoidFriction(FrictionModel):
         starts = [
             np.array([np.log(k2 / scale), k3 * scale]) for k2 in (1.0, 10.0, 100.0) for k3 in (0.0, 0.3, -0.3)
         ]
+        from scipy.optimize import least_squares
+
         fits = [least_squares(resid, z0, method="lm", max_nfev=200) for z0 in starts]
         best = min(fits, key=lambda sol: sol.cost)  # the first of the least cost, as before
         phi2, phi3 = float(np.exp(best.x[0])), float(best.x[1])

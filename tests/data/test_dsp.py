@@ -122,7 +122,7 @@ def test_frequency_response_is_sosfreqz() -> None:
     assert abs(dsp.frequency_response(sos, [20.0], 1000.0)[0]) == pytest.approx(2**-0.5)  # -3 dB at the cut-off
 
 
-def test_identify_and_validate_do_not_import_scipy_signal(ur5, tmp_path) -> None:
+def test_identify_and_validate_import_neither_scipy_signal_nor_optimize(ur5, tmp_path) -> None:
     """scipy.signal's import (about 0.75 s) was a third of an OLS identification from the shell."""
     from dynid.data.files import save_dataset
     from dynid.identify.columns import column_set
@@ -134,7 +134,8 @@ def test_identify_and_validate_do_not_import_scipy_signal(ur5, tmp_path) -> None
     save_dataset(data, tmp_path / "D.csv")
     model = tmp_path / "M.json"
     for argv in (
-        ["identify", "--robot", "ur5", "--data", "D.csv", "--out", "M.json", "--method", "ols", "--gmm", "off"],
+        ["identify", "--robot", "ur5", "--data", "D.csv", "--out", "M.json", "--method", "ols", "--friction", "linear",
+         "--gmm", "off"],
         ["validate", "--model", "M.json", "--data", "D.csv", "--report", "R.html"],
     ):
         run = subprocess.run(
@@ -145,4 +146,6 @@ def test_identify_and_validate_do_not_import_scipy_signal(ur5, tmp_path) -> None
         imported = {line.rsplit("|", 1)[-1].strip() for line in run.stderr.splitlines() if line.startswith("import time:")}
         assert "dynid.data.dsp" in imported  # the list is the command's own imports
         assert not {name for name in imported if name.startswith("scipy.signal")}, argv[0]
+        # nor scipy.optimize (0.3 s), which a linear friction with no active bound does not use
+        assert "scipy.optimize" not in imported, argv[0]
     assert model.exists()
