@@ -118,7 +118,11 @@ FIGAROH's TX40 example                                  10.46    9.97      1188
 =====================================================  ======  ======  ========
 
 identify + validate: defaults 0.81 times FIGAROH's CPU time, OLS 0.47 times; identification alone
-0.54 and 0.19 times; peak memory 0.25 times.
+0.54 and 0.19 times; peak memory 0.25 times.  After scipy.optimize left the paths that do not use it
+(load 1.2-1.6, medians of 3): defaults identify 6.74 s, validate 2.76 s; OLS identify 1.96 s, validate
+2.66 s; FIGAROH 10.21 s: 0.93x and 0.45x for identify + validate.  The defaults' CPU time varies by about
+20 % between runs of the same code on this shared machine (5.2-6.3 s in three alternated runs of each of
+7708ed8 and the commit after it, means 6.36 and 6.37 s); the ratios are the comparable figures.
 """
 
 from __future__ import annotations
