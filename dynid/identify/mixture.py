@@ -48,7 +48,7 @@ def kmeans_labels(X: NDArray[np.float64], K: int, random_state: np.random.Random
     to 300 that stop when no label changes or the centres move by at most 1e-4 of the mean variance
     (squared shift summed), an empty cluster given the samples farthest from their centres, and the
     labels of the final centres.  Importing scikit-learn (scipy.stats with it) took 0.65-0.8 s of CPU,
-    a tenth of a default identification; tests/identify/test_mixture.py compares the labels with
+    a tenth of a default identification; tests/identify/test_gmr.py compares the labels with
     scikit-learn's own.
     """
     tol = float(np.mean(np.var(X, axis=0))) * 1e-4  # on the data as given, before centring
