@@ -166,7 +166,7 @@ _HYPER_RULES: dict[str, dict[str, tuple[Callable[[float], bool], str]]] = {
         "mix": (
             lambda v: math.isfinite(v) and 0 <= v <= 1,
             "the weight of the first joint's speed, from 0 (the second joint's own output stage) to 1 (the "
-            "coupled motor's speed, the default)",
+            "coupled motor's speed)",
         ),
     },
     "load_friction": {"asymmetric": (_flag, "0 or 1")},
@@ -187,7 +187,7 @@ def _check_hyper(name: str, key: str, value: float, item: str) -> str:
     if not ok(value):
         raise UsageError(
             f"the hyper-parameter {canonical} of the effect '{item}' is {value:g}; give {rule}, or leave it out "
-            "to have it tuned on the data"
+            + ("(the default 1)" if canonical == "mix" else "to have it tuned on the data")  # a mix is not tuned
         )
     return canonical
 

@@ -117,6 +117,7 @@ def test_the_model_file_keeps_the_terms_and_older_files_load(ur5, coupled, tmp_p
         ("stribeck@9", "give joints in 1..6"),
         ("stribeck@2,stribeck@2", "'stribeck@2' is given twice"),
         ("cogging@2:N", "is not KEY=NUMBER"),
+        ("coupled_friction@5+6:mix=2", "mix of the effect .* is 2; give the weight .* or leave it out \\(the default 1\\)"),
     ],
 )
 def test_a_malformed_effect_is_refused(spec, match) -> None:
