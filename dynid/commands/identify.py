@@ -287,7 +287,9 @@ def run(args: argparse.Namespace) -> int:
     if figures["robot"].get("transmission") is not None:
         print("transmission: coupled (motor-side armature and friction of the coupled motors)")
         held = {e["key"] for e in figures.get("effects", [])}
-        for a, b in _coupled_pairs(figures["robot"]["transmission"]):
+        from dynid.identify.columns import coupled_pairs
+
+        for a, b in coupled_pairs(figures["robot"]["transmission"]):
             key = f"coupled_friction@{a + 1}+{b + 1}:mix=0"
             if key not in held:
                 print(
@@ -334,12 +336,3 @@ def run(args: argparse.Namespace) -> int:
     write_figures(args.json, {**figures, "elapsed_s": elapsed, "model": str(json_path)})
     return 0
 
-
-def _coupled_pairs(transmission) -> list[tuple[int, int]]:
-    """(a, b), 0-based, for each motor b of the transmission that turns with exactly joints a and b."""
-    pairs = []
-    for b, row in enumerate(transmission):
-        moved = [j for j, v in enumerate(row) if abs(float(v)) > 1e-12]
-        if len(moved) == 2 and b in moved:
-            pairs.append((moved[0] if moved[1] == b else moved[1], b))
-    return pairs

@@ -37,6 +37,7 @@ __all__ = [
     "ColumnSet",
     "column_set",
     "compiled_base_regressor",
+    "coupled_pairs",
     "linear_torque",
     "robot_coupling",
 ]
@@ -265,6 +266,17 @@ def robot_coupling(robot) -> NDArray[np.float64] | None:
     if np.array_equal(R, np.eye(robot.n)):
         return None
     return R
+
+
+def coupled_pairs(R: ArrayLike) -> list[tuple[int, int]]:
+    """``(a, b)`` (0-based) for each motor ``b`` of the transmission ``R`` that turns with exactly its own
+    joint ``b`` and one other, ``a`` (the TX40's wrist: motor 6 with joints 5 and 6)."""
+    pairs = []
+    for b, row in enumerate(np.asarray(R, dtype=np.float64)):
+        moved = np.flatnonzero(np.abs(row) > 1e-12).tolist()
+        if len(moved) == 2 and b in moved:
+            pairs.append((moved[0] if moved[1] == b else moved[1], b))
+    return pairs
 
 
 _COLUMN_CACHE: dict[tuple[str, bool, bool, bytes], ColumnSet] = {}

@@ -22,7 +22,7 @@ from dynid._threads import single_blas_thread
 from dynid.data.dataset import Dataset
 from dynid.data.preparation import Preprocessing
 from dynid.exceptions import DynidError, UsageError
-from dynid.identify.columns import ColumnSet, linear_torque, robot_coupling
+from dynid.identify.columns import ColumnSet, coupled_pairs, linear_torque, robot_coupling
 from dynid.identify.consistent import ConsistentLS, consistent_projection
 from dynid.identify.effect_terms import (
     Candidate,
@@ -731,14 +731,14 @@ def data_fingerprint(data: Dataset) -> str:
 
 def _transmission_sign(term: Candidate, R: NDArray[np.float64]) -> Candidate:
     """A coupled pair's output-stage friction (``coupled_friction`` with mix < 1, sign not given) on a robot
-    whose transmission has a motor turning with exactly that pair: that motor drives the stage, so its
+    whose transmission has a motor turning with exactly that pair (its own joint and one other,
+    :func:`~dynid.identify.columns.coupled_pairs`): that motor drives the stage, so its
     torque reaches the two joints with the transmission's sign, which the term takes instead of tuning it."""
     if term.effect != "coupled_friction" or term.joints is None or "sign" in term.hyper:
         return term
     if term.hyper.get("mix", 1.0) == 1.0:
         return term
-    a, b = term.joints
-    for row in R:
-        if set(np.flatnonzero(np.abs(row) > 1e-12).tolist()) == {a, b}:
-            return replace(term, hyper={**term.hyper, "sign": float(np.sign(row[a] * row[b]))})
+    for a, b in coupled_pairs(R):
+        if {a, b} == set(term.joints):
+            return replace(term, hyper={**term.hyper, "sign": float(np.sign(R[b, a] * R[b, b]))})
     return term
