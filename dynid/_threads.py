@@ -40,8 +40,8 @@ def _joint_threads() -> int:
 
 
 JOINT_THREADS = _joint_threads()
-"""Threads of the per-joint work of an identification (friction searches, link steps, filters): two at
-most, as the work per joint is small and the process's own threads run beside them; fewer when
+"""Threads of an identification's large filters (the data matrix's columns, two blocks at once): two at
+most, as the process's own threads run beside them; fewer when
 ``$DYNID_NUM_THREADS`` (:func:`env_threads`) says so, which also sets the compiled regressors' threads:
 the local workers of a fleet, which share the machine's cores, get 1."""
 

@@ -35,13 +35,12 @@ their fits :mod:`dynid.identify.friction_fitting`.
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from dynid._threads import JOINT_THREADS, one_blas_thread
+from dynid._threads import one_blas_thread
 from dynid.exceptions import DataError, ModelFileError
 from dynid.identify.checks import check_is_fitted
 from dynid.identify.friction_base import FrictionModel, friction_model, register_friction_model
@@ -153,15 +152,10 @@ class FrictionLayer:
             except DataError as err:
                 return DataError(f"joint {j + 1}: {err}")
 
-        # The joints are independent, and their searches spend most of their time in filtering, QR and
-        # large array operations that release the GIL: two threads fit two joints at once on 2 cores
-        # (the same CPU time and the same result, bit for bit, as one after the other).
-        workers = min(dq.shape[1], JOINT_THREADS)  # the result does not depend on it
-        if workers > 1:
-            with ThreadPoolExecutor(max_workers=workers) as pool:
-                models = list(pool.map(fit_joint, range(dq.shape[1])))
-        else:
-            models = [fit_joint(j) for j in range(dq.shape[1])]
+        # One joint after the other: two threads, one joint each, cost more CPU and wall time than this
+        # loop (their searches are many small array operations that hold the interpreter lock; see
+        # dynid.identify.refine._per_joint).
+        models = [fit_joint(j) for j in range(dq.shape[1])]
         for mdl in models:
             if isinstance(mdl, DataError):
                 raise mdl

@@ -50,7 +50,6 @@ from __future__ import annotations
 import copy
 import hashlib
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -58,7 +57,7 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import NDArray
 
-from dynid._threads import JOINT_THREADS, single_blas_thread
+from dynid._threads import single_blas_thread
 from dynid.identify._qr import q_factor, r_factor
 from dynid.identify.estimators import bounded_triangular, long_run_factor
 from dynid.identify.friction import FrictionLayer, bounded_lsq
@@ -126,18 +125,15 @@ def _rms(r: NDArray[np.float64]) -> list[float]:
 
 
 def _per_joint(func: Callable[[int], Any], n: int) -> list[Any]:
-    """``[func(0), ..., func(n - 1)]``, two joints at once.
+    """``[func(0), ..., func(n - 1)]``, one joint after the other.
 
-    The joints' eliminations, factorisations and filters are independent and spend their time in
-    LAPACK, BLAS and scipy's filter, which release the GIL: on 2 cores two threads take about half the
-    wall time, for the same CPU time and the same results, bit for bit (each joint's arithmetic is the
-    one of a loop, with one BLAS thread).
+    Two threads, one joint each, were tried: the joints' steps are many small array operations, and the
+    two threads mostly waited for each other's interpreter lock.  On the three real arms' default
+    identifications (single BLAS thread, 2 cores) they cost 0.7-1.1 s more CPU and 0-0.7 s more wall
+    time than this loop; the large filters, where threads do pay, keep them
+    (:func:`dynid.identify.linear_system.build_system`).
     """
-    workers = min(n, JOINT_THREADS)  # the results do not depend on it
-    if workers <= 1:
-        return [func(j) for j in range(n)]
-    with ThreadPoolExecutor(max_workers=workers) as pool:
-        return list(pool.map(func, range(n)))
+    return [func(j) for j in range(n)]
 
 
 def _filtered(prep, designs: list[NDArray[np.float64]]) -> list[NDArray[np.float64]]:
