@@ -46,6 +46,7 @@ __all__ = [
     "pseudo_inertia_jacobian",
     "reference_bodies",
     "standard_from_pseudo_inertia",
+    "trace_gradient",
 ]
 
 
@@ -234,28 +235,51 @@ def physical_scale(phi_ref: NDArray[np.float64], n: int) -> NDArray[np.float64]:
     return out
 
 
-def add_neg_logdet(M, B_all, coef: float, grad, hess) -> None:
-    """Add the derivatives of ``-coef sum_l log det M_l`` (``dM_l / dv_k = B_all[l, k]``) in place.
+def add_neg_logdet(M, G, coef: float, grad, hess) -> None:
+    """Add the derivatives of ``-coef sum_l log det M_l`` (``dM_l / dv_k = sum_i G[10 l + i, k] E_i``) in place.
 
-    Gradient ``-coef tr(M^-1 B_k)``, Hessian ``coef tr(M^-1 B_k M^-1 B_j)``, batched over the links.
+    In each link's standard parameters the gradient of ``-log det M`` is ``-tr(M^-1 E_i)`` and its
+    Hessian ``tr(M^-1 E_i M^-1 E_j)`` (10 x 10, ``E_i`` the pseudo-inertia of unit parameter ``i``);
+    ``G`` maps them to the variables.  (Forming ``dM_l / dv_k`` for every variable first, as
+    :func:`pseudo_inertia_jacobian` gives it, costs ``k / 10`` times the small products: on a 7-link
+    arm this form took a Newton step of the consistent fit from 0.6 to about 0.15 ms.)
 
     Parameters
     ----------
     M : ndarray, shape (n, 4, 4)
         Positive definite matrices (pseudo-inertias, or their part above a margin).
-    B_all : ndarray, shape (n, k, 4, 4)
-        Their derivatives along the k variables (:func:`pseudo_inertia_jacobian`).
+    G : ndarray, shape (m, k), m >= 10 n
+        ``d params / d v``: its first 10 n rows are the standard parameters of links 1..n, as
+        :func:`pseudo_inertia_jacobian` takes them.
     coef : float
         Weight of the barrier.
     grad, hess : ndarray, shapes (k,) and (k, k)
         Gradient and Hessian, added to in place.
     """
-    n, nv = B_all.shape[:2]
-    Li = np.linalg.inv(np.linalg.cholesky(M))  # (n, 4, 4), lower triangular
-    T = (Li[:, None] @ B_all @ np.swapaxes(Li, 1, 2)[:, None]).reshape(n, nv, 16)
-    grad -= coef * T[:, :, [0, 5, 10, 15]].sum(axis=(0, 2))
-    Tm = np.ascontiguousarray(T.transpose(1, 0, 2)).reshape(nv, 16 * n)
-    hess += coef * (Tm @ Tm.T)
+    n = M.shape[0]
+    Gl = G[: 10 * n]
+    Li = np.linalg.inv(np.linalg.cholesky(M))  # (n, 4, 4), lower triangular: M^-1 = Li^T Li
+    S = (Li[:, None] @ _E @ np.swapaxes(Li, 1, 2)[:, None]).reshape(n, 10, 16)  # Li E_i Li^T
+    g = S[:, :, [0, 5, 10, 15]].sum(axis=2).reshape(10 * n)  # tr(M^-1 E_i)
+    H = S @ np.swapaxes(S, 1, 2)  # (n, 10, 10): tr(M^-1 E_i M^-1 E_j)
+    grad -= coef * (Gl.T @ g)
+    hess += coef * (Gl.T @ (H @ Gl.reshape(n, 10, -1)).reshape(10 * n, -1))
+
+
+def trace_gradient(A, G) -> NDArray[np.float64]:
+    """The gradient of ``sum_l tr(A_l M_l)`` in the variables (``M_l`` as in :func:`add_neg_logdet`).
+
+    Parameters
+    ----------
+    A : ndarray, shape (n, 4, 4)
+    G : ndarray, shape (m, k), m >= 10 n
+
+    Returns
+    -------
+    ndarray, shape (k,)
+    """
+    n = A.shape[0]
+    return G[: 10 * n].T @ np.einsum("lab,iba->li", A, _E).reshape(10 * n)
 
 
 def newton_direction(hess, grad):
@@ -423,7 +447,6 @@ class _Divergence:
     bounded: NDArray[np.bool_]
     e_ref: NDArray[np.float64]
     e_scale: NDArray[np.float64]
-    B_all: NDArray[np.float64]
     trace_grad: NDArray[np.float64]
     kappa: float = 1e-9  # barrier weight of the extras' bounds (relative to the unit pull)
 
@@ -462,7 +485,7 @@ class _Divergence:
         grad -= kappa * Nb.T @ (1.0 / slack)
         hess += kappa * (Nb.T / slack**2) @ Nb
         grad += self.trace_grad
-        add_neg_logdet(Js - self.shift, self.B_all, 1.0, grad, hess)
+        add_neg_logdet(Js - self.shift, self.N, 1.0, grad, hess)
         return grad, hess
 
 
@@ -478,7 +501,6 @@ def _divergence(
     n, N = free.n, free.N
     eps_l, J_ref_pd = reference_bodies(robot.params, eps)
     A = np.linalg.inv(J_ref_pd)  # (n, 4, 4)
-    B_all = pseudo_inertia_jacobian(N, n)
     return _Divergence(
         n=n,
         base=phi[free.act].copy(),
@@ -489,8 +511,7 @@ def _divergence(
         bounded=np.isfinite(lb),
         e_ref=free.ref[10 * n + free.e_idx],
         e_scale=e_scale,
-        B_all=B_all,
-        trace_grad=np.einsum("lab,lkba->k", A, B_all),  # the gradient of sum_l tr(A_l J_l): constant
+        trace_grad=trace_gradient(A, N),  # the gradient of sum_l tr(A_l J_l): constant
     )
 
 

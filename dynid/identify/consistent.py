@@ -72,9 +72,9 @@ from dynid.identify.bodies import (
     newton_direction,
     physical_scale,
     pseudo_inertia,
-    pseudo_inertia_jacobian,
     reference_bodies,
     standard_from_pseudo_inertia,
+    trace_gradient,
 )
 from dynid.identify.columns import EXTRA_KINDS, ColumnSet
 from dynid.identify.estimators import ESTIMATORS, LinkEstimator
@@ -421,7 +421,6 @@ class _BarrierProblem:
     v0: NDArray[np.float64]  # a strictly feasible start
     weight: NDArray[np.float64]  # of (v - centre)^2: 1 for y, _RHO for w
     centre: NDArray[np.float64]
-    B_all: NDArray[np.float64]  # (n, nv, 4, 4): dJ_l / dv
     lower: NDArray[np.bool_]  # extras in play with a finite lower bound
     Ge: NDArray[np.float64]  # their rows of G
     lbe: NDArray[np.float64]  # their bounds
@@ -472,9 +471,9 @@ class _BarrierProblem:
         Js, slack = self.bodies(v)
         grad = 2 * self.weight * (v - self.centre) + self.prior_grad
         hess = np.diag(2 * self.weight)
-        add_neg_logdet(Js - self.shift, self.B_all, mu, grad, hess)
+        add_neg_logdet(Js - self.shift, self.G, mu, grad, hess)
         if self.reference_weight > 0:
-            add_neg_logdet(Js, self.B_all, self.reference_weight, grad, hess)
+            add_neg_logdet(Js, self.G, self.reference_weight, grad, hess)
         grad -= mu * (self.Ge.T @ (1.0 / slack))
         hess += mu * (self.Ge.T / slack**2) @ self.Ge
         step = newton_direction(hess, grad)
@@ -496,7 +495,6 @@ def _barrier_problem(start: _SearchStart, R, scale2: float, reference_weight: fl
     ny, nv = len(start.xm), G.shape[1]
     lower = np.isfinite(start.lb_e)
     phi_f = _interior_point(start, lower)
-    B_all = pseudo_inertia_jacobian(G, n)
     Jr_inv = np.linalg.inv(start.J_ref_pd)
     return _BarrierProblem(
         act=act,
@@ -505,7 +503,6 @@ def _barrier_problem(start: _SearchStart, R, scale2: float, reference_weight: fl
         v0=np.concatenate([R @ (start.P[:, act] @ phi_f[act] - start.xm) / sigma, V2.T @ (phi_f[act] / D_a)]),
         weight=np.concatenate([np.ones(ny), np.full(nv - ny, _RHO)]),
         centre=np.concatenate([np.zeros(ny), V2.T @ (start.phi0[act] / D_a)]),
-        B_all=B_all,
         lower=lower,
         Ge=G[10 * n :][lower],
         lbe=start.lb_e[lower],
@@ -515,7 +512,7 @@ def _barrier_problem(start: _SearchStart, R, scale2: float, reference_weight: fl
         Jr_inv=Jr_inv,
         logdet_ref=np.linalg.slogdet(start.J_ref_pd)[1],
         prior_grad=(
-            reference_weight * np.einsum("lab,lkba->k", Jr_inv, B_all)
+            reference_weight * trace_gradient(Jr_inv, G)
             if reference_weight > 0
             else np.zeros(nv)
         ),

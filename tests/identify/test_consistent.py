@@ -57,3 +57,44 @@ def test_projection_moves_an_inconsistent_estimate_toward_the_true_parameters(ur
     assert np.all(fit.min_eigenvalues_ >= 1e-6 * (1 - 1e-6))
     kinds = np.array(cols.kinds)
     assert np.all(x_c[np.isin(kinds, ["armature", "coulomb", "viscous"])] >= -1e-12)
+
+
+def test_the_log_det_derivatives_are_those_of_finite_differences() -> None:
+    """``add_neg_logdet`` and ``trace_gradient`` against central differences of their functions."""
+    from dynid.identify.bodies import add_neg_logdet, trace_gradient
+
+    rng = np.random.default_rng(5)
+    n, k = 3, 7
+    G = rng.standard_normal((10 * n + 2, k))  # two rows after the links' (extras): ignored
+    base = np.concatenate([[2.0, 0.1, -0.2, 0.3, 0.5, 0.01, 0.6, -0.02, 0.03, 0.4]] * n)
+    A = np.stack([(lambda B: B @ B.T + np.eye(4))(rng.standard_normal((4, 4))) for _ in range(n)])
+
+    def bodies(v):
+        return pseudo_inertia((base + 0.01 * (G[: 10 * n] @ v)).reshape(n, 10))
+
+    def f(v):
+        return -2.5 * float(np.sum(np.linalg.slogdet(bodies(v))[1]))
+
+    v = 0.3 * rng.standard_normal(k)
+    grad, hess = np.zeros(k), np.zeros((k, k))
+    Gs = 0.01 * G
+    add_neg_logdet(bodies(v), Gs, 2.5, grad, hess)
+    h = 1e-5
+    fd_grad = np.array([(f(v + h * e) - f(v - h * e)) / (2 * h) for e in np.eye(k)])
+
+    def gradient(v):
+        g, unused = np.zeros(k), np.zeros((k, k))
+        add_neg_logdet(bodies(v), Gs, 2.5, g, unused)
+        return g
+
+    fd_hess = np.array([(gradient(v + h * e) - gradient(v - h * e)) / (2 * h) for e in np.eye(k)])
+    assert np.abs(grad).max() > 1e-2  # a real gradient, not zeros on both sides
+    np.testing.assert_allclose(grad, fd_grad, rtol=1e-6, atol=1e-8)
+    np.testing.assert_allclose(hess, fd_hess, rtol=1e-6, atol=1e-8)  # the gradient's differences
+    np.testing.assert_allclose(hess, hess.T, atol=1e-12)
+
+    def tr(v):
+        return float(np.einsum("lab,lba->", A, bodies(v)))
+
+    fd_tr = np.array([(tr(v + h * e) - tr(v - h * e)) / (2 * h) for e in np.eye(k)])
+    np.testing.assert_allclose(trace_gradient(A, Gs), fd_tr, rtol=1e-7, atol=1e-9)
