@@ -34,12 +34,14 @@ EPS = 1e-6
 (see :class:`~dynid.identify.consistent.ConsistentLS`)."""
 __all__ = [
     "EPS",
+    "add_link_terms",
     "add_neg_logdet",
     "clip_eigenvalues",
     "described_bodies",
     "is_consistent",
     "link_inertials",
     "log_cholesky",
+    "neg_logdet_terms",
     "newton_direction",
     "physical_scale",
     "pseudo_inertia",
@@ -256,14 +258,30 @@ def add_neg_logdet(M, G, coef: float, grad, hess) -> None:
     grad, hess : ndarray, shapes (k,) and (k, k)
         Gradient and Hessian, added to in place.
     """
+    g, H = neg_logdet_terms(M)
+    add_link_terms(G, coef * g, coef * H, grad, hess)
+
+
+def neg_logdet_terms(M) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Gradient and Hessian of ``-log det M_l`` in each link's standard parameters.
+
+    Returns ``(g, H)``: ``g`` (10 n,) stacks ``-tr(M_l^-1 E_i)``, ``H`` (n, 10, 10) holds
+    ``tr(M_l^-1 E_i M_l^-1 E_j)``; :func:`add_link_terms` maps them to the variables.
+    """
     n = M.shape[0]
-    Gl = G[: 10 * n]
     Li = np.linalg.inv(np.linalg.cholesky(M))  # (n, 4, 4), lower triangular: M^-1 = Li^T Li
     S = (Li[:, None] @ _E @ np.swapaxes(Li, 1, 2)[:, None]).reshape(n, 10, 16)  # Li E_i Li^T
-    g = S[:, :, [0, 5, 10, 15]].sum(axis=2).reshape(10 * n)  # tr(M^-1 E_i)
-    H = S @ np.swapaxes(S, 1, 2)  # (n, 10, 10): tr(M^-1 E_i M^-1 E_j)
-    grad -= coef * (Gl.T @ g)
-    hess += coef * (Gl.T @ (H @ Gl.reshape(n, 10, -1)).reshape(10 * n, -1))
+    g = -S[:, :, [0, 5, 10, 15]].sum(axis=2).reshape(10 * n)  # -tr(M^-1 E_i)
+    return g, S @ np.swapaxes(S, 1, 2)  # (n, 10, 10): tr(M^-1 E_i M^-1 E_j)
+
+
+def add_link_terms(G, g, H, grad, hess) -> None:
+    """Add a gradient ``g`` (10 n,) and block-diagonal Hessian ``H`` (n, 10, 10) in the links' standard
+    parameters to ``grad`` and ``hess`` in the variables (``G`` as in :func:`add_neg_logdet`), in place."""
+    n = H.shape[0]
+    Gl = G[: 10 * n]
+    grad += Gl.T @ g
+    hess += Gl.T @ (H @ Gl.reshape(n, 10, -1)).reshape(10 * n, -1)
 
 
 def trace_gradient(A, G) -> NDArray[np.float64]:

@@ -63,12 +63,13 @@ from dynid.data.preparation import Preprocessing
 from dynid.exceptions import IdentificationWarning, UsageError
 from dynid.identify.bodies import (
     EPS,
-    add_neg_logdet,
+    add_link_terms,
     clip_eigenvalues,
     described_bodies,
     is_consistent,
     link_inertials,
     log_cholesky,
+    neg_logdet_terms,
     newton_direction,
     physical_scale,
     pseudo_inertia,
@@ -471,9 +472,13 @@ class _BarrierProblem:
         Js, slack = self.bodies(v)
         grad = 2 * self.weight * (v - self.centre) + self.prior_grad
         hess = np.diag(2 * self.weight)
-        add_neg_logdet(Js - self.shift, self.G, mu, grad, hess)
+        g, H = neg_logdet_terms(Js - self.shift)  # the barrier's and the pull's, mapped to v together
+        g, H = mu * g, mu * H
         if self.reference_weight > 0:
-            add_neg_logdet(Js, self.G, self.reference_weight, grad, hess)
+            g_ref, H_ref = neg_logdet_terms(Js)
+            g += self.reference_weight * g_ref
+            H += self.reference_weight * H_ref
+        add_link_terms(self.G, g, H, grad, hess)
         grad -= mu * (self.Ge.T @ (1.0 / slack))
         hess += mu * (self.Ge.T / slack**2) @ self.Ge
         step = newton_direction(hess, grad)
