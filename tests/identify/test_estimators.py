@@ -180,3 +180,31 @@ def test_data_of_another_robot_are_refused(ur5) -> None:
     ds = Dataset(np.arange(100) * 0.01, np.zeros((100, 7)), np.zeros((100, 7)))
     with pytest.raises(DataError, match=r"q has 7 columns; the robot has 6 joints"):
         OLS(robot=ur5).fit(ds)
+
+
+def test_a_shared_system_takes_each_estimators_fit_once(setup, monkeypatch) -> None:
+    """Within ``sharing_systems``, a second fit of one estimator and settings on one dataset is the first's
+    (equal attributes, copied arrays); other settings or another estimator fit again."""
+    from dynid.identify.linear_system import sharing_systems
+
+    robot, cols, x, traj = setup
+    ds = synthetic_dataset(cols, x, traj, rate=50, rng=np.random.default_rng(4), noise=0.5)
+    calls = []
+    original = IRLS._fit_system
+    monkeypatch.setattr(IRLS, "_fit_system", lambda self, system: calls.append(self) or original(self, system))
+    alone = IRLS(robot=robot).fit(build_system(robot, ds))
+    with sharing_systems():
+        first = IRLS(robot=robot).fit(build_system(robot, ds))
+        second = IRLS(robot=robot).fit(build_system(robot, ds))
+        assert len(calls) == 2  # the one outside the block, then the first inside it
+        second.params_[0] += 1.0  # the second's arrays are its own
+        third = IRLS(robot=robot).fit(build_system(robot, ds))
+        other = IRLS(robot=robot, max_iter=3).fit(build_system(robot, ds))
+        assert len(calls) == 3  # other settings: fitted
+        ols = OLS(robot=robot).fit(build_system(robot, ds))
+    np.testing.assert_array_equal(first.params_, alone.params_)
+    np.testing.assert_array_equal(third.params_, alone.params_)
+    np.testing.assert_array_equal(third.cov_, alone.cov_)
+    assert third.n_iter_ == alone.n_iter_ and third.converged_ == alone.converged_
+    assert other.n_iter_ == 3 and not np.array_equal(other.params_, alone.params_)
+    assert not np.array_equal(ols.params_, alone.params_)
