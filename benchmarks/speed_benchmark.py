@@ -123,6 +123,18 @@ identify + validate: defaults 0.81 times FIGAROH's CPU time, OLS 0.47 times; ide
 2.66 s; FIGAROH 10.21 s: 0.93x and 0.45x for identify + validate.  The defaults' CPU time varies by about
 20 % between runs of the same code on this shared machine (5.2-6.3 s in three alternated runs of each of
 7708ed8 and the commit after it, means 6.36 and 6.37 s); the ratios are the comparable figures.
+
+After the per-joint steps stopped running in two threads (they held each other's interpreter lock:
+0.7-1.1 s more CPU, no wall time saved), the threshold searches stopped at a 0.5 % bracket, the
+consistent fit's log-det terms moved to the links' standard parameters and a shared system's layer-1
+fit was taken once per estimator (parameters identical on the three real arms, but for the threshold
+searches' rounding), in-process default identifications alternated with the code before them (a2ad3e7),
+two rounds, CPU s: TX40 split 3.4-4.4 (5.1-6.0 before), Panda 4.1-4.3 (6.4-6.7), LWR4+ 5.7-6.3
+(8.1-9.3).  ``--part cli --repeat 3`` (load 0.4-1.3; the children run from cached bytecode, as an
+installed package does): defaults identify 4.75-5.25 s of CPU, validate 2.4-3.2 s; OLS identify
+1.73-1.86 s; FIGAROH 10.5-10.9 s.  The identification alone: defaults 0.45-0.48x FIGAROH's CPU time
+(the target is 1/3), OLS 0.16-0.17x; identify + validate 0.68-0.78x and 0.46x; defaults 2.75-2.81 times
+OLS from the shell.
 """
 
 from __future__ import annotations
@@ -376,6 +388,11 @@ def part_cli(repeat: int, figaroh_example: str | None, figaroh_python: str) -> N
         def dynid(*args: str) -> list[str]:
             return [sys.executable, "-m", "dynid", *args, "--quiet"]
 
+        if os.environ.pop("PYTHONDONTWRITEBYTECODE", None):
+            # an installed package runs from cached bytecode (pip compiles it, as it compiled FIGAROH's);
+            # with the variable set, every dynid command would compile its 80 modules again (0.15 s)
+            print("  PYTHONDONTWRITEBYTECODE is unset for these runs: modules run from cached bytecode")
+
         ols = ("--method", "ols", "--friction", "linear", "--gmm", "off")
         runs = {
             "dynid identify (defaults)": dynid(
@@ -425,13 +442,15 @@ def part_cli(repeat: int, figaroh_example: str | None, figaroh_python: str) -> N
         default_cpu = med[keys[0]]["cpu"] + med[keys[1]]["cpu"]
         ols_cpu = med[keys[2]]["cpu"] + med[keys[3]]["cpu"]
         print(f"  identify + validate: defaults {default_cpu:.2f} s CPU, OLS {ols_cpu:.2f} s CPU (ratio "
-              f"{default_cpu / ols_cpu:.2f})")  # fmt: skip
+              f"{default_cpu / ols_cpu:.2f}); identify alone: defaults {med[keys[0]]['cpu']:.2f}, OLS "
+              f"{med[keys[2]]['cpu']:.2f} (ratio {med[keys[0]]['cpu'] / med[keys[2]]['cpu']:.2f})")  # fmt: skip
         if figaroh is not None:
             peer = med[keys[-1]]
             print(
                 f"  against FIGAROH's example ({peer['cpu']:.2f} s CPU, {peer['rss_mib']:.0f} MiB): defaults "
                 f"{default_cpu / peer['cpu']:.2f}x its CPU time, OLS {ols_cpu / peer['cpu']:.2f}x; peak memory "
-                f"{max(med[keys[0]]['rss_mib'], med[keys[1]]['rss_mib']) / peer['rss_mib']:.2f}x"
+                f"{max(med[keys[0]]['rss_mib'], med[keys[1]]['rss_mib']) / peer['rss_mib']:.2f}x; identify alone: "
+                f"defaults {med[keys[0]]['cpu'] / peer['cpu']:.2f}x, OLS {med[keys[2]]['cpu'] / peer['cpu']:.2f}x"
             )
 
 
