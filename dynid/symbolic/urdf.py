@@ -100,6 +100,8 @@ def _snapped(joints: list[Joint], source: str) -> list[Joint]:
         out.append(j)
     worst = max((a for _, a in moved), default=0.0)
     if worst > _QUIET_SNAP_RAD:  # values written to 7 decimals or better are the exact ones, silently
+        if os.path.isfile(source):  # one path per file (a model and its --compare name it from two folders)
+            source = os.path.normpath(os.path.abspath(source))
         warnings.warn(
             f"the robot description '{source}' places joint(s) {', '.join(name for name, _ in moved)} within "
             f"{SNAP_RAD:g} rad of a right angle or {SNAP_M:g} m of zero (rounded values, as CAD exports write "

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import os
 import re
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -124,3 +126,18 @@ def test_a_model_of_a_description_with_rounded_axes_exports_onto_it(urdfs, runs,
         result = export_model(model, "urdf", tmp_path / "out.urdf")
     check = next(c for c in result.checks if c["check"].startswith("URDF in Pinocchio"))
     assert check["passed"] and check["tolerance"] > 1e-8 and check["relative_error"] > 1e-8
+
+
+def test_one_file_named_two_ways_gives_one_warning_text(urdfs, tmp_path, monkeypatch):
+    """A model and its --compare may name one description from two folders: the warning names the file
+    once, by its absolute path, so that the command line's once-per-message printing shows it once."""
+    path = Path(urdfs[1]).resolve()
+    (tmp_path / "a").mkdir()
+    monkeypatch.chdir(tmp_path / "a")
+    texts = set()
+    for name in (str(path), os.path.relpath(path), str(Path("..", "a", os.path.relpath(path)))):
+        with pytest.warns(RobotModelWarning) as caught:
+            load_robot(name)
+        texts |= {str(w.message) for w in caught if issubclass(w.category, RobotModelWarning)}
+    assert texts and len(texts) == 1
+    assert f"'{path}'" in texts.pop()
