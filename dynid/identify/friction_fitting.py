@@ -32,10 +32,13 @@ __all__ = [
 _SEARCH_SAMPLES = 10_000  # samples used in shape-parameter searches (evenly strided)
 _SEARCH_WINDOW = 10_000  # full-rate samples filtered per candidate in a search on filtered data
 _GOLDEN_STEPS = 20  # at most, golden-section refinements of a threshold search
-#: A threshold search stops when its bracket spans less than this relative width: a threshold known to
-#: 0.5 %, far inside its own uncertainty (the bracket between the best candidate's neighbours spans
+#: A threshold search stops when its bracket spans less than this relative width and its two inner
+#: costs agree to :data:`_SHAPE_FTOL`: a threshold known to 0.5 %, far inside its own uncertainty on
+#: measured data, whose cost is flat there (the bracket between the best candidate's neighbours spans
 #: 30-70 %; 20 steps, the earlier fixed count, narrowed it to 0.002 %, each step one more filtered fit).
+#: A noise-free cost, whose minimum is sharp, is searched the 20 steps.
 _SHAPE_RTOL = 0.005
+_SHAPE_FTOL = 1e-6
 
 
 def _check_pair(
@@ -216,7 +219,7 @@ def shape_search(
     x1, x2 = a_hi - g * (a_hi - a_lo), a_lo + g * (a_hi - a_lo)
     f1, f2 = cost(np.exp(x1)), cost(np.exp(x2))
     for _ in range(_GOLDEN_STEPS):
-        if a_hi - a_lo < _SHAPE_RTOL:
+        if a_hi - a_lo < _SHAPE_RTOL and abs(f1 - f2) <= _SHAPE_FTOL * max(abs(f1), abs(f2)):
             break
         if f1 < f2:
             a_hi, x2, f2 = x2, x1, f1
