@@ -161,3 +161,24 @@ def test_seed_model_holds_an_implausible_static_level_at_the_coulomb_level(rng) 
     assert back.tied_ == (False, False) and len(back.linear_coef()) == 7
     old_file = {k: v for k, v in untied.to_dict()["coef"].items() if not k.endswith("_held")}
     assert FrictionLayer.from_dict({"model": "seed", "joints": [old_file]}).models_[0].tied_ == (False, False)
+
+
+def test_the_threshold_search_stops_where_its_cost_is_flat_and_not_before_a_sharp_minimum() -> None:
+    """A measured cost is flat near its minimum: the golden section stops at a 0.5 % bracket. A
+    noise-free cost has a sharp minimum: it is searched its 20 steps and lands on it."""
+    from dynid.identify.friction_fitting import shape_search
+
+    best = 0.0137
+    candidates = np.geomspace(1e-3, 1.0, 30)
+    for floor, most, rtol in ((1.0, 2 + 10, 5e-3), (0.0, 2 + 20, 1e-5)):
+        calls = []
+
+        def cost(c, floor=floor, calls=calls):
+            calls.append(c)
+            return floor + 1e-3 * np.log(c / best) ** 2
+
+        found, sse = shape_search(cost, candidates)
+        assert len(sse) == 30 and len(calls) - 30 <= most
+        assert abs(np.log(found / best)) < rtol
+        if floor:
+            assert len(calls) - 30 < 2 + 20  # stopped before the 20 steps
