@@ -40,7 +40,7 @@ def _distributed() -> Any:
 
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "DYNID_NUM_THREADS")
 """Set to 1 in every local worker: each task is single-threaded (BLAS, OpenMP, and dynid's own threads: the
-compiled regressors' and the per-joint work's), and the workers share the machine's cores."""
+compiled regressors' and the identification's large filters'), and the workers share the machine's cores."""
 
 TRIM_VARIABLE = "MALLOC_TRIM_THRESHOLD_"
 """glibc's heap-trim threshold, which Dask sets to 64 KiB in its workers by default (left unset here)."""

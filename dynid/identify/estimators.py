@@ -228,19 +228,27 @@ class LinkEstimator:
         self
         """
         system = self._system(data)
-        key = self._fit_key() if system.shared else None
-        fitted = system.derived.get(key) if key is not None else None
-        if fitted is not None:  # this estimator fitted this shared system already (another pipeline)
-            self.__dict__.update(_copied(fitted))
+        # (a copy without the data matrix estimates the residual's correlation otherwise: its own key)
+        key = (*self._fit_key(), system.Z is None) if system.shared else None
+        if key is None:
+            with single_blas_thread():
+                self._fit_system(system)
             return self
-        with single_blas_thread():
-            self._fit_system(system)
-        if key is not None:
-            system.derived[key] = _copied({k: v for k, v in vars(self).items() if k.endswith("_")})
+        if key not in system.derived:
+            with single_blas_thread(), warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                self._fit_system(system)
+            fitted = {k: v for k, v in vars(self).items() if k.endswith("_")}
+            system.derived[key] = (_copied(fitted), [(w.message, w.category, w.filename, w.lineno) for w in caught])
+        else:  # this estimator fitted this shared system already (another pipeline): its fit, its warnings
+            fitted, _ = system.derived[key]
+            self.__dict__.update(_copied(fitted))
+        for message, category, filename, lineno in system.derived[key][1]:
+            warnings.warn_explicit(message, category, filename, lineno)  # the caller's filters decide
         return self
 
-    def _fit_key(self) -> tuple | None:
-        """What this fit depends on besides the system: the estimator and its settings (None: not reused).
+    def _fit_key(self) -> tuple:
+        """What this fit depends on besides the system: the estimator and its settings.
 
         The default identification fits several pipelines on one shared system
         (:func:`dynid.identify.linear_system.sharing_systems`); those with the same layer-1 estimator
@@ -252,6 +260,8 @@ class LinkEstimator:
                 continue
             if name == "robot":
                 value = id(value)  # the system holds the robot alive
+            elif isinstance(value, np.ndarray):  # every digit (repr rounds them)
+                value = ("array", value.shape, value.dtype.str, value.tobytes())
             elif not isinstance(value, (bool, int, float, str, type(None))):
                 value = repr(value)
             settings.append((name, value))

@@ -208,3 +208,23 @@ def test_a_shared_system_takes_each_estimators_fit_once(setup, monkeypatch) -> N
     assert third.n_iter_ == alone.n_iter_ and third.converged_ == alone.converged_
     assert other.n_iter_ == 3 and not np.array_equal(other.params_, alone.params_)
     assert not np.array_equal(ols.params_, alone.params_)
+
+
+def test_a_shared_fit_says_its_warnings_again_and_a_copy_without_samples_fits_its_own(setup) -> None:
+    """The second taker of a shared fit gets the first's warnings (IRLS stopped short); a copy without the
+    data matrix, whose residual correlation falls back to the filter's, is fitted for itself."""
+    from dynid.exceptions import IdentificationWarning
+    from dynid.identify.linear_system import sharing_systems
+
+    robot, cols, x, traj = setup
+    ds = synthetic_dataset(cols, x, traj, rate=50, rng=np.random.default_rng(5), noise=0.5)
+    with sharing_systems():
+        for _ in range(2):
+            with pytest.warns(IdentificationWarning, match="IRLS did not converge in 2 iterations"):
+                IRLS(robot=robot, max_iter=2).fit(build_system(robot, ds))
+        full = OLS(robot=robot).fit(build_system(robot, ds))
+        bare = OLS(robot=robot).fit(build_system(robot, ds, keep_samples=False))
+    alone = OLS(robot=robot).fit(build_system(robot, ds, keep_samples=False))
+    np.testing.assert_array_equal(bare.correlation_, alone.correlation_)
+    np.testing.assert_array_equal(bare.cov_, alone.cov_)
+    assert not np.array_equal(full.correlation_, bare.correlation_)  # the two really differ
