@@ -122,7 +122,7 @@ def test_frequency_response_is_sosfreqz() -> None:
     assert abs(dsp.frequency_response(sos, [20.0], 1000.0)[0]) == pytest.approx(2**-0.5)  # -3 dB at the cut-off
 
 
-def test_identify_and_validate_import_neither_scipy_signal_nor_optimize(ur5, tmp_path) -> None:
+def test_identify_and_validate_import_neither_scipy_signal_nor_optimize_nor_special(ur5, tmp_path) -> None:
     """scipy.signal's import (about 0.75 s) was a third of an OLS identification from the shell."""
     from dynid.data.files import save_dataset
     from dynid.identify.columns import column_set
@@ -148,4 +148,5 @@ def test_identify_and_validate_import_neither_scipy_signal_nor_optimize(ur5, tmp
         assert not {name for name in imported if name.startswith("scipy.signal")}, argv[0]
         # nor scipy.optimize (0.3 s), which a linear friction with no active bound does not use
         assert "scipy.optimize" not in imported, argv[0]
+        assert "scipy.special" not in imported, argv[0]  # (50 ms) nor the sigmoid friction's expit
     assert model.exists()
