@@ -134,7 +134,9 @@ two rounds, CPU s: TX40 split 3.4-4.4 (5.1-6.0 before), Panda 4.1-4.3 (6.4-6.7),
 installed package does): defaults identify 4.75-5.25 s of CPU, validate 2.4-3.2 s; OLS identify
 1.73-1.86 s; FIGAROH 10.5-10.9 s.  The identification alone: defaults 0.45-0.48x FIGAROH's CPU time
 (the target is 1/3), OLS 0.16-0.17x; identify + validate 0.68-0.78x and 0.46x; defaults 2.75-2.81 times
-OLS from the shell.
+OLS from the shell.  With scipy.special left to the sigmoid friction (18442d9, load 0.7-1.2): defaults
+identify 4.27 s of CPU, validate 2.39 s; OLS identify 1.50 s, validate 2.39 s; FIGAROH 9.90 s: the
+identification alone 0.43x and 0.15x, identify + validate 0.67x and 0.39x.
 """
 
 from __future__ import annotations
