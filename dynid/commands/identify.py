@@ -335,4 +335,3 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {json_path} and {arrays_path}")
     write_figures(args.json, {**figures, "elapsed_s": elapsed, "model": str(json_path)})
     return 0
-

@@ -142,23 +142,19 @@ class FrictionLayer:
         elif dq.shape != F.shape:
             raise DataError(f"dq has shape {dq.shape} but F has {F.shape}; give (m, n) arrays of one shape")
 
-        def fit_joint(j: int) -> FrictionModel | DataError:
+        # One joint after the other: two threads, one joint each, cost more CPU and wall time than this
+        # loop (their searches are many small array operations that hold the interpreter lock; see
+        # dynid.identify.refine._per_joint).
+        models = []
+        for j in range(dq.shape[1]):
             try:
                 mdl = friction_model(self.model, **(self.options or {}))
                 hint = None
                 if around is not None and around.model == self.model and isinstance(mdl, ShapedFriction):
                     hint = float(around.models_[j].coef_[-1])
-                return mdl.fit(dq[:, j], F[:, j], sampling=sampling, around=hint)
+                models.append(mdl.fit(dq[:, j], F[:, j], sampling=sampling, around=hint))
             except DataError as err:
-                return DataError(f"joint {j + 1}: {err}")
-
-        # One joint after the other: two threads, one joint each, cost more CPU and wall time than this
-        # loop (their searches are many small array operations that hold the interpreter lock; see
-        # dynid.identify.refine._per_joint).
-        models = [fit_joint(j) for j in range(dq.shape[1])]
-        for mdl in models:
-            if isinstance(mdl, DataError):
-                raise mdl
+                raise DataError(f"joint {j + 1}: {err}") from None
         self.models_ = models
         self.rms_ = np.array([mdl.rms_ for mdl in models])
         self.filtered_ = prepared is not None
