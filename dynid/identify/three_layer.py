@@ -109,7 +109,7 @@ class ThreeLayerModel:
         hyper-parameters, when not given, are tuned on the training data.
     drive_gains : bool
         With ``method="auto"`` and no ``effects``, a drive gain (``drive_gain@j``: the measured torque a
-        constant times the model's) on each joint whose gain the recording shows and its halves confirm
+        constant times the model's) on each joint whose gain the recording shows and its folds confirm
         (:func:`dynid.identify.pipeline.choose_gains`; default).  False: none, for a model whose bodies
         go into a description that cannot carry a gain (a URDF).
     physical : bool
@@ -230,7 +230,7 @@ class ThreeLayerModel:
         # or none, no correction) or the paper's sequence is asked for
         joint = self.rounds > 0 and not (self.friction in ("none", "linear") and self.gmm == "off")
         self._prior = None
-        if isinstance(self.reference_weight, PriorChoice):  # chosen already (the pipeline's halves)
+        if isinstance(self.reference_weight, PriorChoice):  # chosen already (the pipeline's folds)
             self._prior = self.reference_weight
         elif self.reference_weight == "auto" and (self.physical or self.method == "consistent"):
             say("the description's prior: its strength by blocked cross-validation")
@@ -340,8 +340,8 @@ class ThreeLayerModel:
 
         weight = self.reference_weight
         if weight == "auto" and self.physical and not self.effects and self.friction != "none":
-            # the prior's strength once, on the whole recording; each half takes half its weight (the
-            # weight is in effective samples, and a half has half of them)
+            # the prior's strength once, on the whole recording; each fold takes half its weight (the
+            # weight is in effective samples, and a fold has about half of them: a third to two thirds)
             say("the description's prior: its strength by blocked cross-validation")
             system = build_system(
                 self.robot, data, preprocessing=self.preprocessing, friction=True, armature=self.armature
@@ -366,21 +366,21 @@ class ThreeLayerModel:
                 )
                 if isinstance(half, PriorChoice):  # the same information in D times fewer, less correlated samples
                     half = replace(half, kappa=max(1.0, half.kappa / cv_data.meta["coarse"]["decimate"]))
-        if cv_data is data:  # halves at full size: the whole recording's system is not held beside theirs
+        if cv_data is data:  # folds at full size: the whole recording's system is not held beside theirs
             forget_shared(data)
         choice = choose_pipeline(
             lambda m, f, g: self._with(method=m, friction=f, gmm=g, reference_weight=half, preprocessing=cv_pre),
             cv_data,
             candidates(self.friction, self.gmm),
         )
-        if self.drive_gains and not self.effects:  # a gain per joint where the halves show one
+        if self.drive_gains and not self.effects:  # a gain per joint where the folds show one
             try:
                 joints = gain_screen(
                     build_system(self.robot, cv_data, preprocessing=cv_pre, friction=True, armature=self.armature)
                 )
             except DynidError:  # a recording whose system cannot be solved has no gain to screen
                 joints = []
-            if joints:  # refits on the halves follow: the system is not held beside theirs
+            if joints:  # refits on the folds follow: the system is not held beside theirs
                 forget_shared(cv_data)
                 give_back()
             choice = choose_gains(

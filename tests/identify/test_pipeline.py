@@ -66,6 +66,76 @@ def test_a_recording_too_short_for_two_halves_keeps_the_full_pipeline(ur5):
     assert scaled.info["pipeline"]["drive_gains"] == [] and "drive gain" not in scaled.info["pipeline"]["reason"]
 
 
+@pytest.fixture(scope="module")
+def two_excitations(ur5):
+    """One UR5 on two different excitations: ten seconds, then six (two runs of unequal length, so that
+    the halves of the two joined would not be the runs)."""
+    rng = np.random.default_rng(31)
+    cols = column_set(ur5)
+    x = true_parameters(cols, rng)
+    first = synthetic_dataset(cols, x, random_fourier(ur5, rng, periods=1), rate=100, rng=rng, noise=0.05)
+    second = synthetic_dataset(cols, x, random_fourier(ur5, rng, periods=1), rate=100, rng=rng, noise=0.05)
+    return first, second.select_rows(np.arange(second.m * 3 // 5))
+
+
+def test_a_recording_of_several_runs_is_cut_along_them(two_excitations):
+    from dynid.data.dataset import Dataset
+    from dynid.identify.pipeline import folds
+
+    a, b = two_excitations
+    fa, fb, kind = folds(Dataset.concat([a, b]))
+    assert kind == "runs"
+    first, second = sorted([fa, fb], key=lambda d: d.t[0])  # each fold one recording, sample for sample
+    np.testing.assert_array_equal(first.q, a.q)
+    np.testing.assert_array_equal(second.tau, b.tau)
+    assert len(first.runs) == len(second.runs) == 1
+    # three runs: the longest alone, the two others together, each kept a run of its own
+    fa, fb, kind = folds(Dataset.concat([b, a, b]))
+    assert kind == "runs" and sorted([fa.m, fb.m]) == [a.m, 2 * b.m]
+    assert sorted(len(f.runs) for f in (fa, fb)) == [1, 2]
+    # a run too short to make a fold of a third: the halves
+    tiny = b.select_rows(np.arange(b.m // 4))
+    fa, fb, kind = folds(Dataset.concat([a, tiny]))
+    assert kind == "halves" and abs(fa.m - fb.m) <= 1
+    assert folds(a)[2] == "halves"
+
+
+def test_the_pipeline_is_chosen_on_the_runs_each_predicting_the_other(ur5, two_excitations):
+    from dynid.data.dataset import Dataset
+    from dynid.identify.pipeline import _cross_fit
+
+    a, b = two_excitations
+    base = ThreeLayerModel(robot=ur5)
+
+    def make(m, f, g):
+        return base._with(method=m, friction=f, gmm=g)
+
+    options = [BASELINE, ("ols", "none", "off")]
+    choice = choose_pipeline(make, Dataset.concat([a, b]), options)
+    assert choice.folds == "runs" and choice.to_dict()["folds"] == "runs"
+    assert "on the recording's runs, dealt to two folds, each predicting the other" in choice.reason
+    # the scores are those of each recording predicting the other (the halves would cut the first)
+    np.testing.assert_allclose(choice.cv_rms, np.sqrt(_cross_fit(make, (a, b), options)), rtol=1e-9)
+
+
+def test_a_recording_that_repeats_one_motion_is_told_to_record_another(ur5, linear_run):
+    from dynid.identify.pipeline import ONE_MOTION, repeats_one_motion
+
+    rng = np.random.default_rng(12)
+    cols = column_set(ur5)
+    x = true_parameters(cols, rng)
+    periodic = synthetic_dataset(
+        cols, x, random_fourier(ur5, rng, periods=3, base_freq=0.2), rate=100, rng=rng, noise=0.05
+    )
+    assert repeats_one_motion(periodic) and not repeats_one_motion(linear_run)
+    base = ThreeLayerModel(robot=ur5)
+    options = [BASELINE, ("ols", "none", "off")]
+    said = choose_pipeline(lambda m, f, g: base._with(method=m, friction=f, gmm=g), periodic, options).reason
+    assert said.endswith(ONE_MOTION) and "dynid identify --data A.csv B.csv" in said
+    once = choose_pipeline(lambda m, f, g: base._with(method=m, friction=f, gmm=g), linear_run, options).reason
+    assert ONE_MOTION not in once
+
+
 @pytest.mark.slow
 def test_nonlinear_friction_makes_the_papers_pipeline_the_choice(ur5):
     """The simulator's seed friction (Stribeck-like at low speed): a pipeline with the paper's friction
