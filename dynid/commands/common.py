@@ -22,6 +22,7 @@ __all__ = [
     "check_outputs",
     "check_period_option",
     "is_training_data",
+    "join_recordings",
     "model_files",
     "output",
     "read_dataset",
@@ -140,6 +141,37 @@ def read_dataset(path: str | os.PathLike[str], n_joints: int | None = None, *, r
     return data
 
 
+def join_recordings(parts: Sequence[Any], paths: Sequence[str | os.PathLike[str]]) -> Any:
+    """Several recordings of one robot as one dataset of runs (:meth:`dynid.data.dataset.Dataset.concat`).
+
+    Each keeps its samples; filters and derivatives never cross from one into the next.  The recordings
+    must carry the same signals: a measured velocity or acceleration in one and not in another is refused
+    in one sentence naming both files.
+
+    Parameters
+    ----------
+    parts : sequence of Dataset
+        The recordings, read.
+    paths : sequence of path-like
+        Their files, for the message.
+
+    Returns
+    -------
+    Dataset
+    """
+    from dynid.data.dataset import Dataset
+
+    for name, label in (("dq", "measured velocities (dq_i)"), ("ddq", "measured accelerations (ddq_i)")):
+        has = [getattr(p, name) is not None for p in parts]
+        if any(has) and not all(has):
+            a, b = paths[has.index(True)], paths[has.index(False)]
+            raise UsageError(
+                f"--data: '{a}' has {label} and '{b}' has not; recordings identified together need the same "
+                f"signals: drop the {name}_i columns from '{a}' or record them in '{b}'."
+            )
+    return Dataset.concat(parts)
+
+
 def check_data_fits_model(model: Any, data: Any, *, model_path: Any, data_option: str) -> None:
     """Refuse data that cannot come from the robot a model was identified for.
 
@@ -201,7 +233,9 @@ def is_training_data(model: Any, data: Any) -> bool:
     """Whether ``data`` are, sample for sample, the data ``model`` was identified on.
 
     A model file records the sha256 of its training recording's time stamps, angles and torques
-    (``data_sha256``, :func:`dynid.identify.model.data_fingerprint`).  Files written before it: what the fit
+    (``data_sha256``, :func:`dynid.identify.model.data_fingerprint`), and of each recording it was
+    identified on together (``data_parts_sha256``, ``dynid identify --data A.csv B.csv``): any of them
+    matches.  Files written before it: what the fit
     saw, the samples kept (``n_samples``) and the range of the torque as fitted (``torque_range``, per
     joint); the data, prepared as the model prepares them, give both again (to 1e-9) in practice only when
     they are the training data (a payload identified later widens the range, and such a model is not
@@ -226,7 +260,8 @@ def is_training_data(model: Any, data: Any) -> bool:
     if isinstance(info.get("data_sha256"), str):
         from dynid.identify.model import data_fingerprint
 
-        return info["data_sha256"] == data_fingerprint(data)
+        fingerprint = data_fingerprint(data)
+        return info["data_sha256"] == fingerprint or fingerprint in (info.get("data_parts_sha256") or [])
     seen, count = info.get("torque_range"), info.get("n_samples")
     if seen is None or count is None or data.n != model.robot.n:
         return False

@@ -10,6 +10,7 @@ from dynid.commands.common import (
     add_robot_arguments,
     add_topic_argument,
     check_outputs,
+    join_recordings,
     model_files,
     output,
     read_dataset,
@@ -54,8 +55,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--data",
         required=True,
+        nargs="+",
         metavar="D.csv",
-        help="dataset (.csv or .npz: t, q_i, tau_i [, dq_i, ddq_i]; or a ROS 2 .mcap / rosbag2 folder)",
+        help="dataset (.csv or .npz: t, q_i, tau_i [, dq_i, ddq_i]; or a ROS 2 .mcap / rosbag2 folder); "
+        "several are identified together as runs, and the default pipeline is then chosen by each run "
+        "predicting the others (recordings of two different excitations show a pipeline that only fits "
+        "one motion)",
     )
     add_degrees_argument(parser)
     add_topic_argument(parser)
@@ -65,8 +70,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         choices=("auto", *method_names()),
         help="layer-1 method; auto (default): among ols or irls with linear friction, ols with the paper's "
         "seed friction and the paper's irls + seed friction + gmm, the simplest within 5 points of the one "
-        "that predicts one half of the recording from the other best (none with a joint 5 %% worse than ols "
-        "with linear friction)",
+        "that predicts one half of the recording from the other best (its runs instead of halves when several "
+        "--data files are given; none with a joint 5 %% worse than ols with linear friction)",
     )
     parser.add_argument(
         "--friction",
@@ -240,10 +245,14 @@ def run(args: argparse.Namespace) -> int:
 
         parse_effect_terms(args.effects, robot.n)
     start = time.perf_counter()
-    data = read_dataset(
-        args.data, robot.n, robot_name=robot.name, degrees=args.degrees, topic=args.topic,
-        joint_names=robot.joint_names, robot=robot,
-    )
+    parts = [
+        read_dataset(
+            path, robot.n, robot_name=robot.name, degrees=args.degrees, topic=args.topic,
+            joint_names=robot.joint_names, robot=robot,
+        )
+        for path in args.data
+    ]
+    data = parts[0] if len(parts) == 1 else join_recordings(parts, args.data)
     model = identify(
         robot,
         data,
@@ -258,6 +267,10 @@ def run(args: argparse.Namespace) -> int:
         effects=args.effects,
         drive_gains=not args.no_drive_gains,
     )
+    if len(parts) > 1:  # scoring the model on one of them is scoring it on training data
+        from dynid.identify.model import data_fingerprint
+
+        model.info["data_parts_sha256"] = [data_fingerprint(part) for part in parts]
     json_path, arrays_path = save_model(model, args.out)
     elapsed = time.perf_counter() - start
     figures = model.figures()

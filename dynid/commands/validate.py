@@ -126,9 +126,15 @@ def run(args: argparse.Namespace) -> int:
         check_data_fits_model(model, data, model_path=path, data_option="data")
     for path, model in zip(files, loaded, strict=True):
         if model is not None and is_training_data(model, data):
+            from dynid.identify.model import data_fingerprint
+
+            what = (
+                f"one of the recordings {path} was identified on"
+                if data_fingerprint(data) in (model.info.get("data_parts_sha256") or [])
+                else f"the data {path} was identified on (the same {model.info['n_samples']} samples and torque range)"
+            )
             warnings.warn(
-                f"--data {args.data} is the data {path} was identified on (the same {model.info['n_samples']} "
-                "samples and torque range), so its scores are optimistic, not held-out figures; validate on "
+                f"--data {args.data} is {what}, so its scores are optimistic, not held-out figures; validate on "
                 "a recording the model was not fitted to",
                 DataWarning,
                 stacklevel=2,

@@ -371,6 +371,7 @@ def _model_from(doc: dict[str, Any], blob: bytes, robot, name: str) -> Identifie
             "torque_range",
             "payload",
             "data_sha256",
+            "data_parts_sha256",
         )
     }
     if doc.get("gmm") is not None:

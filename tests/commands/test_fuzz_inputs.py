@@ -456,6 +456,42 @@ def test_diagnosis_settings_refuse_a_period_that_is_not_positive() -> None:
 
 
 # ---------------------------------------------------------------------- 5. training data as held-out data
+def test_two_recordings_identified_together_are_each_training_data(
+    work: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``identify --data D.csv V.csv``: one model of both; validating it on either says so."""
+    argv = ["identify", "--robot", "ur5", "--data", str(work / "D.csv"), str(work / "V.csv"), "--out",
+            str(work / "J.json"), "--method", "ols", "--friction", "linear", "--gmm", "off", "--quiet"]  # fmt: skip
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(argv) == 0, capsys.readouterr().err
+    doc = json.loads((work / "J.json").read_text())
+    assert len(doc["data_parts_sha256"]) == 2 and doc["data_sha256"] not in doc["data_parts_sha256"]
+    for name in ("D.csv", "V.csv"):
+        assert_warned(
+            ["validate", "--model", str(work / "J.json"), "--data", str(work / name), "--quiet"],
+            rf"--data .*{name[0]}\.csv is one of the recordings .*J\.json was identified on, so its scores are "
+            "optimistic, not held-out figures",
+            capsys,
+        )
+
+
+def test_recordings_identified_together_need_the_same_signals(work: Path, capsys) -> None:
+    header, table = _table(work, "V.csv")
+    n = sum(h.startswith("q_") for h in header)
+    dq = np.gradient(table[:, 1 : 1 + n], table[:, 0], axis=0)
+    with_dq = work / "W.csv"
+    np.savetxt(with_dq, np.hstack([table, dq]), delimiter=",", header=",".join(header + [f"dq_{j + 1}" for j in
+               range(n)]), comments="")  # fmt: skip
+    assert_refused(
+        ["identify", "--robot", "ur5", "--data", str(work / "D.csv"), str(with_dq), "--out", str(work / "J.json")],
+        work,
+        r"--data: '.*W\.csv' has measured velocities \(dq_i\) and '.*D\.csv' has not; recordings identified "
+        r"together need the same signals: drop the dq_i columns from '.*W\.csv' or record them in '.*D\.csv'\.",
+        capsys,
+    )
+
+
 def test_validate_on_the_training_data_warns_that_the_score_is_optimistic(
     work: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
