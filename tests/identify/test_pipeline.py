@@ -143,7 +143,8 @@ def test_two_excitations_show_a_pipeline_that_only_fits_one_motion(tmp_path, cap
     ordinary least squares with linear friction, and it predicted another excitation up to 1.37 times
     worse; given two excitations (20 s and 10 s, so the halves of the two joined are not the runs), the
     choice is made on each predicting the other, and predicts a third within 5 % of the baseline on
-    every joint."""
+    every joint.  (Those halves would each see some of both motions and pass the last check too: the
+    folds are what this test holds; one excitation's failure is the unseen-arms benchmark's row b.)"""
     import json
 
     from dynid.cli import main
