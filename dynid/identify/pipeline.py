@@ -98,9 +98,9 @@ _MIN_HALF_SECONDS = 2.0  # halves shorter than this cannot score a motion: the f
 
 ONE_MOTION = (
     "; the recording repeats one motion, so its halves hold the same motion and cannot tell a pipeline "
-    "fitted to that motion from one fitted to the arm: record a second excitation (dynid excite with "
-    "another --seed) and give both recordings (dynid identify --data A.csv B.csv) to choose on a motion "
-    "not seen"
+    "fitted to that motion from one fitted to the arm: record a second excitation (dynid excite "
+    "--trajectories 2 designs two that complement each other) and give both recordings (dynid identify "
+    "--data A.csv B.csv) to choose on a motion not seen"
 )
 """Said after the reason when the pipeline was chosen on two halves of one repeated motion."""
 
