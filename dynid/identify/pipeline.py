@@ -19,8 +19,8 @@ Two halves of one excitation played several times hold the same motion, so they 
 that fits that motion rather than the arm (:data:`PARSIMONY`); two recordings of different motions can.
 Splitting such a recording by phase instead (the first against the second half of every period) was
 tried and dropped: each half period holds states, often a velocity sign, that the other never sees, and
-it refused pipelines that predict a new motion best.  :func:`repeats_one_motion` tells the summary to
-say so, with the command that records a second excitation.
+it refused pipelines that predict a new motion best.  :func:`one_motion` tells when the two folds hold
+one motion, and the reason then says so, with the commands that design and use a second excitation.
 """
 
 from __future__ import annotations
@@ -46,6 +46,7 @@ __all__ = [
     "PARSIMONY",
     "RATE_FACTOR",
     "RUN_BALANCE",
+    "SAME_MOTION",
     "PipelineChoice",
     "candidates",
     "choose_gains",
@@ -54,7 +55,7 @@ __all__ = [
     "decide",
     "folds",
     "gain_screen",
-    "repeats_one_motion",
+    "one_motion",
 ]
 
 BASELINE = ("ols", "linear", "off")
@@ -97,12 +98,21 @@ and the gains are kept only if no joint ends more than :data:`JOINT_TOLERANCE` w
 _MIN_HALF_SECONDS = 2.0  # halves shorter than this cannot score a motion: the full pipeline is kept
 
 ONE_MOTION = (
-    "; the recording repeats one motion, so its halves hold the same motion and cannot tell a pipeline "
-    "fitted to that motion from one fitted to the arm: record a second excitation (dynid excite "
+    "; its two folds hold one motion (every state of one lies on the other's path), so they cannot tell a "
+    "pipeline fitted to that motion from one fitted to the arm: record a second excitation (dynid excite "
     "--trajectories 2 designs two that complement each other) and give both recordings (dynid identify "
     "--data A.csv B.csv) to choose on a motion not seen"
 )
-"""Said after the reason when the pipeline was chosen on two halves of one repeated motion."""
+"""Said after the reason when the pipeline was chosen on folds that hold one motion (:func:`one_motion`)."""
+
+SAME_MOTION = 0.25
+"""Two folds hold one motion when the median distance from a state of one to the nearest state of the
+other is below this, in standard deviations of each angle and speed (:func:`one_motion`).
+
+Measured: the halves of one excitation played six times 0.006-0.010 (simulated UR10, xArm 7, Z1), two
+runs of one excitation recorded twice 0.015 (the LWR4+'s runs 1 and 2); two excitations 4.1-5.0
+(simulated), two different trajectories 1.4-1.6 (the LWR4+'s runs 1 and 3), the halves of the Panda's
+and the TX40's training recordings 3.1-4.0."""
 
 RUN_BALANCE = 1.0 / 3.0
 """Runs become the folds when the smaller fold they make holds at least this share of the samples.
@@ -331,14 +341,38 @@ def folds(data) -> tuple[Any, Any, str]:
     return data.select_rows(np.arange(half)), data.select_rows(np.arange(half, data.m)), "halves"
 
 
-def repeats_one_motion(data) -> bool:
-    """Whether the recording is one run that repeats one period (:func:`dynid.data.periodic.period_of`,
-    rule ``"repeat"``): its two halves then hold the same motion, and the summary advises a second one."""
-    from dynid.data.periodic import period_of
+def _states(data, count: int = 600) -> NDArray[np.float64]:
+    """About ``count`` samples of the angles and their speeds (differences over the thinned samples,
+    which smooth the encoder's noise), evenly spread over the recording."""
+    rows = np.unique(np.linspace(0, data.m - 1, min(count, data.m)).astype(int))
+    q = data.q[rows]
+    t = data.t[rows]
+    return np.hstack([q, np.gradient(q, t, axis=0)]) if len(rows) > 1 else q
 
-    if len(data.runs) > 1 or not data.is_uniform or data.m < 8:
-        return False
-    return period_of(data.q, rule="repeat", min_lag=max(1, int(0.5 / data.dt))) is not None
+
+def one_motion(a, b) -> bool:
+    """Whether two folds hold one motion: the median distance from a state ``[q, dq]`` of either to the
+    nearest state of the other, in standard deviations of each coordinate over both, is below
+    :data:`SAME_MOTION` (both ways).  Two halves of an excitation played several times, or two
+    recordings of one excitation, are; the halves of a recording that moves on, or two excitations, are
+    not.
+
+    Parameters
+    ----------
+    a, b : Dataset
+        The folds.
+
+    Returns
+    -------
+    bool
+    """
+    A, B = _states(a), _states(b)
+    scale = np.vstack([A, B]).std(axis=0)
+    scale[scale <= 0] = 1.0
+    A, B = A / scale, B / scale
+    d2 = np.sum(A**2, axis=1)[:, None] + np.sum(B**2, axis=1)[None, :] - 2.0 * A @ B.T
+    d = np.sqrt(np.maximum(d2, 0.0))
+    return bool(max(np.median(d.min(axis=0)), np.median(d.min(axis=1))) < SAME_MOTION)
 
 
 def choose_pipeline(make, data, options: list[tuple[str, str, str | int]]) -> PipelineChoice:
@@ -368,7 +402,7 @@ def choose_pipeline(make, data, options: list[tuple[str, str, str | int]]) -> Pi
     with stage(f"choosing the pipeline by cross-validation on {_SAID[kind]}", total=2 * len(options)):
         mse = _cross_fit(make, (a, b), options, advance)
     choice = decide(options, np.sqrt(mse), data.meta.get("coarse", {}).get("rate_hz"), kind)
-    if kind == "halves" and repeats_one_motion(data):
+    if one_motion(a, b):
         choice = replace(choice, reason=choice.reason + ONE_MOTION)
     return choice
 

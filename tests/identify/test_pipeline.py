@@ -118,22 +118,30 @@ def test_the_pipeline_is_chosen_on_the_runs_each_predicting_the_other(ur5, two_e
     np.testing.assert_allclose(choice.cv_rms, np.sqrt(_cross_fit(make, (a, b), options)), rtol=1e-9)
 
 
-def test_a_recording_that_repeats_one_motion_is_told_to_record_another(ur5, linear_run):
-    from dynid.identify.pipeline import ONE_MOTION, repeats_one_motion
+def test_folds_that_hold_one_motion_are_told_to_record_another(ur5, linear_run, two_excitations):
+    """One excitation played three times (its halves), or recorded twice (two runs): the folds hold one
+    motion and the reason says so, with the commands that add a second; a recording that moves on, or
+    two excitations, are not told."""
+    from dynid.data.dataset import Dataset
+    from dynid.identify.pipeline import ONE_MOTION, folds, one_motion
 
     rng = np.random.default_rng(12)
     cols = column_set(ur5)
     x = true_parameters(cols, rng)
-    periodic = synthetic_dataset(
-        cols, x, random_fourier(ur5, rng, periods=3, base_freq=0.2), rate=100, rng=rng, noise=0.05
-    )
-    assert repeats_one_motion(periodic) and not repeats_one_motion(linear_run)
+    traj = random_fourier(ur5, rng, periods=3, base_freq=0.2)
+    periodic = synthetic_dataset(cols, x, traj, rate=100, rng=rng, noise=0.05)
+    again = synthetic_dataset(cols, x, traj, rate=100, rng=rng, noise=0.05)  # the same motion, other noise
+    assert one_motion(*folds(periodic)[:2]) and one_motion(*folds(Dataset.concat([periodic, again]))[:2])
+    assert not one_motion(*folds(linear_run)[:2]) and not one_motion(*folds(Dataset.concat(two_excitations))[:2])
     base = ThreeLayerModel(robot=ur5)
     options = [BASELINE, ("ols", "none", "off")]
-    said = choose_pipeline(lambda m, f, g: base._with(method=m, friction=f, gmm=g), periodic, options).reason
-    assert said.endswith(ONE_MOTION) and "dynid identify --data A.csv B.csv" in said
-    once = choose_pipeline(lambda m, f, g: base._with(method=m, friction=f, gmm=g), linear_run, options).reason
-    assert ONE_MOTION not in once
+
+    def said(data):
+        return choose_pipeline(lambda m, f, g: base._with(method=m, friction=f, gmm=g), data, options).reason
+
+    told = said(periodic)
+    assert told.endswith(ONE_MOTION) and "dynid excite --trajectories 2" in told and "--data A.csv B.csv" in told
+    assert ONE_MOTION not in said(linear_run) and ONE_MOTION not in said(Dataset.concat(two_excitations))
 
 
 @pytest.mark.slow
