@@ -16,6 +16,7 @@ from dynid.commands.common import (
     check_outputs,
     check_period_option,
     is_training_data,
+    join_recordings,
     model_files,
     output,
     read_dataset,
@@ -38,7 +39,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "diagnosed as its nominal model: rigid body, armature, damping and Coulomb friction from the file",
     )
     parser.add_argument(
-        "--data", required=True, metavar="D.csv", help="the training data the model was identified on"
+        "--data",
+        required=True,
+        nargs="+",
+        metavar="D.csv",
+        help="the training data the model was identified on (the recordings, when it was identified on several)",
     )
     parser.add_argument(
         "--heldout",
@@ -139,7 +144,7 @@ def _check_options(args, described: bool) -> _Options:
             f"--max-effects is {args.max_effects}; give a whole number of at least 0 (default 3)."
         )
     check_period_option(args.period)
-    if same_file(args.heldout, args.data):
+    if any(same_file(args.heldout, path) for path in args.data):
         raise UsageError(_NOT_HELD_OUT.format(heldout=args.heldout, what="the same file as --data"))
     return _Options(report=report, effects=effects)
 
@@ -203,13 +208,13 @@ def _read_inputs(args, described: bool) -> _Inputs:
         from dynid.symbolic.robot import load_robot
 
         robot = load_robot(args.model)
-        train = read_dataset(args.data, robot=robot, **read)
+        train = _read_training(args, robot, read)
         # nothing identified: the file as the simulator reads it, seen through the training data's filter
         model = description_model(args.model, train)
     else:
         model = load_model(args.model, robot=robot)
         robot = model.robot
-        train = read_dataset(args.data, robot=robot, **read)
+        train = _read_training(args, robot, read)
     heldout = read_dataset(args.heldout, robot=robot, option="heldout", **read)
     return _Inputs(model=model, robot=robot, train=train, heldout=heldout)
 
@@ -291,7 +296,7 @@ def _write_report(args, report, model, result, figures: dict, context: dict) -> 
         report,
         context={
             "model": args.model,
-            "training data": args.data,
+            "training data": ", ".join(args.data),
             "held-out data": args.heldout,
             "robot": model.robot.name,
             **context,
@@ -307,6 +312,12 @@ _NOT_HELD_OUT = (
     "(on its training data the error is fitted away and the gap looks smaller than it is); give another "
     "recording of the robot (another run, or 'dynid simulate' with another --seed)"
 )
+
+
+def _read_training(args, robot, read: dict):
+    """The training recording(s), joined as runs when several are given (as ``identify --data`` joins them)."""
+    parts = [read_dataset(path, robot=robot, **read) for path in args.data]
+    return parts[0] if len(parts) == 1 else join_recordings(parts, args.data)
 
 
 def _same_data(a, b) -> bool:
@@ -416,7 +427,7 @@ def _settling_commands(args, model, heldout, result) -> dict | None:
         "commands": [
             settle["excite"],
             settle["play"],
-            f"dynid diagnose --model {shlex.quote(args.model)} --data {shlex.quote(args.data)} "
+            f"dynid diagnose --model {shlex.quote(args.model)} --data {' '.join(shlex.quote(d) for d in args.data)} "
             "--heldout heldout.csv" + _forwarded(args),
         ],
     }

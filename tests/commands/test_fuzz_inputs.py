@@ -285,6 +285,13 @@ CASES: list[tuple[str, Callable[[Path], list[str]], str]] = [
         r"not fitted to .*; give another recording of the robot",
     ),
     (
+        "diagnose_heldout_is_one_of_the_data",
+        lambda f: ["diagnose", "--model", str(f / "M.json"), "--data", str(f / "V.csv"), str(f / "D.csv"),
+                   "--heldout", str(f / "D.csv"), "--report", str(f / "R.html")],  # fmt: skip
+        r"--heldout .*D\.csv is the same file as --data, but the diagnosis measures the gap on data the model was "
+        r"not fitted to",
+    ),
+    (
         "diagnose_heldout_is_training_copy",
         lambda f: _diagnose(f, str(f / "V.csv"), str(shutil.copy2(f / "D.csv", f / "D2.csv"))),
         r"--heldout .*D2\.csv is the data .*M\.json was identified on, but the diagnosis measures the gap on data",
