@@ -146,7 +146,7 @@ def join_recordings(parts: Sequence[Any], paths: Sequence[str | os.PathLike[str]
 
     Each keeps its samples; filters and derivatives never cross from one into the next.  The recordings
     must carry the same signals: a measured velocity or acceleration in one and not in another is refused
-    in one sentence naming both files.
+    in one sentence naming both files, and so is a file named twice.
 
     Parameters
     ----------
@@ -161,6 +161,13 @@ def join_recordings(parts: Sequence[Any], paths: Sequence[str | os.PathLike[str]
     """
     from dynid.data.dataset import Dataset
 
+    for i, a in enumerate(paths):
+        for b in paths[i + 1 :]:
+            if same_file(a, b):
+                raise UsageError(
+                    f"--data names '{a}'{'' if str(a) == str(b) else f' and {b!r}, one file,'} twice; each "
+                    "recording counts once in the fit: give it once."
+                )
     for name, label in (("dq", "measured velocities (dq_i)"), ("ddq", "measured accelerations (ddq_i)")):
         has = [getattr(p, name) is not None for p in parts]
         if any(has) and not all(has):

@@ -286,8 +286,7 @@ CASES: list[tuple[str, Callable[[Path], list[str]], str]] = [
     ),
     (
         "diagnose_heldout_is_one_of_the_data",
-        lambda f: ["diagnose", "--model", str(f / "M.json"), "--data", str(f / "V.csv"), str(f / "D.csv"),
-                   "--heldout", str(f / "D.csv"), "--report", str(f / "R.html")],  # fmt: skip
+        lambda f: _diagnose(f, str(f / "V.csv"), str(f / "D.csv"), "--data", str(f / "V.csv"), str(f / "D.csv")),
         r"--heldout .*D\.csv is the same file as --data, but the diagnosis measures the gap on data the model was "
         r"not fitted to",
     ),
@@ -481,6 +480,15 @@ def test_two_recordings_identified_together_are_each_training_data(
             "optimistic, not held-out figures",
             capsys,
         )
+
+
+def test_a_recording_named_twice_is_refused(work: Path, capsys) -> None:
+    assert_refused(
+        ["identify", "--robot", "ur5", "--data", str(work / "D.csv"), str(work / "D.csv"), "--out", str(work / "J.json")],
+        work,
+        r"^dynid identify: error: --data names '.*D\.csv' twice; each recording counts once in the fit: give it once\.$",
+        capsys,
+    )
 
 
 def test_recordings_identified_together_need_the_same_signals(work: Path, capsys) -> None:
