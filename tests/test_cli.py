@@ -135,3 +135,22 @@ def test_demo_runs_what_exists(tmp_path, capsys):
     data = json.loads(figures.read_text())
     assert data["n_base"] == 36
     assert data["c_export_max_error"] < 1e-10
+
+
+def test_the_settling_command_names_the_robot_as_a_user_types_it_here(tmp_path, monkeypatch):
+    """A model file names its description relative to itself; the command diagnose prints to settle an
+    undecided effect is run from the working directory, where a path climbing out of it reads worse than
+    the absolute one, and a built-in name stays a name."""
+    import os
+
+    from dynid.commands.diagnose import _as_typed
+
+    here, elsewhere = tmp_path / "work", tmp_path / "robots"
+    here.mkdir()
+    (here / "arm.urdf").write_text("<robot/>")
+    elsewhere.mkdir()
+    (elsewhere / "arm.urdf").write_text("<robot/>")
+    monkeypatch.chdir(here)
+    assert _as_typed("ur5") == "ur5"
+    assert _as_typed(str(here / "arm.urdf")) == "arm.urdf"
+    assert _as_typed(os.path.join("..", "robots", "arm.urdf")) == str(elsewhere / "arm.urdf")

@@ -314,6 +314,19 @@ _NOT_HELD_OUT = (
 )
 
 
+def _as_typed(source) -> str:
+    """A robot's source as a user would type it here: a built-in name as it is, a file by its path from the
+    working directory, or by its absolute path where that path climbs out of it (a model file elsewhere
+    names its description relative to itself)."""
+    import os
+
+    text = str(source)
+    if not os.path.exists(text):
+        return text
+    relative = os.path.relpath(text)
+    return os.path.abspath(text) if relative.startswith(os.pardir) else relative
+
+
 def _read_training(args, robot, read: dict):
     """The training recording(s), joined as runs when several are given (as ``identify --data`` joins them)."""
     parts = [read_dataset(path, robot=robot, **read) for path in args.data]
@@ -417,7 +430,7 @@ def _settling_commands(args, model, heldout, result) -> dict | None:
     from dynid.diagnosis.result import settling_excitation
 
     rate = 1.0 / float(np.median(np.diff(heldout.t)))
-    settle = settling_excitation(result, robot=str(model.robot.source), dq_max=model.robot.dq_max, rate=rate)
+    settle = settling_excitation(result, robot=_as_typed(model.robot.source), dq_max=model.robot.dq_max, rate=rate)
     if settle is None:
         return None
     return {
