@@ -91,34 +91,41 @@ which the link parameters cannot take wholly, since each acts on several joints 
 GAIN_GAIN = 0.10
 """A screened drive gain is kept when refitting with it lowers its joint's cross-validated RMS this much.
 
-The refit (:func:`choose_gains`) fits the chosen pipeline with the gains on each half and scores the
+The refit (:func:`choose_gains`) fits the chosen pipeline with the gains on each fold and scores the
 other, as the candidates were scored; a gain that does not earn this much on its own joint is dropped,
 and the gains are kept only if no joint ends more than :data:`JOINT_TOLERANCE` worse than without them."""
 
-_MIN_HALF_SECONDS = 2.0  # halves shorter than this cannot score a motion: the full pipeline is kept
+_MIN_HALF_SECONDS = 2.0  # folds shorter than this cannot score a motion (the full pipeline is kept)
+_MIN_FOLD_ROWS = 64
 
-ONE_MOTION = (
-    "; its two folds hold one motion (every state of one lies on the other's path), so they cannot tell a "
-    "pipeline fitted to that motion from one fitted to the arm: record a second excitation (dynid excite "
-    "--trajectories 2 designs two that complement each other) and give both recordings (dynid identify "
-    "--data A.csv B.csv) to choose on a motion not seen"
-)
-"""Said after the reason when the pipeline was chosen on folds that hold one motion (:func:`one_motion`)."""
+ONE_MOTION = {
+    "halves": "; its two halves hold one motion (most states of one lie on the other's path), so they cannot "
+    "tell a pipeline fitted to that motion from one fitted to the arm: record a second excitation (dynid "
+    "excite --trajectories 2 designs two that complement each other) and give both recordings (dynid "
+    "identify --data A.csv B.csv) to choose on a motion not seen",
+    "runs": "; its runs hold one motion (most states of one lie on the other's path: one excitation recorded "
+    "again), so they cannot tell a pipeline fitted to that motion from one fitted to the arm: record a "
+    "different excitation (dynid excite --trajectories 2 designs two that complement each other) and "
+    "identify on both to choose on a motion not seen",
+}
+"""Said after the reason (:attr:`PipelineChoice.said`) when the folds hold one motion (:func:`one_motion`)."""
 
 SAME_MOTION = 0.25
 """Two folds hold one motion when the median distance from a state of one to the nearest state of the
 other is below this, in standard deviations of each angle and speed (:func:`one_motion`).
 
-Measured: the halves of one excitation played six times 0.006-0.010 (simulated UR10, xArm 7, Z1), two
-runs of one excitation recorded twice 0.015 (the LWR4+'s runs 1 and 2); two excitations 4.1-5.0
-(simulated), two different trajectories 1.4-1.6 (the LWR4+'s runs 1 and 3), the halves of the Panda's
-and the TX40's training recordings 3.1-4.0."""
+Measured on the decimated copies the pipeline scores: one motion 0.004-0.013 (the halves of one
+excitation played six times on the five simulated arms of ``benchmarks/unseen_arms_benchmark.py``; the
+halves of the LWR4+'s run 1, 0.008; its runs 1 and 2, one excitation recorded twice, 0.013); two motions
+1.6-5.0 (two excitations on the same five arms; the LWR4+'s runs 1 and 3, 1.6; the halves of the Panda's
+and the TX40's training recordings, 4.0-4.1)."""
 
 RUN_BALANCE = 1.0 / 3.0
 """Runs become the folds when the smaller fold they make holds at least this share of the samples.
 
 Whole runs are dealt to two folds, the longest first to the fold with fewer samples; a run that holds
-most of the recording would leave the other fold too little to fit on, and the halves are used."""
+most of the recording would leave the other fold too little to fit on, and the halves are used (as
+they are when a fold of runs would last under two seconds or hold under 64 samples)."""
 
 RATE_FACTOR = 10.0
 """The cross-validation fits the candidates at a rate of at least this many times the torque's cut-off.
@@ -153,7 +160,10 @@ class PipelineChoice:
     gain_cv_rms : ndarray, shape (n,), or None
         Cross-validated RMS per joint of the chosen pipeline with those gains (None: no gain kept).
     folds : str
-        ``"halves"`` (the recording's two halves) or ``"runs"`` (its runs, dealt to two folds).
+        ``"halves"`` (the recording's two halves), ``"runs"`` (its runs, dealt to two folds) or ``"none"``
+        (nothing scored).
+    one_motion : bool
+        Whether the two folds hold one motion (:func:`one_motion`).
     """
 
     method: str
@@ -166,6 +176,12 @@ class PipelineChoice:
     gains: tuple[int, ...] = ()
     gain_cv_rms: NDArray[np.float64] | None = None
     folds: str = "halves"
+    one_motion: bool = False
+
+    @property
+    def said(self) -> str:
+        """The reason, with the advice :data:`ONE_MOTION` gives when the folds hold one motion."""
+        return self.reason + (ONE_MOTION.get(self.folds, "") if self.one_motion else "")
 
     @property
     def effects(self) -> str | None:
@@ -180,11 +196,12 @@ class PipelineChoice:
             "gmm": self.gmm,
             "candidates": [list(c) for c in self.candidates],
             "cv_rms": np.round(self.cv_rms, 6).tolist(),
-            "reason": self.reason,
+            "reason": self.said,
             "rate_hz": None if self.rate_hz is None else float(self.rate_hz),
             "drive_gains": [j + 1 for j in self.gains],
             "drive_gain_cv_rms": None if self.gain_cv_rms is None else np.round(self.gain_cv_rms, 6).tolist(),
             "folds": self.folds,
+            "one_motion": self.one_motion,
         }
 
 
@@ -278,7 +295,7 @@ def _cross_fit(make, halves, settings, on_done=None):
     failed = np.zeros(len(settings), dtype=bool)
     done = 0
     for a, b in ((0, 1), (1, 0)):
-        # every setting fitted on one half, its system built once and let go before the other's
+        # every setting fitted on one fold, its system built once and let go before the other's
         with sharing_systems():
             for i, setting in enumerate(settings):
                 if not failed[i]:
@@ -297,16 +314,17 @@ def _cross_fit(make, halves, settings, on_done=None):
     return np.where(failed[:, None], np.nan, total / 2)
 
 
-_SAID = {"halves": "two halves of the recording", "runs": "the recording's runs, dealt to two folds"}
+_SAID = {"halves": "two halves of the recording", "runs": "the recording's runs, dealt to two folds"}  # by kind
 
 
 def folds(data) -> tuple[Any, Any, str]:
     """The two folds the candidates are fitted and scored on: ``(fold_a, fold_b, kind)``.
 
     A recording of several runs (recordings joined with :meth:`~dynid.data.dataset.Dataset.concat`, such
-    as two excitations given to ``dynid identify --data A.csv B.csv``) is cut along its runs: whole runs
-    are dealt to two folds, the longest first to the fold with fewer samples, when the smaller fold holds
-    at least :data:`RUN_BALANCE` of the samples (``kind`` ``"runs"``).  A fit on one fold then predicts
+    as two excitations given to ``dynid identify --data A.csv B.csv``, or the pieces of one recording
+    between gaps in its stamps) is cut along its runs: whole runs are dealt to two folds, the longest
+    first to the fold with fewer samples, when the smaller fold holds at least :data:`RUN_BALANCE` of the
+    samples and each fold lasts two seconds (``kind`` ``"runs"``).  A fit on one fold then predicts
     motions it has not seen.  On a simulated xArm 7 with Stribeck friction, two 15 s excitations scored
     the paper's pipeline 14-26 % worse than ordinary least squares on joints 1-3, and IRLS with linear
     friction was chosen (a third excitation held out: every joint within 1.03 times the baseline); the
@@ -334,7 +352,9 @@ def folds(data) -> tuple[Any, Any, str]:
             k = int(count[1] < count[0])
             dealt[k].append(runs[i])
             count[k] += sizes[i]
-        if min(count) >= RUN_BALANCE * data.m:
+        if min(count) >= max(RUN_BALANCE * data.m, _MIN_FOLD_ROWS) and all(
+            sum(float(data.t[r.stop - 1] - data.t[r.start]) for r in d) >= _MIN_HALF_SECONDS for d in dealt
+        ):
             rows = [np.concatenate([np.arange(r.start, r.stop) for r in sorted(d, key=lambda r: r.start)]) for d in dealt]
             return data.select_rows(rows[0]), data.select_rows(rows[1]), "runs"
     half = data.m // 2
@@ -342,20 +362,27 @@ def folds(data) -> tuple[Any, Any, str]:
 
 
 def _states(data, count: int = 600) -> NDArray[np.float64]:
-    """About ``count`` samples of the angles and their speeds (differences over the thinned samples,
-    which smooth the encoder's noise), evenly spread over the recording."""
-    rows = np.unique(np.linspace(0, data.m - 1, min(count, data.m)).astype(int))
-    q = data.q[rows]
-    t = data.t[rows]
-    return np.hstack([q, np.gradient(q, t, axis=0)]) if len(rows) > 1 else q
+    """About ``count`` samples of the angles and their speeds, spread over the runs in proportion to their
+    length; the speeds are differences over the thinned samples of each run (which smooth the encoder's
+    noise, and never cross from one run into the next)."""
+    out = []
+    for run in data.runs:
+        k = max(3, round(count * (run.stop - run.start) / data.m))
+        rows = np.unique(np.linspace(run.start, run.stop - 1, min(k, run.stop - run.start)).astype(int))
+        if len(rows) < 3:
+            continue
+        q = data.q[rows]
+        out.append(np.hstack([q, np.gradient(q, data.t[rows], axis=0)]))
+    return np.vstack(out) if out else np.zeros((0, 2 * data.n))
 
 
 def one_motion(a, b) -> bool:
     """Whether two folds hold one motion: the median distance from a state ``[q, dq]`` of either to the
-    nearest state of the other, in standard deviations of each coordinate over both, is below
-    :data:`SAME_MOTION` (both ways).  Two halves of an excitation played several times, or two
-    recordings of one excitation, are; the halves of a recording that moves on, or two excitations, are
-    not.
+    nearest state of the other is below :data:`SAME_MOTION` (both ways), each coordinate centred and in
+    its standard deviation over both folds, floored at a twentieth of the largest of its kind (an angle,
+    a speed), so that a joint that hardly moves does not count its noise or rounding as motion.  Two
+    halves of an excitation played several times, or two recordings of one excitation, are one motion;
+    the halves of a recording that moves on, or two excitations, are not.
 
     Parameters
     ----------
@@ -366,13 +393,23 @@ def one_motion(a, b) -> bool:
     -------
     bool
     """
+    return bool(_motion_distance(a, b) < SAME_MOTION)
+
+
+def _motion_distance(a, b) -> float:
+    """The larger of the two median nearest-state distances of :func:`one_motion` (inf: no states)."""
     A, B = _states(a), _states(b)
-    scale = np.vstack([A, B]).std(axis=0)
-    scale[scale <= 0] = 1.0
-    A, B = A / scale, B / scale
-    d2 = np.sum(A**2, axis=1)[:, None] + np.sum(B**2, axis=1)[None, :] - 2.0 * A @ B.T
+    if len(A) == 0 or len(B) == 0:
+        return float("inf")
+    both = np.vstack([A, B])
+    centre, spread = both.mean(axis=0), both.std(axis=0)
+    n = a.n
+    for kind in (slice(0, n), slice(n, 2 * n)):  # angles, speeds
+        spread[kind] = np.maximum(spread[kind], max(0.05 * float(spread[kind].max()), 1e-12))
+    A, B = (A - centre) / spread, (B - centre) / spread
+    d2 = np.sum(A**2, axis=1)[:, None] + np.sum(B**2, axis=1)[None, :] - 2.0 * A @ B.T  # O(1) values: exact enough
     d = np.sqrt(np.maximum(d2, 0.0))
-    return bool(max(np.median(d.min(axis=0)), np.median(d.min(axis=1))) < SAME_MOTION)
+    return float(max(np.median(d.min(axis=0)), np.median(d.min(axis=1))))
 
 
 def choose_pipeline(make, data, options: list[tuple[str, str, str | int]]) -> PipelineChoice:
@@ -392,19 +429,18 @@ def choose_pipeline(make, data, options: list[tuple[str, str, str | int]]) -> Pi
     PipelineChoice
     """
     half = data.m // 2
-    if len(options) == 1 or data.duration < 2 * _MIN_HALF_SECONDS or half < 64:
+    if len(options) == 1 or data.duration < 2 * _MIN_HALF_SECONDS or half < _MIN_FOLD_ROWS:
         m, f, g = options[-1]
         return PipelineChoice(
             m, f, g, list(options), np.zeros((len(options), data.n)),
             "the recording is too short to cross-validate two halves of it: the full pipeline is kept",
+            folds="none",
         )  # fmt: skip
     a, b, kind = folds(data)
     with stage(f"choosing the pipeline by cross-validation on {_SAID[kind]}", total=2 * len(options)):
         mse = _cross_fit(make, (a, b), options, advance)
     choice = decide(options, np.sqrt(mse), data.meta.get("coarse", {}).get("rate_hz"), kind)
-    if one_motion(a, b):
-        choice = replace(choice, reason=choice.reason + ONE_MOTION)
-    return choice
+    return replace(choice, one_motion=one_motion(a, b))
 
 
 def gain_screen(system) -> list[int]:
@@ -586,7 +622,7 @@ def decide(
     options: list[tuple[str, str, str | int]],
     cv: NDArray[np.float64],
     rate: float | None = None,
-    folds: str = "halves",
+    kind: str = "halves",
 ) -> PipelineChoice:
     """The choice among scored candidates: the rules of :func:`choose_pipeline`.
 
@@ -598,19 +634,19 @@ def decide(
         Their cross-validated RMS per joint (NaN: a candidate that could not be fitted).
     rate : float, optional
         The rate they were scored at, when the recording was made coarser for it.
-    folds : {"halves", "runs"}
+    kind : {"halves", "runs"}
         What the two folds were (:func:`folds`), for the reason.
 
     Returns
     -------
     PipelineChoice
     """
-    said = _SAID[folds]
+    said = _SAID[kind]
     base = cv[0]
     if not np.all(np.isfinite(base)):
         m, f, g = options[-1]
         return PipelineChoice(m, f, g, list(options), cv, "the baseline could not be fitted on a fold: the full "
-                              "pipeline is kept", folds=folds)  # fmt: skip
+                              "pipeline is kept", folds=kind)  # fmt: skip
     fitted = np.all(np.isfinite(cv), axis=1)  # a candidate a fold could not support has no score
     score = np.full(len(options), np.inf)
     score[fitted] = np.mean(cv[fitted] / np.maximum(base, 1e-300), axis=1)
@@ -655,4 +691,4 @@ def decide(
         )
     if rate is not None:
         reason += f" (scored at {rate:.4g} Hz, {RATE_FACTOR:g} times the cut-off or more)"
-    return PipelineChoice(m, f, g, list(options), cv, reason, rate, folds=folds)
+    return PipelineChoice(m, f, g, list(options), cv, reason, rate, folds=kind)

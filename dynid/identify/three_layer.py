@@ -391,7 +391,7 @@ class ThreeLayerModel:
                 choice,
                 joints,
             )
-        say(f"pipeline: {choice.reason}")
+        say(f"pipeline: {choice.said}")
         give_back()
         chosen = self._with(
             method=choice.method,
@@ -403,7 +403,7 @@ class ThreeLayerModel:
         ).fit(data)
         info = dict(chosen.model_.info)
         info["pipeline"] = choice.to_dict()
-        info["notes"] = [f"pipeline chosen from the recording: {choice.reason}", *info.get("notes", [])]
+        info["notes"] = [f"pipeline chosen from the recording: {choice.said}", *info.get("notes", [])]
         chosen.model_ = replace(chosen.model_, info=info)
         return chosen._adopt_into(self)
 

@@ -131,17 +131,48 @@ def test_folds_that_hold_one_motion_are_told_to_record_another(ur5, linear_run, 
     traj = random_fourier(ur5, rng, periods=3, base_freq=0.2)
     periodic = synthetic_dataset(cols, x, traj, rate=100, rng=rng, noise=0.05)
     again = synthetic_dataset(cols, x, traj, rate=100, rng=rng, noise=0.05)  # the same motion, other noise
-    assert one_motion(*folds(periodic)[:2]) and one_motion(*folds(Dataset.concat([periodic, again]))[:2])
+    twice = Dataset.concat([periodic, again])
+    assert one_motion(*folds(periodic)[:2]) and one_motion(*folds(twice)[:2])
     assert not one_motion(*folds(linear_run)[:2]) and not one_motion(*folds(Dataset.concat(two_excitations))[:2])
     base = ThreeLayerModel(robot=ur5)
     options = [BASELINE, ("ols", "none", "off")]
 
-    def said(data):
-        return choose_pipeline(lambda m, f, g: base._with(method=m, friction=f, gmm=g), data, options).reason
+    def choice(data):
+        return choose_pipeline(lambda m, f, g: base._with(method=m, friction=f, gmm=g), data, options)
 
-    told = said(periodic)
-    assert told.endswith(ONE_MOTION) and "dynid excite --trajectories 2" in told and "--data A.csv B.csv" in told
-    assert ONE_MOTION not in said(linear_run) and ONE_MOTION not in said(Dataset.concat(two_excitations))
+    told = choice(periodic)
+    assert told.one_motion and told.said == told.reason + ONE_MOTION["halves"]
+    assert "dynid excite --trajectories 2" in told.said and "--data A.csv B.csv" in told.said
+    assert told.to_dict()["reason"] == told.said and told.to_dict()["one_motion"] is True
+    recorded_twice = choice(twice)
+    assert recorded_twice.folds == "runs" and recorded_twice.said.endswith(ONE_MOTION["runs"])
+    for moving in (linear_run, Dataset.concat(two_excitations)):
+        assert not choice(moving).one_motion and choice(moving).said == choice(moving).reason
+
+
+def test_a_joint_that_hardly_moves_does_not_decide_whether_two_folds_are_one_motion(ur5, two_excitations):
+    """A wrist held still, at a rounding-level spread or with encoder noise, is not motion: two excitations
+    stay two motions with joint 6 locked at 0.3 rad, and one excitation played twice stays one with joint
+    6's angle only noise."""
+    from dataclasses import replace
+
+    from dynid.data.dataset import Dataset
+    from dynid.identify.pipeline import folds, one_motion
+
+    def held(ds, angle, noise=0.0):
+        q = ds.q.copy()
+        q[:, 5] = angle + noise * np.random.default_rng(3).standard_normal(ds.m)
+        return replace(ds, q=q)
+
+    a, b = two_excitations
+    assert not one_motion(*folds(Dataset.concat([held(a, 0.3), held(b, 0.3)]))[:2])
+    rng = np.random.default_rng(12)
+    cols = column_set(ur5)
+    periodic = synthetic_dataset(
+        cols, true_parameters(cols, rng), random_fourier(ur5, rng, periods=3, base_freq=0.2), rate=100, rng=rng,
+        noise=0.05,
+    )  # fmt: skip
+    assert one_motion(*folds(held(periodic, -1.2, noise=1e-4))[:2])
 
 
 @pytest.mark.slow
