@@ -19,6 +19,7 @@ __all__ = [
     "add_robot_arguments",
     "add_topic_argument",
     "check_data_fits_model",
+    "check_distinct_recordings",
     "check_outputs",
     "check_period_option",
     "is_training_data",
@@ -141,12 +142,31 @@ def read_dataset(path: str | os.PathLike[str], n_joints: int | None = None, *, r
     return data
 
 
+def check_distinct_recordings(paths: Sequence[str | os.PathLike[str]], option: str = "data") -> None:
+    """Refuse a recording named twice in ``--data`` (before any is read): its samples would count twice in
+    the fit and halve its standard deviations.
+
+    Parameters
+    ----------
+    paths : sequence of path-like
+        The files given.
+    option : str
+        The option that named them, for the message.
+    """
+    for i, a in enumerate(paths):
+        for b in paths[i + 1 :]:
+            if same_file(a, b):
+                named = f"'{a}'" if str(a) == str(b) else f"('{a}', '{b}')"
+                raise UsageError(f"--{option} names one file twice {named}; each recording counts once: give it once.")
+
+
 def join_recordings(parts: Sequence[Any], paths: Sequence[str | os.PathLike[str]]) -> Any:
     """Several recordings of one robot as one dataset of runs (:meth:`dynid.data.dataset.Dataset.concat`).
 
-    Each keeps its samples; filters and derivatives never cross from one into the next.  The recordings
-    must carry the same signals: a measured velocity or acceleration in one and not in another is refused
-    in one sentence naming both files, and so is a file named twice.
+    Filters and derivatives never cross from one into the next; recordings at different rates are
+    resampled onto one grid by the preprocessing, as an irregular recording is.  The recordings must
+    carry the same signals: a measured velocity or acceleration in one and not in another is refused in
+    one sentence naming both files (:func:`check_distinct_recordings` refuses a file named twice).
 
     Parameters
     ----------
@@ -161,20 +181,16 @@ def join_recordings(parts: Sequence[Any], paths: Sequence[str | os.PathLike[str]
     """
     from dynid.data.dataset import Dataset
 
-    for i, a in enumerate(paths):
-        for b in paths[i + 1 :]:
-            if same_file(a, b):
-                raise UsageError(
-                    f"--data names '{a}'{'' if str(a) == str(b) else f' and {b!r}, one file,'} twice; each "
-                    "recording counts once in the fit: give it once."
-                )
-    for name, label in (("dq", "measured velocities (dq_i)"), ("ddq", "measured accelerations (ddq_i)")):
-        has = [getattr(p, name) is not None for p in parts]
-        if any(has) and not all(has):
-            a, b = paths[has.index(True)], paths[has.index(False)]
+    labels = {"dq": "measured velocities (dq_i)", "ddq": "measured accelerations (ddq_i)"}
+    has = [{name for name in labels if getattr(p, name) is not None} for p in parts]
+    richest = max(range(len(parts)), key=lambda i: len(has[i]))
+    for k, signals in enumerate(has):
+        missing = has[richest] - signals
+        if missing:
+            what = " and ".join(labels[name] for name in labels if name in missing)
             raise UsageError(
-                f"--data: '{a}' has {label} and '{b}' has not; recordings identified together need the same "
-                f"signals: drop the {name}_i columns from '{a}' or record them in '{b}'."
+                f"--data: '{paths[richest]}' has {what} and '{paths[k]}' has not; recordings identified "
+                "together need the same signals: give them in every recording or in none."
             )
     return Dataset.concat(parts)
 

@@ -13,6 +13,7 @@ from dynid.commands.common import (
     add_json_argument,
     add_topic_argument,
     check_data_fits_model,
+    check_distinct_recordings,
     check_outputs,
     check_period_option,
     is_training_data,
@@ -42,6 +43,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--data",
         required=True,
         nargs="+",
+        action="extend",
         metavar="D.csv",
         help="the training data the model was identified on (the recordings, when it was identified on several)",
     )
@@ -125,6 +127,7 @@ class _Inputs:
     robot: Any
     train: Any
     heldout: Any
+    parts: tuple = ()  # the training recordings as read, when several were joined
 
 
 def _check_options(args, described: bool) -> _Options:
@@ -146,6 +149,7 @@ def _check_options(args, described: bool) -> _Options:
     check_period_option(args.period)
     if any(same_file(args.heldout, path) for path in args.data):
         raise UsageError(_NOT_HELD_OUT.format(heldout=args.heldout, what="the same file as --data"))
+    check_distinct_recordings(args.data)
     return _Options(report=report, effects=effects)
 
 
@@ -208,15 +212,15 @@ def _read_inputs(args, described: bool) -> _Inputs:
         from dynid.symbolic.robot import load_robot
 
         robot = load_robot(args.model)
-        train = _read_training(args, robot, read)
+        train, parts = _read_training(args, robot, read)
         # nothing identified: the file as the simulator reads it, seen through the training data's filter
         model = description_model(args.model, train)
     else:
         model = load_model(args.model, robot=robot)
         robot = model.robot
-        train = _read_training(args, robot, read)
+        train, parts = _read_training(args, robot, read)
     heldout = read_dataset(args.heldout, robot=robot, option="heldout", **read)
-    return _Inputs(model=model, robot=robot, train=train, heldout=heldout)
+    return _Inputs(model=model, robot=robot, train=train, heldout=heldout, parts=parts)
 
 
 def _check_held_out(args, described: bool, inputs: _Inputs) -> None:
@@ -229,12 +233,14 @@ def _check_held_out(args, described: bool, inputs: _Inputs) -> None:
     check_data_fits_model(model, heldout, model_path=args.model, data_option="heldout")
     # data of another joint count are refused by the diagnosis itself, naming both counts
     if train.n == heldout.n == inputs.robot.n:
-        if _same_data(train, heldout):
+        if any(_same_data(part, heldout) for part in (train, *inputs.parts)):
             raise UsageError(_NOT_HELD_OUT.format(heldout=args.heldout, what="the same data as --data"))
         if not described and is_training_data(model, heldout):
-            raise UsageError(
-                _NOT_HELD_OUT.format(heldout=args.heldout, what=f"the data {args.model} was identified on")
-            )
+            from dynid.identify.model import data_fingerprint
+
+            part = data_fingerprint(heldout) in (model.info.get("data_parts_sha256") or [])
+            what = f"one of the recordings {args.model} was identified on" if part else f"the data {args.model} was identified on"
+            raise UsageError(_NOT_HELD_OUT.format(heldout=args.heldout, what=what))
     if args.period is not None:
         from pathlib import Path
 
@@ -323,14 +329,21 @@ def _as_typed(source) -> str:
     text = str(source)
     if not os.path.exists(text):
         return text
-    relative = os.path.relpath(text)
-    return os.path.abspath(text) if relative.startswith(os.pardir) else relative
+    try:
+        relative = os.path.relpath(text)
+    except ValueError:  # another drive
+        return os.path.abspath(text)
+    climbs = relative == os.pardir or relative.startswith(os.pardir + os.sep)
+    return os.path.abspath(text) if climbs else relative
 
 
 def _read_training(args, robot, read: dict):
-    """The training recording(s), joined as runs when several are given (as ``identify --data`` joins them)."""
+    """The training recording(s), joined as runs when several are given (as ``identify --data`` joins them),
+    and the recordings as read when several were (else an empty tuple)."""
     parts = [read_dataset(path, robot=robot, **read) for path in args.data]
-    return parts[0] if len(parts) == 1 else join_recordings(parts, args.data)
+    if len(parts) == 1:
+        return parts[0], ()
+    return join_recordings(parts, args.data), tuple(parts)
 
 
 def _same_data(a, b) -> bool:

@@ -9,6 +9,7 @@ from dynid.commands.common import (
     add_json_argument,
     add_robot_arguments,
     add_topic_argument,
+    check_distinct_recordings,
     check_outputs,
     join_recordings,
     model_files,
@@ -56,11 +57,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--data",
         required=True,
         nargs="+",
+        action="extend",
         metavar="D.csv",
         help="dataset (.csv or .npz: t, q_i, tau_i [, dq_i, ddq_i]; or a ROS 2 .mcap / rosbag2 folder); "
-        "several are identified together as runs, and the default pipeline is then chosen by each run "
-        "predicting the others (recordings of two different excitations show a pipeline that only fits "
-        "one motion)",
+        "several are identified together, each a run of its own, and the default pipeline is then chosen "
+        "on two folds of whole recordings instead of two halves (recordings of two different excitations "
+        "show a pipeline that only fits one motion)",
     )
     add_degrees_argument(parser)
     add_topic_argument(parser)
@@ -70,8 +72,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         choices=("auto", *method_names()),
         help="layer-1 method; auto (default): among ols or irls with linear friction, ols with the paper's "
         "seed friction and the paper's irls + seed friction + gmm, the simplest within 5 points of the one "
-        "that predicts one half of the recording from the other best (its runs instead of halves when several "
-        "--data files are given; none with a joint 5 %% worse than ols with linear friction)",
+        "that predicts one half of the recording from the other best (two folds of whole recordings instead of "
+        "halves when several --data files of comparable length are given; none with a joint 5 %% worse than "
+        "ols with linear friction)",
     )
     parser.add_argument(
         "--friction",
@@ -244,6 +247,7 @@ def run(args: argparse.Namespace) -> int:
         from dynid.identify.effect_terms import parse_effect_terms
 
         parse_effect_terms(args.effects, robot.n)
+    check_distinct_recordings(args.data)
     start = time.perf_counter()
     parts = [
         read_dataset(

@@ -720,6 +720,7 @@ def attach_payload(model, payload: PayloadResult):
     cov = model.cov + Pd @ payload.cov @ Pd.T
     info = dict(model.info)
     info.pop("data_sha256", None)  # a model with a payload was not identified on the unloaded recording alone
+    info.pop("data_parts_sha256", None)
     consistency = info.get("consistency")
     if consistency and "standard_params" in consistency:
         phi = np.asarray(consistency["standard_params"], dtype=np.float64).reshape(-1).copy()
