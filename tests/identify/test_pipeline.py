@@ -213,6 +213,13 @@ def test_two_excitations_show_a_pipeline_that_only_fits_one_motion(tmp_path, cap
     # each recording is training data to the model: validate says so on either
     with pytest.warns(UserWarning, match="is one of the recordings .*M.json was identified on"):
         assert main(["validate", "--model", model, "--data", both[1], "--quiet"]) == 0
+    # the diagnosis takes the recordings the model was identified on, and names them all
+    report, found = tmp_path / "G.html", tmp_path / "G.json"
+    assert main(["diagnose", "--model", model, "--data", *both, "--heldout", str(tmp_path / "H.csv"),
+                 "--report", str(report), "--json", str(found), "--quiet"]) == 0  # fmt: skip
+    assert f"{both[0]}, {both[1]}" in report.read_text()
+    settle = json.loads(found.read_text())["settle"]
+    assert settle is None or f"--data {both[0]} {both[1]} " in settle["commands"][-1]
 
 
 @pytest.mark.slow
