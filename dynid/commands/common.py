@@ -19,17 +19,17 @@ __all__ = [
     "add_robot_arguments",
     "add_topic_argument",
     "check_data_fits_model",
-    "check_distinct_recordings",
     "check_outputs",
     "check_period_option",
     "is_training_data",
-    "join_recordings",
     "model_files",
     "output",
     "read_dataset",
+    "read_recordings",
     "robot_file",
     "robot_from_args",
     "same_file",
+    "training_match",
     "write_figures",
 ]
 
@@ -142,45 +142,42 @@ def read_dataset(path: str | os.PathLike[str], n_joints: int | None = None, *, r
     return data
 
 
-def check_distinct_recordings(paths: Sequence[str | os.PathLike[str]], option: str = "data") -> None:
-    """Refuse a recording named twice in ``--data`` (before any is read): its samples would count twice in
-    the fit and halve its standard deviations.
+def read_recordings(paths: Sequence[str | os.PathLike[str]], n_joints: int | None = None, **read: Any):
+    """The recordings of ``--data`` as one dataset of runs, and each as read (``(data, ())`` for one file).
+
+    Each file is read by :func:`read_dataset` (``n_joints`` and ``read`` passed on).  Several are joined
+    with :meth:`dynid.data.dataset.Dataset.concat`: filters and derivatives never cross from one into the
+    next, and recordings at different rates are resampled onto one grid by the preprocessing, as an
+    irregular recording is.  Refused in one sentence: a file named twice, before any is read (its samples
+    would count twice in the fit and halve its standard deviations), and recordings with different
+    signals (a measured velocity or acceleration in one and not in another), naming both files.
 
     Parameters
     ----------
     paths : sequence of path-like
         The files given.
-    option : str
-        The option that named them, for the message.
+    n_joints : int, optional
+        Joint count the data must have.
+    **read
+        Keyword arguments of :func:`read_dataset`.
+
+    Returns
+    -------
+    data : Dataset
+        The recording, or the recordings joined.
+    parts : tuple of Dataset
+        The recordings as read when several were given, else empty.
     """
+    from dynid.data.dataset import Dataset
+
     for i, a in enumerate(paths):
         for b in paths[i + 1 :]:
             if same_file(a, b):
                 named = f"'{a}'" if str(a) == str(b) else f"('{a}', '{b}')"
-                raise UsageError(f"--{option} names one file twice {named}; each recording counts once: give it once.")
-
-
-def join_recordings(parts: Sequence[Any], paths: Sequence[str | os.PathLike[str]]) -> Any:
-    """Several recordings of one robot as one dataset of runs (:meth:`dynid.data.dataset.Dataset.concat`).
-
-    Filters and derivatives never cross from one into the next; recordings at different rates are
-    resampled onto one grid by the preprocessing, as an irregular recording is.  The recordings must
-    carry the same signals: a measured velocity or acceleration in one and not in another is refused in
-    one sentence naming both files (:func:`check_distinct_recordings` refuses a file named twice).
-
-    Parameters
-    ----------
-    parts : sequence of Dataset
-        The recordings, read.
-    paths : sequence of path-like
-        Their files, for the message.
-
-    Returns
-    -------
-    Dataset
-    """
-    from dynid.data.dataset import Dataset
-
+                raise UsageError(f"--data names one file twice {named}; each recording counts once: give it once.")
+    parts = [read_dataset(path, n_joints, **read) for path in paths]
+    if len(parts) == 1:
+        return parts[0], ()
     labels = {"dq": "measured velocities (dq_i)", "ddq": "measured accelerations (ddq_i)"}
     has = [{name for name in labels if getattr(p, name) is not None} for p in parts]
     richest = max(range(len(parts)), key=lambda i: len(has[i]))
@@ -192,7 +189,7 @@ def join_recordings(parts: Sequence[Any], paths: Sequence[str | os.PathLike[str]
                 f"--data: '{paths[richest]}' has {what} and '{paths[k]}' has not; recordings identified "
                 "together need the same signals: give them in every recording or in none."
             )
-    return Dataset.concat(parts)
+    return Dataset.concat(parts), tuple(parts)
 
 
 def check_data_fits_model(model: Any, data: Any, *, model_path: Any, data_option: str) -> None:
@@ -253,16 +250,21 @@ def check_period_option(period: float | None, option: str = "--period") -> None:
 
 
 def is_training_data(model: Any, data: Any) -> bool:
-    """Whether ``data`` are, sample for sample, the data ``model`` was identified on.
+    """Whether ``data`` are, sample for sample, data ``model`` was identified on (:func:`training_match`)."""
+    return training_match(model, data) is not None
+
+
+def training_match(model: Any, data: Any) -> str | None:
+    """Whether ``data`` are, sample for sample, the data ``model`` was identified on: ``"whole"`` (its
+    training recording), ``"part"`` (one of the recordings it was identified on together) or None.
 
     A model file records the sha256 of its training recording's time stamps, angles and torques
     (``data_sha256``, :func:`dynid.identify.model.data_fingerprint`), and of each recording it was
-    identified on together (``data_parts_sha256``, ``dynid identify --data A.csv B.csv``): any of them
-    matches.  Files written before it: what the fit
-    saw, the samples kept (``n_samples``) and the range of the torque as fitted (``torque_range``, per
-    joint); the data, prepared as the model prepares them, give both again (to 1e-9) in practice only when
-    they are the training data (a payload identified later widens the range, and such a model is not
-    matched).
+    identified on together (``data_parts_sha256``, ``dynid identify --data A.csv B.csv``).  Files
+    written before it: what the fit saw, the samples kept (``n_samples``) and the range of the torque as
+    fitted (``torque_range``, per joint); the data, prepared as the model prepares them, give both again
+    (to 1e-9) in practice only when they are the training data (a payload identified later widens the
+    range, and such a model is not matched).
 
     Parameters
     ----------
@@ -273,7 +275,7 @@ def is_training_data(model: Any, data: Any) -> bool:
 
     Returns
     -------
-    bool
+    str or None
     """
     import numpy as np
 
@@ -284,20 +286,23 @@ def is_training_data(model: Any, data: Any) -> bool:
         from dynid.identify.model import data_fingerprint
 
         fingerprint = data_fingerprint(data)
-        return info["data_sha256"] == fingerprint or fingerprint in (info.get("data_parts_sha256") or [])
+        if info["data_sha256"] == fingerprint:
+            return "whole"
+        return "part" if fingerprint in (info.get("data_parts_sha256") or []) else None
     seen, count = info.get("torque_range"), info.get("n_samples")
     if seen is None or count is None or data.n != model.robot.n:
-        return False
+        return None
     try:
         prep = model.prepare(data)
     except DynidError:
-        return False
+        return None
     if len(prep.rows) != int(count):
-        return False
+        return None
     tau = prep.tau_reference
     now = np.stack([tau.min(axis=0), tau.max(axis=0)], axis=1)
     seen = np.asarray(seen, dtype=float)
-    return now.shape == seen.shape and bool(np.allclose(now, seen, rtol=1e-9, atol=1e-12))
+    same = now.shape == seen.shape and bool(np.allclose(now, seen, rtol=1e-9, atol=1e-12))
+    return "whole" if same else None
 
 
 def robot_file(args: argparse.Namespace) -> str | None:

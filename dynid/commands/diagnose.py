@@ -13,16 +13,15 @@ from dynid.commands.common import (
     add_json_argument,
     add_topic_argument,
     check_data_fits_model,
-    check_distinct_recordings,
     check_outputs,
     check_period_option,
-    is_training_data,
-    join_recordings,
     model_files,
     output,
     read_dataset,
+    read_recordings,
     robot_file,
     same_file,
+    training_match,
     write_figures,
 )
 
@@ -149,7 +148,6 @@ def _check_options(args, described: bool) -> _Options:
     check_period_option(args.period)
     if any(same_file(args.heldout, path) for path in args.data):
         raise UsageError(_NOT_HELD_OUT.format(heldout=args.heldout, what="the same file as --data"))
-    check_distinct_recordings(args.data)
     return _Options(report=report, effects=effects)
 
 
@@ -212,13 +210,13 @@ def _read_inputs(args, described: bool) -> _Inputs:
         from dynid.symbolic.robot import load_robot
 
         robot = load_robot(args.model)
-        train, parts = _read_training(args, robot, read)
+        train, parts = read_recordings(args.data, robot=robot, **read)
         # nothing identified: the file as the simulator reads it, seen through the training data's filter
         model = description_model(args.model, train)
     else:
         model = load_model(args.model, robot=robot)
         robot = model.robot
-        train, parts = _read_training(args, robot, read)
+        train, parts = read_recordings(args.data, robot=robot, **read)
     heldout = read_dataset(args.heldout, robot=robot, option="heldout", **read)
     return _Inputs(model=model, robot=robot, train=train, heldout=heldout, parts=parts)
 
@@ -235,12 +233,10 @@ def _check_held_out(args, described: bool, inputs: _Inputs) -> None:
     if train.n == heldout.n == inputs.robot.n:
         if any(_same_data(part, heldout) for part in (train, *inputs.parts)):
             raise UsageError(_NOT_HELD_OUT.format(heldout=args.heldout, what="the same data as --data"))
-        if not described and is_training_data(model, heldout):
-            from dynid.identify.model import data_fingerprint
-
-            part = data_fingerprint(heldout) in (model.info.get("data_parts_sha256") or [])
-            what = f"one of the recordings {args.model} was identified on" if part else f"the data {args.model} was identified on"
-            raise UsageError(_NOT_HELD_OUT.format(heldout=args.heldout, what=what))
+        match = None if described else training_match(model, heldout)
+        if match is not None:
+            what = "one of the recordings" if match == "part" else "the data"
+            raise UsageError(_NOT_HELD_OUT.format(heldout=args.heldout, what=f"{what} {args.model} was identified on"))
     if args.period is not None:
         from pathlib import Path
 
@@ -335,15 +331,6 @@ def _as_typed(source) -> str:
         return os.path.abspath(text)
     climbs = relative == os.pardir or relative.startswith(os.pardir + os.sep)
     return os.path.abspath(text) if climbs else relative
-
-
-def _read_training(args, robot, read: dict):
-    """The training recording(s), joined as runs when several are given (as ``identify --data`` joins them),
-    and the recordings as read when several were (else an empty tuple)."""
-    parts = [read_dataset(path, robot=robot, **read) for path in args.data]
-    if len(parts) == 1:
-        return parts[0], ()
-    return join_recordings(parts, args.data), tuple(parts)
 
 
 def _same_data(a, b) -> bool:

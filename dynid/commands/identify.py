@@ -9,12 +9,10 @@ from dynid.commands.common import (
     add_json_argument,
     add_robot_arguments,
     add_topic_argument,
-    check_distinct_recordings,
     check_outputs,
-    join_recordings,
     model_files,
     output,
-    read_dataset,
+    read_recordings,
     robot_file,
     robot_from_args,
     write_figures,
@@ -247,16 +245,11 @@ def run(args: argparse.Namespace) -> int:
         from dynid.identify.effect_terms import parse_effect_terms
 
         parse_effect_terms(args.effects, robot.n)
-    check_distinct_recordings(args.data)
     start = time.perf_counter()
-    parts = [
-        read_dataset(
-            path, robot.n, robot_name=robot.name, degrees=args.degrees, topic=args.topic,
-            joint_names=robot.joint_names, robot=robot,
-        )
-        for path in args.data
-    ]
-    data = parts[0] if len(parts) == 1 else join_recordings(parts, args.data)
+    data, parts = read_recordings(
+        args.data, robot.n, robot_name=robot.name, degrees=args.degrees, topic=args.topic,
+        joint_names=robot.joint_names, robot=robot,
+    )
     model = identify(
         robot,
         data,
@@ -271,7 +264,7 @@ def run(args: argparse.Namespace) -> int:
         effects=args.effects,
         drive_gains=not args.no_drive_gains,
     )
-    if len(parts) > 1:  # scoring the model on one of them is scoring it on training data
+    if parts:  # scoring the model on one of them is scoring it on training data
         from dynid.identify.model import data_fingerprint
 
         model.info["data_parts_sha256"] = [data_fingerprint(part) for part in parts]

@@ -13,10 +13,10 @@ from dynid.commands.common import (
     check_data_fits_model,
     check_outputs,
     check_period_option,
-    is_training_data,
     output,
     read_dataset,
     robot_file,
+    training_match,
     write_figures,
 )
 from dynid.exceptions import DataWarning
@@ -125,12 +125,11 @@ def run(args: argparse.Namespace) -> int:
     for path, model in zip(files, models, strict=True):
         check_data_fits_model(model, data, model_path=path, data_option="data")
     for path, model in zip(files, loaded, strict=True):
-        if model is not None and is_training_data(model, data):
-            from dynid.identify.model import data_fingerprint
-
+        match = None if model is None else training_match(model, data)
+        if match is not None:
             what = (
                 f"one of the recordings {path} was identified on"
-                if data_fingerprint(data) in (model.info.get("data_parts_sha256") or [])
+                if match == "part"
                 else f"the data {path} was identified on (the same {model.info['n_samples']} samples and torque range)"
             )
             warnings.warn(
