@@ -54,7 +54,7 @@ PAIRS = (("stribeck", "delay"), ("cogging", "load_friction"), ("nonlinear_viscou
 WHOLE_ARM = ("payload", "base_tilt", "coupled_friction")
 UNKNOWN = "coupled_friction"
 SHAKE_ARM = ("elasticity", "backlash")  # a flexible transmission shows on every joint
-ABSORBED = ("payload", "drive_gain", "offset", "armature")  # re-identification can absorb them
+ABSORBED = ("payload", "drive_gain", "offset", "armature", "base_tilt")  # re-identification can absorb them
 
 
 def _visible(r: dict) -> float:

@@ -77,7 +77,7 @@ def classify(diagnosis, injected: Sequence[tuple[str, int | None]]) -> dict[str,
         (a.candidate.effect, a.candidate.joint + 1 if a.candidate.joint is not None else None)
         for a in diagnosis.accepted
     ]
-    structured = par in ("payload", "drive_gain", "offset", "armature")
+    structured = par in ("payload", "drive_gain", "offset", "armature", "base_tilt")
     if found:
         label = found[0][0]
     elif structured:

@@ -391,20 +391,32 @@ def _parameter_change(
     settings: DiagnosisSettings,
     sigma: NDArray[np.float64],
 ) -> dict[str, Any]:
-    """What the baseline refit absorbed: the parameter-change test, with the screen's one-joint gains."""
+    """What the refit absorbed beside the accepted effects: the parameter-change test, with the screen's
+    one-joint gains and the base tilt as hypotheses.
+
+    The refit holds the verdict's effects (the selection's final fit): what they explain is not a change
+    of the nominal parameters (a coupled friction absorbed by the last links' inertia read as a payload of
+    0.2 g, or as "the nominal inertial parameters are off").
+    """
+    fit = sel.fit if sel.fit is not None else base.fit
+    x = fit.solve()[0] if sel.accepted else base.x
     # A torque gain on one joint scales that joint's measured torque: what the refit absorbs of it.
     # Its columns were built for the screen (round 0 tunes every candidate).
-    gain_dirs = {c.joint: base.fit.regress(C) for c, C in sel.tuned.values() if c.effect == "drive_gain"}
+    gain_dirs = {c.joint: fit.regress(C) for c, C in sel.tuned.values() if c.effect == "drive_gain"}
+    # A tilt of the base rotates gravity: what the refit absorbs of its two columns (the screen's).
+    tilt = [fit.regress(C) for c, C in sel.tuned.values() if c.effect == "base_tilt"]
     return parameter_change_test(
         tr.src.ddq[tr.rows],
         structure.columns,
-        base.fit,
-        base.x,
+        fit,
+        x,
         structure.robot,
         block,
         settings.alpha,
         sigma,
         gain_dirs,
+        tilt_dirs=tilt[0] if tilt else None,
+        beside=[a.candidate.key for a in sel.accepted],
     )
 
 

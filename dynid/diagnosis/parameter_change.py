@@ -2,13 +2,14 @@
 
 The re-identified minus the nominal base parameters, with the refit's block (HAC) covariance, are fitted
 by generalised least squares to structured hypotheses (a common drive gain, a torque gain on one joint,
-a payload on the last link, an armature per joint) and chosen by BIC
+a payload on the last link, an armature per joint, a tilt of the base) and chosen by BIC
 (:func:`dynid.diagnosis.stats.structured_change_test`); then the model's own torque offsets and
 armatures are tested against their nominal values.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -77,13 +78,19 @@ def parameter_change_test(
     sigma: NDArray[np.float64],
     gain_dirs: dict[int, NDArray[np.float64]] | None = None,
     chi2_per_dof: float = 5.0,
+    tilt_dirs: NDArray[np.float64] | None = None,
+    beside: Sequence[str] = (),
 ) -> dict[str, Any]:
     """Identified minus nominal parameters against structured hypotheses (chi^2, BIC).
 
     ``gain_dirs`` maps a joint (0-based) to the parameter change (k, 1) that a torque gain error on that
     joint alone leaves in the refit (the regression of its predicted torque on the baseline columns); a
     gain on one joint is partly absorbed (for most joints nearly all of it): its residual part is scored
-    as a candidate, the absorbed part here.
+    as a candidate, the absorbed part here.  ``tilt_dirs`` (k, 2) is the same for the gravity direction:
+    the parameter change that a tilt of the base by 1 rad about each of two horizontal axes leaves in the
+    refit (a tilt shows in the gravity columns, so re-identification absorbs part of it and the
+    nominal parameters look "off" when it is not a hypothesis).  ``beside`` names the effects whose
+    columns ``fit`` holds after the baseline's (the verdict's): the change is what is left beside them.
 
     A structured hypothesis is the finding when it has the lowest BIC, the nominal parameters are
     rejected clearly (chi^2 per degree of freedom above ``2 chi2_per_dof``) and what it leaves is
@@ -98,11 +105,14 @@ def parameter_change_test(
     # An armature cannot be negative (identify keeps it at zero or above): its change is at least minus
     # the nominal one.
     nominal_armature = np.maximum(np.asarray(robot.armature, dtype=float), 0.0)
-    hyp, lower = _hypotheses(cols, robot, change, nominal_armature, gain_dirs)
+    hyp, lower = _hypotheses(cols, robot, change, nominal_armature, gain_dirs, tilt_dirs)
     fits = st.structured_change_test(change.delta, change.C, hyp, n_obs=fit.shape[0], lower=lower)
     h0 = next(f for f in fits if f.name == "none")
     out = _hypotheses_record(fits, h0, len(change.idx))
-    found = _structured_finding(fits[0], h0, alpha, chi2_per_dof, nominal_armature)
+    # A payload is a body: it adds a mass the change determines and that is positive beyond its error.
+    # A change of the last link's inertia with no mass (a friction the refit put there) is no payload.
+    best = next(f for f in fits if f.name != "payload" or _a_body(f))
+    found = _structured_finding(best, h0, alpha, chi2_per_dof, nominal_armature, robot)
     # Per-joint parameters the model holds: torque offsets (nominal 0) and armatures (nominal: the URDF's).
     # Each is tested alone, with the jackknife's spread over chunks of the training run: the block
     # sandwich's standard errors were about half of it on field-like runs (noise correlated over 0.1 s,
@@ -123,7 +133,10 @@ def parameter_change_test(
         found = _per_joint_finding(flagged)
     out["finding"] = found.finding
     out["joint"] = found.joint
+    out["beside"] = list(beside)
     out["text"] = found.text
+    if beside:
+        out["text"] = f"With {', '.join(beside)} in the refit: {found.text[0].lower()}{found.text[1:]}"
     return out
 
 
@@ -148,6 +161,7 @@ def _hypotheses(
     change: _Change,
     nominal_armature: NDArray[np.float64],
     gain_dirs: dict[int, NDArray[np.float64]] | None,
+    tilt_dirs: NDArray[np.float64] | None = None,
 ) -> tuple[dict[str, NDArray[np.float64]], dict[str, float]]:
     """The structured hypotheses' directions on the tested parameters, and their lower bounds."""
     n, nb = robot.n, cols.n_base
@@ -171,6 +185,8 @@ def _hypotheses(
             lower[f"armature@{j + 1}"] = -float(nominal_armature[j])
     for j, d in (gain_dirs or {}).items():
         hyp[f"drive_gain@{j + 1}"] = d[idx]
+    if tilt_dirs is not None and np.linalg.norm(tilt_dirs[idx]) > 0:
+        hyp["base_tilt"] = tilt_dirs[idx]
     return hyp, lower
 
 
@@ -187,6 +203,8 @@ def _hypotheses_record(fits, h0, n_parameters: int) -> dict[str, Any]:
                 "bic": f.bic,
                 "theta": f.theta.tolist(),
                 "at_bound": f.at_bound,
+                "theta_se": [None if not np.isfinite(v) else float(v) for v in (f.theta_se if f.theta_se is not None else [])],
+                "a_body": _a_body(f) if f.name == "payload" else None,
             }
             for f in fits
         ],
@@ -199,7 +217,7 @@ def _hypotheses_record(fits, h0, n_parameters: int) -> dict[str, Any]:
 
 
 def _structured_finding(
-    best, h0, alpha: float, chi2_per_dof: float, nominal_armature: NDArray[np.float64]
+    best, h0, alpha: float, chi2_per_dof: float, nominal_armature: NDArray[np.float64], robot
 ) -> _Finding:
     """The structured hypothesis found (or none, or an unstructured change), and its sentence."""
     finding, joint = "none", None
@@ -220,10 +238,13 @@ def _structured_finding(
                 f"on joint {joint} alone (its drive's torque constant or current sensor) would change them; "
                 "re-identification absorbs most of it."
             )
+        elif best.name == "base_tilt":
+            text = _tilt_sentence(best.theta, robot.gravity)
         elif best.name == "payload":
+            se = float(best.theta_se[0]) if best.theta_se is not None else float("nan")
             text = (
                 "Parameter change: the base parameters changed as a payload on the last link would change them "
-                f"(mass change {float(best.theta[0]):.3g} kg), which re-identification absorbs."
+                f"(mass change {float(best.theta[0]):.3g} +- {se:.2g} kg), which re-identification absorbs."
             )
         else:
             joint = int(best.name.split("@")[1])
@@ -239,10 +260,35 @@ def _structured_finding(
         finding = "unstructured"
         text = (
             "Parameter change: the re-identified base parameters differ from the nominal ones, and no structured "
-            "hypothesis (common or one-joint gain, payload, armature) explains the change: the nominal inertial parameters "
-            "are off."
+            "hypothesis (common or one-joint gain, payload, armature, base tilt) explains the change: the description's "
+            "inertial parameters are off, or an effect the refit does not hold is absorbed into them (the verdict "
+            "and the ranking say which effects were tried)."
         )
     return _Finding(finding=finding, joint=joint, text=text)
+
+
+def _a_body(fit) -> bool:
+    """A payload hypothesis' fit is a body: its mass determined by the change and above twice its error."""
+    se = fit.theta_se
+    if se is None or len(fit.theta) == 0 or not np.isfinite(se[0]):
+        return False
+    return bool(fit.theta[0] > 2.0 * se[0])
+
+
+def _tilt_sentence(theta: NDArray[np.float64], gravity: NDArray[np.float64]) -> str:
+    """The base tilt that the change fits: its angle, and the axis it turns about in the base frame."""
+    from dynid.identify.effect_builders import tilt_axes
+
+    a1, a2 = tilt_axes(gravity)
+    rot = float(theta[0]) * a1 + float(theta[1]) * a2  # small rotation vector (rad)
+    axis = rot / max(float(np.linalg.norm(rot)), 1e-300)
+    return (
+        f"Parameter change: the base parameters changed as a tilt of the robot's base by "
+        f"{np.degrees(np.linalg.norm(rot)):.2g} degrees about the axis [{axis[0]:.2f}, {axis[1]:.2f}, "
+        f"{axis[2]:.2f}] of the base frame would change them (gravity not along the description's "
+        "vertical), which re-identification absorbs in part.  Level the base, or give the gravity "
+        "direction in the description."
+    )
 
 
 def _per_joint_rows(

@@ -73,6 +73,9 @@ class Selection:
         Remarks (delays too short to be told apart from the state estimation).
     cross : CrossFitted
         The final model (the baseline and the accepted effects) cross-fitted on the held-out folds.
+    fit : WeightedFit or None
+        The final model's training fit: the baseline's columns, then the accepted effects' (the
+        baseline's own fit when none was accepted).
     """
 
     accepted: list[RankedCandidate]
@@ -83,6 +86,7 @@ class Selection:
     tuned: dict[int, Tuned]
     notes: list[str]
     cross: CrossFitted
+    fit: WeightedFit | None = None
 
 
 def select(
@@ -143,7 +147,7 @@ def select(
         accepted.append(rc := replace(taken.ranked, accepted=True))
         ranking0 = _shown_accepted(ranking0, chosen.ranked, rc, replaced)
         current = _with_accepted(ctx, base, current, taken)
-    return Selection(accepted, ranking0, current.residual, current.loss, current.mse, tuned, notes, cross)
+    return Selection(accepted, ranking0, current.residual, current.loss, current.mse, tuned, notes, cross, current.fit)
 
 
 def _baseline(ctx: Context, base: Baseline, held: HeldOutBaseline) -> Current:

@@ -527,6 +527,9 @@ class HypothesisFit:
         Fitted values.
     at_bound : bool
         Its one parameter was held at its lower bound (the free fit fell below what is physically possible).
+    theta_se : ndarray, shape (k,) or None
+        Standard error of each fitted value; NaN where the change does not determine it (a direction the
+        hypothesis' columns leave free, where ``theta`` is the least-norm value).
     """
 
     name: str
@@ -537,6 +540,7 @@ class HypothesisFit:
     bic: float
     theta: NDArray[np.float64]
     at_bound: bool = False
+    theta_se: NDArray[np.float64] | None = None
 
 
 def structured_change_test(
@@ -583,8 +587,10 @@ def structured_change_test(
         A = np.asarray(A, dtype=float).reshape(p, -1)
         Aw = W @ A
         bounded = False
+        se = np.zeros(0)
         if Aw.shape[1]:
             theta, *_ = np.linalg.lstsq(Aw, dw, rcond=1e-10)
+            se = _theta_se(Aw)
             k = int(np.linalg.matrix_rank(Aw, tol=1e-8 * max(np.abs(Aw).max(), 1e-300)))
             low = (lower or {}).get(name)
             if low is not None and theta.size == 1 and theta[0] < low:
@@ -603,6 +609,20 @@ def structured_change_test(
                 bic=chi2 + k * math.log(max(n_obs, 2)),
                 theta=theta,
                 at_bound=bounded,
+                theta_se=se,
             )
         )
     return sorted(out, key=lambda h: h.bic)
+
+
+def _theta_se(Aw: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Standard errors of a whitened least-squares fit's values; NaN for a value its columns leave free."""
+    _, sv, Vt = np.linalg.svd(Aw, full_matrices=False)
+    tol = 1e-10 * max(float(sv[0]) if sv.size else 0.0, 1e-300)
+    on = sv > tol
+    V, s_on = Vt[on].T, sv[on]
+    se = np.sqrt(np.sum((V / s_on) ** 2, axis=1))
+    # a value is determined when its unit vector lies in the row space of the columns
+    free = 1.0 - np.sum(V**2, axis=1) > 1e-8
+    se[free] = np.nan
+    return se

@@ -81,6 +81,7 @@ __all__ = [
     "relay",
     "stribeck_grid",
     "temperature_grid",
+    "tilt_axes",
     "unregister_builder",
 ]
 
@@ -189,20 +190,25 @@ class FeatureSource:
         model = self.robot.pin_model.copy()
         data = model.createData()
         g0 = np.array(model.gravity.linear, dtype=float)
-        up = g0 / max(np.linalg.norm(g0), 1e-12)
-        a1 = np.cross(up, [1.0, 0.0, 0.0])
-        if np.linalg.norm(a1) < 1e-6:
-            a1 = np.cross(up, [0.0, 1.0, 0.0])
-        a1 /= np.linalg.norm(a1)
-        a2 = np.cross(up, a1)
         out = np.empty((self.m, self.n, 2))
-        for k, axis in enumerate((a1, a2)):
+        for k, axis in enumerate(tilt_axes(g0)):
             # Small rotation: g' = g + alpha (axis x g); derivative exact since g(q) is linear in g.
             model.gravity.linear = np.cross(axis, g0)
             for i in range(self.m):
                 out[i, :, k] = pin.computeGeneralizedGravity(model, data, self.q[i])
         self.cache["tilt"] = out
         return out
+
+
+def tilt_axes(gravity: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The two horizontal axes (unit vectors in the base frame) of the base tilt's columns ``ax``, ``ay``."""
+    g0 = np.asarray(gravity, dtype=float)
+    up = g0 / max(np.linalg.norm(g0), 1e-12)
+    a1 = np.cross(up, [1.0, 0.0, 0.0])
+    if np.linalg.norm(a1) < 1e-6:
+        a1 = np.cross(up, [0.0, 1.0, 0.0])
+    a1 /= np.linalg.norm(a1)
+    return a1, np.cross(up, a1)
 
 
 @dataclass(frozen=True)
