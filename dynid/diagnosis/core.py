@@ -400,11 +400,14 @@ def _parameter_change(
     """
     fit = sel.fit if sel.fit is not None else base.fit
     x = fit.solve()[0] if sel.accepted else base.x
+    # An accepted effect's columns are in the fit: as a hypothesis it would be a direction of rounding.
+    held = {a.candidate.key for a in sel.accepted}
+    tuned = [(c, C) for c, C in sel.tuned.values() if c.key not in held]
     # A torque gain on one joint scales that joint's measured torque: what the refit absorbs of it.
     # Its columns were built for the screen (round 0 tunes every candidate).
-    gain_dirs = {c.joint: fit.regress(C) for c, C in sel.tuned.values() if c.effect == "drive_gain"}
+    gain_dirs = {c.joint: fit.regress(C) for c, C in tuned if c.effect == "drive_gain"}
     # A tilt of the base rotates gravity: what the refit absorbs of its two columns (the screen's).
-    tilt = [fit.regress(C) for c, C in sel.tuned.values() if c.effect == "base_tilt"]
+    tilt = [fit.regress(C) for c, C in tuned if c.effect == "base_tilt"]
     return parameter_change_test(
         tr.src.ddq[tr.rows],
         structure.columns,
@@ -416,7 +419,7 @@ def _parameter_change(
         sigma,
         gain_dirs,
         tilt_dirs=tilt[0] if tilt else None,
-        beside=[a.candidate.key for a in sel.accepted],
+        beside=[a.candidate.effect if a.candidate.effect == "base_tilt" else a.candidate.key for a in sel.accepted],
     )
 
 

@@ -108,10 +108,11 @@ def parameter_change_test(
     hyp, lower = _hypotheses(cols, robot, change, nominal_armature, gain_dirs, tilt_dirs)
     fits = st.structured_change_test(change.delta, change.C, hyp, n_obs=fit.shape[0], lower=lower)
     h0 = next(f for f in fits if f.name == "none")
-    out = _hypotheses_record(fits, h0, len(change.idx))
+    out = _hypotheses_record(fits, h0, len(change.idx), float(robot.params[-10]))
     # A payload is a body: it adds a mass the change determines and that is positive beyond its error.
     # A change of the last link's inertia with no mass (a friction the refit put there) is no payload.
-    best = next(f for f in fits if f.name != "payload" or _a_body(f))
+    last_mass = float(robot.params[-10])
+    best = next(f for f in fits if f.name != "payload" or _a_body(f, last_mass))
     found = _structured_finding(best, h0, alpha, chi2_per_dof, nominal_armature, robot)
     # Per-joint parameters the model holds: torque offsets (nominal 0) and armatures (nominal: the URDF's).
     # Each is tested alone, with the jackknife's spread over chunks of the training run: the block
@@ -183,14 +184,17 @@ def _hypotheses(
         if np.linalg.norm(Aa[idx, j]) > 0:
             hyp[f"armature@{j + 1}"] = Aa[idx, j : j + 1]
             lower[f"armature@{j + 1}"] = -float(nominal_armature[j])
+    # a direction the refit does not see (its columns are in the fit already) is no hypothesis
+    seen = 1e-8 * max(float(np.linalg.norm(x_nom[idx])), 1e-300)
     for j, d in (gain_dirs or {}).items():
-        hyp[f"drive_gain@{j + 1}"] = d[idx]
-    if tilt_dirs is not None and np.linalg.norm(tilt_dirs[idx]) > 0:
+        if np.linalg.norm(d[idx]) > seen:
+            hyp[f"drive_gain@{j + 1}"] = d[idx]
+    if tilt_dirs is not None and np.linalg.norm(tilt_dirs[idx]) > seen:
         hyp["base_tilt"] = tilt_dirs[idx]
     return hyp, lower
 
 
-def _hypotheses_record(fits, h0, n_parameters: int) -> dict[str, Any]:
+def _hypotheses_record(fits, h0, n_parameters: int, last_mass: float) -> dict[str, Any]:
     """The hypotheses' fits and the nominal parameters' test, as the result's first entries."""
     return {
         "hypotheses": [
@@ -204,7 +208,7 @@ def _hypotheses_record(fits, h0, n_parameters: int) -> dict[str, Any]:
                 "theta": f.theta.tolist(),
                 "at_bound": f.at_bound,
                 "theta_se": [None if not np.isfinite(v) else float(v) for v in (f.theta_se if f.theta_se is not None else [])],
-                "a_body": _a_body(f) if f.name == "payload" else None,
+                "a_body": _a_body(f, last_mass) if f.name == "payload" else None,
             }
             for f in fits
         ],
@@ -267,12 +271,15 @@ def _structured_finding(
     return _Finding(finding=finding, joint=joint, text=text)
 
 
-def _a_body(fit) -> bool:
-    """A payload hypothesis' fit is a body: its mass determined by the change and above twice its error."""
+def _a_body(fit, nominal_mass: float) -> bool:
+    """A payload hypothesis' fit is a body added (or taken off): its mass change determined by the change,
+    beyond twice its error, and the last link's mass still positive.  The error is widened by the fit's
+    chi^2 per degree of freedom (the block covariance understates the spread a few times)."""
     se = fit.theta_se
     if se is None or len(fit.theta) == 0 or not np.isfinite(se[0]):
         return False
-    return bool(fit.theta[0] > 2.0 * se[0])
+    widen = np.sqrt(max(1.0, fit.chi2 / max(fit.dof, 1)))
+    return bool(abs(fit.theta[0]) > 2.0 * widen * se[0] and nominal_mass + fit.theta[0] > 0)
 
 
 def _tilt_sentence(theta: NDArray[np.float64], gravity: NDArray[np.float64]) -> str:
@@ -280,8 +287,8 @@ def _tilt_sentence(theta: NDArray[np.float64], gravity: NDArray[np.float64]) -> 
     from dynid.identify.effect_builders import tilt_axes
 
     a1, a2 = tilt_axes(gravity)
-    rot = float(theta[0]) * a1 + float(theta[1]) * a2  # small rotation vector (rad)
-    axis = rot / max(float(np.linalg.norm(rot)), 1e-300)
+    rot = float(theta[0]) * a1 + float(theta[1]) * a2  # gravity's small rotation in the base frame (rad)
+    axis = -rot / max(float(np.linalg.norm(rot)), 1e-300)  # the base turned the other way
     return (
         f"Parameter change: the base parameters changed as a tilt of the robot's base by "
         f"{np.degrees(np.linalg.norm(rot)):.2g} degrees about the axis [{axis[0]:.2f}, {axis[1]:.2f}, "
