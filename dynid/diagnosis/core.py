@@ -398,7 +398,7 @@ def _parameter_change(
     of the nominal parameters (a coupled friction absorbed by the last links' inertia read as a payload of
     0.2 g, or as "the nominal inertial parameters are off").
     """
-    fit = sel.fit if sel.fit is not None else base.fit
+    fit = sel.fit  # the baseline's own fit when nothing was accepted
     x = fit.solve()[0] if sel.accepted else base.x
     # An accepted effect's columns are in the fit: as a hypothesis it would be a direction of rounding.
     held = {a.candidate.key for a in sel.accepted}

@@ -108,10 +108,10 @@ def parameter_change_test(
     hyp, lower = _hypotheses(cols, robot, change, nominal_armature, gain_dirs, tilt_dirs)
     fits = st.structured_change_test(change.delta, change.C, hyp, n_obs=fit.shape[0], lower=lower)
     h0 = next(f for f in fits if f.name == "none")
-    out = _hypotheses_record(fits, h0, len(change.idx), float(robot.params[-10]))
+    last_mass = float(robot.params[-10])
+    out = _hypotheses_record(fits, h0, len(change.idx), last_mass)
     # A payload is a body: it adds a mass the change determines and that is positive beyond its error.
     # A change of the last link's inertia with no mass (a friction the refit put there) is no payload.
-    last_mass = float(robot.params[-10])
     best = next(f for f in fits if f.name != "payload" or _a_body(f, last_mass))
     found = _structured_finding(best, h0, alpha, chi2_per_dof, nominal_armature, robot)
     # Per-joint parameters the model holds: torque offsets (nominal 0) and armatures (nominal: the URDF's).

@@ -73,7 +73,7 @@ class Selection:
         Remarks (delays too short to be told apart from the state estimation).
     cross : CrossFitted
         The final model (the baseline and the accepted effects) cross-fitted on the held-out folds.
-    fit : WeightedFit or None
+    fit : WeightedFit
         The final model's training fit: the baseline's columns, then the accepted effects' (the
         baseline's own fit when none was accepted).
     """
@@ -86,7 +86,7 @@ class Selection:
     tuned: dict[int, Tuned]
     notes: list[str]
     cross: CrossFitted
-    fit: WeightedFit | None = None
+    fit: WeightedFit
 
 
 def select(
