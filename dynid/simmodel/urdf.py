@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 
 from dynid.exceptions import UsageError
 from dynid.identify.consistent import is_consistent
-from dynid.symbolic.robot import SNAP_RAD, pin_model_from_urdf
+from dynid.symbolic.robot import SNAP_M, SNAP_RAD, pin_model_from_urdf
 
 __all__ = ["TemplateMatch", "match_template", "read_template", "robot_urdf", "write_urdf"]
 
@@ -177,18 +177,21 @@ def match_template(root: ET.Element, path: str | Path, robot) -> TemplateMatch:
         M = reduced.jointPlacements[i + 1]
         turned = float(np.abs(np.asarray(M.rotation) - joint.rotation).max())
         moved = float(np.abs(np.asarray(M.translation) - joint.translation).max())
-        off = max(turned, moved)
-        # the loader snaps a CAD export's rounded right angles (SNAP_RAD): its own template, read raw, differs
-        # by that much in rotation and is the same robot
-        if (
-            moved > _KINEMATIC_TOL
-            or turned > max(_KINEMATIC_TOL, 1.01 * SNAP_RAD)
-            or int(reduced.parents[i + 1]) != joint.parent
-        ):
+        # the loader snaps a CAD export's rounded right angles (SNAP_RAD) and sub-micrometre offsets (SNAP_M):
+        # its own template, read raw, differs by that much and is the same robot
+        far = moved > max(_KINEMATIC_TOL, 1.01 * SNAP_M)
+        if far or turned > max(_KINEMATIC_TOL, 1.01 * SNAP_RAD) or int(reduced.parents[i + 1]) != joint.parent:
+            what = (
+                f"its offset differs by {moved:.3g} m"
+                if far
+                else f"its orientation differs by {turned:.3g}"
+                if turned > max(_KINEMATIC_TOL, 1.01 * SNAP_RAD)
+                else "its parent differs"
+            )
             raise UsageError(
-                f"the joint '{joint.name}' sits elsewhere in the template '{path}' than in the model (placement "
-                f"differs by {off:.3g}): the template describes another robot; give the URDF the model was "
-                "identified for, or one with the same kinematics"
+                f"the joint '{joint.name}' sits elsewhere in the template '{path}' than in the model ({what}): "
+                "the template describes another robot; give the URDF the model was identified for, or one "
+                "with the same kinematics"
             )
         about = float(np.abs(axes[0][i] - axes[1][i]).max())
         if about > max(_KINEMATIC_TOL, 1.01 * SNAP_RAD):

@@ -135,11 +135,15 @@ def test_a_template_is_matched_to_its_own_robot(rpr):
     ("old", "new", "pattern"),
     [
         ('joint name="j2"', 'joint name="jx"', "has no joint 'j2'"),
-        ('<origin xyz="0 0 0.1" rpy="0.3 0 0"/>', '<origin xyz="0 0 0.1001" rpy="0.3 0 0"/>', "sits elsewhere"),
+        (
+            '<origin xyz="0 0 0.1" rpy="0.3 0 0"/>',
+            '<origin xyz="0 0 0.1001" rpy="0.3 0 0"/>',
+            r"sits elsewhere .*\(its offset differs by 0.0001 m\)",
+        ),
         (  # the same placement on another link
             '<parent link="link2"/><child link="link3"/>',
             '<parent link="link1"/><child link="link3"/>',
-            r"j3.*sits elsewhere.*\(placement differs by 0\)",
+            r"j3.*sits elsewhere.*\(its parent differs\)",
         ),
         pytest.param(
             '<axis xyz="0 0 1"/>\n    <limit lower="-2.9"',
@@ -162,6 +166,20 @@ def test_a_template_of_another_robot_is_refused(tmp_path, rpr, old, new, pattern
     path.write_text(text.replace(old, new))
     with pytest.raises(UsageError, match=pattern):
         match_template(read_template(path), path, rpr)
+
+
+def test_a_template_with_a_sub_micrometre_offset_is_its_own_robot(tmp_path):
+    """A CAD file's offset of 5e-8 m where 0 was meant: the loader snaps it to 0, and the file itself is still
+    the template of the robot it describes (the match allowed 1e-9 m and refused the user's own URDF)."""
+    text = RPR.read_text()
+    old = '<origin xyz="0 0 0.1" rpy="0.3 0 0"/>'
+    assert old in text
+    path = tmp_path / "cad.urdf"
+    path.write_text(text.replace(old, '<origin xyz="5e-08 0 0.1" rpy="0.3 0 0"/>'))
+    robot = load_robot(path)
+    assert any(np.array_equal(j.translation, [0.0, 0.0, 0.1]) for j in robot.joints)  # snapped
+    m = match_template(read_template(path), path, robot)
+    assert [j.get("name") for j in m.joint_elements] == ["j1", "j2", "j3"]
 
 
 # ---------------------------------------------------------------------------- writing
