@@ -143,9 +143,14 @@ def run(args: argparse.Namespace) -> int:
     results = []
     for model, label, path in zip(models, labels, files, strict=True):
         say(f"predicting with {Path(path).name} and measuring the noise floor")
-        results.append(
-            validate(model, data, period=args.period, label=label, info={"model_file": Path(path).name})
-        )
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            results.append(
+                validate(model, data, period=args.period, label=label, info={"model_file": Path(path).name})
+            )
+        for w in caught:  # with --compare, each model's warnings say which model they are about
+            text = f"{Path(path).name}: {w.message}" if len(files) > 1 else str(w.message)
+            warnings.warn(text, w.category, stacklevel=2)
     rows = compare(results)
     first = results[0]
     figures = {

@@ -277,11 +277,14 @@ class IdentifiedModel:
         if not far.any():
             return
         joints = np.flatnonzero(far)
-        worst = joints[np.argmax(np.abs(tau[:, joints]).max(axis=0) / span[joints])]
+        below, above = (lo - tau.min(axis=0)) / span, (tau.max(axis=0) - hi) / span  # in spans beyond the range
+        worst = joints[np.argmax(np.maximum(below, above)[joints])]
+        # the extreme on the side that leaves the range (a joint trained on 12..18 N m may predict -13)
+        reach = f"down to {tau[:, worst].min():.4g}" if below[worst] >= above[worst] else f"up to {tau[:, worst].max():.4g}"
         warnings.warn(
             f"the prediction leaves the training torque's range by far on joint(s) "
-            f"{', '.join(str(j + 1) for j in joints)} (joint {worst + 1}: up to "
-            f"{np.abs(tau[:, worst]).max():.4g} N m, trained on {lo[worst]:.3g}..{hi[worst]:.3g} N m): the model "
+            f"{', '.join(str(j + 1) for j in joints)} (joint {worst + 1}: {reach} N m, trained on "
+            f"{lo[worst]:.3g}..{hi[worst]:.3g} N m): the model "
             "extrapolates, from parameters the training motion did not determine or a motion unlike it; check "
             "the parameters' standard deviations, or identify on a motion that covers this one",
             IdentificationWarning,

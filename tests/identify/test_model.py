@@ -370,6 +370,35 @@ def test_a_prediction_far_outside_the_training_torque_says_so_in_one_sentence(ur
         again.predict(q, 30 * dq, 300 * ddq)
 
 
+def test_the_range_warning_gives_the_extreme_on_the_side_it_leaves(ur5) -> None:
+    """A joint trained on 12.7..18.3 N m that predicts -13.5 reads 'down to -13.5', not 'up to 13.5' (which
+    lies inside the range it says was left)."""
+    from dataclasses import replace
+
+    rng = np.random.default_rng(6)
+    cols = column_set(ur5)
+    train = synthetic_dataset(cols, true_parameters(cols, rng), random_fourier(ur5, rng), rate=50, rng=rng)
+    model = identify(ur5, train, method="ols", friction="linear", gmm="off")
+    q, dq, ddq = (np.asarray(train.q), np.asarray(train.dq), np.asarray(train.ddq))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tau = model.predict(q, dq, ddq)
+    ranges = np.asarray(model.info["torque_range"], dtype=float)
+    j = 1
+    span = np.ptp(tau[:, j])
+    for side, (lo, hi), word, extreme in (
+        ("above", (tau[:, j].max() + 3 * span, tau[:, j].max() + 4 * span), "down to", tau[:, j].min()),
+        ("below", (tau[:, j].min() - 4 * span, tau[:, j].min() - 3 * span), "up to", tau[:, j].max()),
+    ):
+        r = ranges.copy()
+        r[j] = lo, hi
+        moved = replace(model, info={**model.info, "torque_range": r.tolist()})
+        with pytest.warns(IdentificationWarning) as caught:
+            moved.predict(q, dq, ddq)
+        text = str(caught[0].message)
+        assert f"joint {j + 1}: {word} {extreme:.4g} N m, trained on {lo:.3g}..{hi:.3g}" in text, (side, text)
+
+
 def test_a_model_identified_from_a_relative_urdf_path_loads_from_another_folder(ur5, tmp_path, monkeypatch):
     """The model file names its description as given, and as found from the model's own folder: a
     command run elsewhere (export, validate) finds the same file."""

@@ -16,7 +16,7 @@ from dynid.cli import main
 from dynid.data.dataset import Dataset
 from dynid.data.files import load_dataset, save_dataset
 from dynid.data.preparation import Preprocessing, prepare
-from dynid.exceptions import DataError, ModelFileError, ShapeError, UsageError
+from dynid.exceptions import DataError, IdentificationWarning, ModelFileError, ShapeError, UsageError
 from dynid.identify.model import load_model
 from dynid.validation import plots, report
 from dynid.validation import validate as validate_module
@@ -324,6 +324,23 @@ def test_validate_command_writes_what_it_prints(case, tmp_path, capsys):
     assert f"{figures['rms_mean']:.4g}" in text
     assert "noise floor: periods" in text
     assert sorted(p.name for p in out.iterdir()) == ["F.json", "P.csv"]
+
+
+def test_compared_models_warnings_say_which_model(case, tmp_path):
+    """With --compare, a model's warning (here its prediction leaving its training torque's range) names the
+    model file it is about; the other model says nothing."""
+    ols = Path(case.ols)
+    for suffix in (".json", ".npz"):
+        shutil.copy(ols.with_suffix(suffix), tmp_path / ols.with_suffix(suffix).name)
+    moved = tmp_path / ols.name
+    doc = json.loads(moved.read_text())
+    doc["torque_range"] = [[1e3, 1e3 + 1.0] for _ in doc["torque_range"]]  # every prediction far below it
+    moved.write_text(json.dumps(doc))
+    with pytest.warns(IdentificationWarning) as caught:
+        assert main(["validate", "--model", str(case.full), "--compare", str(moved), "--data", str(case.heldout)]) == 0
+    said = [str(w.message) for w in caught if "training torque's range" in str(w.message)]
+    assert len(said) == 1 and said[0].startswith(f"{ols.name}: the prediction leaves the training torque's range")
+    assert "down to" in said[0]
 
 
 def _run_fails(argv, capsys) -> str:
