@@ -210,7 +210,7 @@ def load_model(path: str | os.PathLike[str], robot=None) -> IdentifiedModel:
         raise ModelFileError(f"no model file at {path}; give the JSON written by 'dynid identify --out'")
     doc, info_robot, arrays_path = _read_manifest(path, name)
     robot = _model_robot(robot, info_robot, path, name)
-    blob = _read_arrays(arrays_path, name, doc)
+    blob = _read_arrays(arrays_path, name, doc, renamed=path.with_suffix(".npz"))
     try:
         return _model_from(doc, blob, robot, name)
     except ModelFileError:
@@ -282,36 +282,57 @@ def _model_robot(robot, info_robot: dict[str, Any], path: Path, name: str) -> An
     return robot
 
 
-def _read_arrays(arrays_path: Path, name: str, doc: dict[str, Any]) -> bytes:
+def _read_arrays(arrays_path: Path, name: str, doc: dict[str, Any], renamed: Path | None = None) -> bytes:
     """The bytes of the arrays file the model JSON ``doc`` was written with (those a killed save left
-    under :func:`_old_arrays_name` if the file beside it is another's), checked against its checksum."""
-    try:
-        blob = arrays_path.read_bytes()
-    except OSError:
-        raise ModelFileError(
-            f"{name} keeps its arrays in {arrays_path.name}, which is missing; copy it beside {name} or identify again"
-        ) from None
-    if hashlib.sha256(blob).hexdigest() != doc.get("arrays_sha256"):
-        # a save killed between its renames leaves the old arrays beside the old JSON, under their checksum
-        kept = _old_arrays_name(arrays_path, str(doc.get("arrays_sha256")))
+    under :func:`_old_arrays_name` if the file beside it is another's), checked against its checksum.
+
+    ``renamed`` is the arrays file a pair renamed together would have (the JSON's own name with ``.npz``):
+    ``arm.json`` and ``arm.npz``, renamed from ``M.json`` and ``M.npz``, are read as the pair they are,
+    whose JSON still names ``M.npz``.
+    """
+    sha = doc.get("arrays_sha256")
+
+    def read(p: Path) -> bytes | None:
         try:
-            old_blob = kept.read_bytes()
+            return p.read_bytes()
         except OSError:
-            old_blob = b""
-        if old_blob and hashlib.sha256(old_blob).hexdigest() == doc.get("arrays_sha256"):
-            warnings.warn(
-                f"{name}: a save was interrupted after it replaced {arrays_path.name}; the arrays {name} was "
-                f"written with were read from {kept.name} (save the model again to tidy up)",
-                IdentificationWarning,
-                stacklevel=3,  # the caller of load_model
-            )
-            blob = old_blob
-    if hashlib.sha256(blob).hexdigest() != doc.get("arrays_sha256"):
-        raise ModelFileError(
-            f"{arrays_path.name} is not the arrays file {name} was written with (checksum differs): the pair was "
-            "copied apart or its writing was interrupted; copy the two files together or identify again"
+            return None
+
+    blob = read(arrays_path)
+    if blob is not None and hashlib.sha256(blob).hexdigest() == sha:
+        return blob
+    if renamed is not None and renamed != arrays_path:
+        other = read(renamed)
+        if other is not None and hashlib.sha256(other).hexdigest() == sha:
+            return other
+    # a save killed between its renames leaves the old arrays beside the old JSON, under their checksum
+    kept = _old_arrays_name(arrays_path, str(sha))
+    old_blob = read(kept)
+    if blob is not None and old_blob and hashlib.sha256(old_blob).hexdigest() == sha:
+        warnings.warn(
+            f"{name}: a save was interrupted after it replaced {arrays_path.name}; the arrays {name} was "
+            f"written with were read from {kept.name} (save the model again to tidy up)",
+            IdentificationWarning,
+            stacklevel=3,  # the caller of load_model
         )
-    return blob
+        return old_blob
+    also = (
+        f" (nor is {renamed.name}, the name a pair renamed together would give it)"
+        if renamed is not None and renamed != arrays_path and renamed.is_file()
+        else ""
+    )
+    if blob is None:
+        there = renamed is not None and renamed != arrays_path and renamed.is_file()
+        raise ModelFileError(
+            f"{name} keeps its arrays in {arrays_path.name}, which is missing"
+            + (f", and {renamed.name} beside it is another model's arrays (checksum differs)" if there else "")
+            + f"; copy {arrays_path.name} beside {name} (or as {Path(name).stem}.npz, if the pair was renamed) "
+            "or identify again"
+        )
+    raise ModelFileError(
+        f"{arrays_path.name} is not the arrays file {name} was written with (checksum differs){also}: the pair "
+        "was copied or renamed apart, or its writing was interrupted; copy the two files together or identify again"
+    )
 
 
 def _model_from(doc: dict[str, Any], blob: bytes, robot, name: str) -> IdentifiedModel:

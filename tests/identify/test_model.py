@@ -206,6 +206,27 @@ def test_bad_model_files_give_one_clear_error(ur5, pipeline_data, tmp_path) -> N
     assert not (tmp_path / "missing").exists()
 
 
+def test_a_pair_renamed_together_loads_and_one_renamed_apart_says_so(ur5, pipeline_data, tmp_path) -> None:
+    """arm.json and arm.npz, renamed from M.json and M.npz, are the same model (the JSON still names M.npz);
+    a JSON renamed without its arrays, or beside another model's, is refused in one sentence saying so."""
+    train, test = pipeline_data
+    model = identify(ur5, train, method="ols", friction="linear", gmm="off")
+    other = identify(ur5, train, method="ols", friction="linear", gmm="off", reference_weight=0.0)
+    save_model(model, tmp_path / "M.json")
+    (tmp_path / "M.json").rename(tmp_path / "arm.json")
+    (tmp_path / "M.npz").rename(tmp_path / "arm.npz")
+    again = load_model(tmp_path / "arm.json")
+    np.testing.assert_array_equal(again.predict(test), model.predict(test))
+    (tmp_path / "arm.npz").unlink()
+    with pytest.raises(ModelFileError, match=r"arm.json keeps its arrays in M.npz, which is missing; copy M.npz "
+                       r"beside arm.json \(or as arm.npz, if the pair was renamed\)"):  # fmt: skip
+        load_model(tmp_path / "arm.json")
+    save_model(other, tmp_path / "M.json")  # another model's pair beside it
+    with pytest.raises(ModelFileError, match=r"M.npz is not the arrays file arm.json was written with \(checksum "
+                       r"differs\): the pair was copied or renamed apart"):  # fmt: skip
+        load_model(tmp_path / "arm.json")
+
+
 def test_identify_command_writes_the_model_and_figures(ur5, pipeline_data, tmp_path, capsys) -> None:
     train, _ = pipeline_data
     data = save_dataset(train, tmp_path / "D.csv")
