@@ -114,7 +114,7 @@ def read_dataset(path: str | os.PathLike[str], n_joints: int | None = None, *, r
     """
     import inspect
 
-    from dynid.data.files import check_joint_range, check_torque_scale, load_dataset
+    from dynid.data.files import check_joint_range, check_torque_scale, load_dataset, simulated_on
 
     kwargs: dict[str, Any] = {}
     if robot is not None and joint_names is None:
@@ -135,6 +135,12 @@ def read_dataset(path: str | os.PathLike[str], n_joints: int | None = None, *, r
         data = load_dataset(path, n_joints, **kwargs)
     if robot is not None and data.n == robot.n:
         source = Path(path).name
+        other = simulated_on(robot, data, joints=True)
+        if other is not None:  # identify, diagnose and export read it as the robot's own otherwise
+            raise UsageError(
+                f"--{option} {source} was simulated on '{other}' (its {source}.truth.json says so), not on "
+                f"'{robot.name}'; give data of '{robot.name}', or the robot the data were simulated on."
+            )
         check_torque_scale(data, robot, source=source)
         if model_path is not None:
             _check_fits_robot(robot, data, model_path=model_path, data_option=option)

@@ -58,6 +58,8 @@ __all__ = [
     "check_torque_scale",
     "load_dataset",
     "save_dataset",
+    "simulated_on",
+    "truth_sidecar",
 ]
 
 #: A median time step (s) at or above this makes :func:`load_dataset` refuse the time column as not in seconds.
@@ -656,3 +658,61 @@ def save_dataset(ds: Dataset, path: str | os.PathLike[str]) -> Path:
             with open(tmp, "wb") as f:
                 _write_npz(ds, f)
     return path
+
+
+def truth_sidecar(data: Dataset) -> dict[str, Any] | None:
+    """The simulator's record beside a simulated dataset's file (``<data>.truth.json``), or None.
+
+    Parameters
+    ----------
+    data : Dataset
+        The data, read from a file (``meta["source"]``).
+
+    Returns
+    -------
+    dict or None
+        The record (``robot``, ``source``, ``joint_names``, the truth, ...); None without one.
+    """
+    source = data.meta.get("source")
+    if not source:
+        return None
+    path = Path(str(source))
+    sidecar = path.with_name(path.name + ".truth.json")
+    if not sidecar.is_file():
+        return None
+    try:
+        doc = json.loads(sidecar.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return doc if isinstance(doc, dict) else None
+
+
+def simulated_on(robot: Any, data: Dataset, *, joints: bool = False) -> str | None:
+    """The robot a simulated dataset's sidecar (:func:`truth_sidecar`) names when it is not ``robot`` (by both
+    its description's source and its name), else None (no sidecar, or the same robot).
+
+    Parameters
+    ----------
+    robot : RobotModel
+        The robot the data are given for.
+    data : Dataset
+        The data, read from a file (``meta["source"]``).
+    joints : bool
+        Also require other joint names (when the sidecar lists them): a copy of the description under
+        another file and robot name (``arm.urdf``, the UR5's) is then the same robot, and an arm of another
+        family (a Kinova's data for an SO-101) is not.
+
+    Returns
+    -------
+    str or None
+    """
+    side = truth_sidecar(data)
+    if side is None:
+        return None
+    source, name = side.get("source"), side.get("robot")
+    if source is None or name is None or source == robot.source or name == robot.name:
+        return None
+    listed = side.get("joint_names")
+    if joints and isinstance(listed, list) and list(listed) == list(robot.joint_names):
+        return None
+    return str(name)

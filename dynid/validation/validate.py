@@ -34,7 +34,6 @@ and the robot description's own model (:func:`nominal_model`, :func:`described_m
 from __future__ import annotations
 
 import io
-import json
 import os
 import time
 import warnings
@@ -47,6 +46,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynid.data.dataset import Dataset
+from dynid.data.files import simulated_on, truth_sidecar
 from dynid.data.preparation import Prepared, Preprocessing
 from dynid.exceptions import DataError, ModelFileError, ShapeError, UsageError
 from dynid.identify.columns import linear_torque
@@ -76,21 +76,6 @@ __all__ = [
 
 
 # ---------------------------------------------------------------------------- checks
-def _sidecar(data: Dataset) -> dict[str, Any] | None:
-    source = data.meta.get("source")
-    if not source:
-        return None
-    path = Path(str(source))
-    sidecar = path.with_name(path.name + ".truth.json")
-    if not sidecar.is_file():
-        return None
-    try:
-        doc = json.loads(sidecar.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
-    return doc if isinstance(doc, dict) else None
-
-
 def check_same_robot(model: IdentifiedModel, data: Dataset, *, model_name: str = "the model") -> None:
     """Refuse data recorded on another robot than the model's.
 
@@ -118,14 +103,12 @@ def check_same_robot(model: IdentifiedModel, data: Dataset, *, model_name: str =
             f"{model_name} was identified for '{robot.name}' ({robot.n} joints) but {data_name} has {data.n} "
             "joints; validate a model on data recorded on the robot it was identified for."
         )
-    side = _sidecar(data)
-    if side is not None:
-        source, name = side.get("source"), side.get("robot")
-        if source is not None and name is not None and source != robot.source and name != robot.name:
-            raise ModelFileError(
-                f"{model_name} was identified for '{robot.name}' but {data_name} was simulated on '{name}' "
-                f"(its {data_name}.truth.json says so); validate a model on data of the robot it was identified for."
-            )
+    name = simulated_on(robot, data)
+    if name is not None:
+        raise ModelFileError(
+            f"{model_name} was identified for '{robot.name}' but {data_name} was simulated on '{name}' "
+            f"(its {data_name}.truth.json says so); validate a model on data of the robot it was identified for."
+        )
 
 
 def sidecar_period(data: Dataset) -> float | None:
@@ -139,7 +122,7 @@ def sidecar_period(data: Dataset) -> float | None:
     data : Dataset
         Data read by :func:`dynid.data.files.load_dataset` (its ``meta["source"]`` names the file).
     """
-    side = _sidecar(data)
+    side = truth_sidecar(data)
     traj = (side or {}).get("trajectory") or {}
     if traj.get("type") == "FourierTrajectory" and traj.get("duration"):
         return float(traj["duration"])

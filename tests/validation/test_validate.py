@@ -278,6 +278,28 @@ def test_simulated_data_of_another_robot_is_refused_by_its_sidecar(case, full, t
         validate(full, load_dataset(data), info={"model_file": "M.json"})
 
 
+@pytest.mark.parametrize("command", ["identify", "validate"])
+def test_commands_refuse_data_simulated_on_another_robot(case, tmp_path, capsys, command):
+    """identify took a recording its sidecar says was simulated on another arm of as many joints (other joint
+    names) and fitted it (validate refused it): every command that reads data for a robot now refuses it, in
+    one sentence."""
+    data = tmp_path / "V10.csv"
+    shutil.copy(case.heldout, data)
+    side = json.loads(Path(str(case.heldout) + ".truth.json").read_text())
+    side.update(robot="kinova", source="kinova.urdf", joint_names=[f"j2s6s200_joint_{k}" for k in range(1, 7)])
+    Path(str(data) + ".truth.json").write_text(json.dumps(side))
+    out = tmp_path / "M.json"
+    argv = (
+        ["identify", "--robot", "ur5", "--data", str(data), "--out", str(out), "--method", "ols"]
+        if command == "identify"
+        else ["validate", "--model", str(case.full), "--data", str(data)]
+    )
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "--data V10.csv was simulated on 'kinova' (its V10.csv.truth.json says so), not on 'ur5'" in err
+    assert "Traceback" not in err and not out.exists()
+
+
 def test_too_short_data_is_refused(full, heldout):
     short = heldout.select_rows(np.arange(100))
     with pytest.raises(
