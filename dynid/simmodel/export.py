@@ -140,13 +140,16 @@ def _measured(heldout: dict[str, Any], item: dict[str, Any]) -> str | None:
             or (what in ("armature", "coupled transmission") and name.startswith("rigid body"))
         )
         if hit:
-            together = " (with the other friction terms)" if what in friction_items else ""
+            without, full = float(np.mean(part["rms_without"])), float(heldout["rms_full_mean"])
+            if what in friction_items:  # one figure for all of them: they are removed together
+                return (
+                    f"held-out RMS {without:.4g} N m without the friction terms the file cannot carry (all of "
+                    f"them together, not this one alone), {full:.4g} N m with them (mean over joints)"
+                )
+            together = ""
             if what in ("armature", "coupled transmission"):
                 together = " (with the rest of the rigid-body change: consistency projection, armature)"
-            return (
-                f"held-out RMS {np.mean(part['rms_without']):.4g} N m without it{together}, "
-                f"{heldout['rms_full_mean']:.4g} N m with it (mean over joints)"
-            )
+            return f"held-out RMS {without:.4g} N m without it{together}, {full:.4g} N m with it (mean over joints)"
     return None
 
 
