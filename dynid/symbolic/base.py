@@ -94,10 +94,11 @@ class BaseParameters:
                 if coef == 0:
                     continue
                 name = self.standard_names[j]
-                if abs(abs(coef) - 1) < 1e-12:
+                shown = f"{abs(coef):.6g}"
+                if shown == "1":  # 1 to the six digits shown (1 - 4e-8 on an arm with rounded angles)
                     text += f" {'-' if coef < 0 else '+'} {name}"
                 else:
-                    text += f" {'-' if coef < 0 else '+'} {abs(coef):.6g}*{name}"
+                    text += f" {'-' if coef < 0 else '+'} {shown}*{name}"
             out.append(text)
         return tuple(out)
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -78,6 +80,12 @@ def test_names_and_expressions_are_readable():
     assert expr["mz2R"] == "mz2 + 0.425*m3 + 0.425*m4 + 0.425*m5 + 0.425*m6"
     assert expr["Izz1R"].startswith("Izz1 + ")
     assert expr["mx2"] == "mx2"
+    # a coefficient of 1 to the digits shown (1 - 4e-8 on an arm whose angles were rounded) reads as 1
+    from dataclasses import replace
+
+    nearly = replace(base, K=np.where(np.abs(np.abs(base.K) - 1) < 1e-12, base.K * (1 - 4e-8), base.K))
+    assert nearly.expressions == base.expressions
+    assert not any(re.search(r"(?<![\d.])1\*", e) for e in nearly.expressions)
 
 
 def test_gravity_related_columns(robot_and_base, rng):
