@@ -309,6 +309,15 @@ def _check_units(ds: Dataset, source: str, degrees: bool) -> Dataset:
             "nanoseconds / 1e9)"
         )
     if degrees:
+        peak = float(np.abs(ds.q).max(initial=0.0))
+        if 0.0 < peak <= 2 * np.pi:  # every angle within one turn, as radians are: 57 times too small if so
+            warnings.warn(
+                f"{source}: degrees were asked for (--degrees), but every angle lies within +-{peak:.3g}, as "
+                "angles in radians do; if the file is in radians, drop --degrees (its angles would be read 57 "
+                "times too small)",
+                DataWarning,
+                stacklevel=4,
+            )
         scale = np.pi / 180.0
         ds = ds._derive(
             q=ds.q * scale,

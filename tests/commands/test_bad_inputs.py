@@ -400,10 +400,19 @@ def test_degrees_are_converted_when_asked(base: Path, tmp_path: Path) -> None:
     header, table = _table(base)
     table[:, 1:7] = np.rad2deg(table[:, 1:7])
     _write(tmp_path / "deg.csv", header, table)
-    ds = load_dataset(tmp_path / "deg.csv", 6, degrees=True)
+    with warnings.catch_warnings():
+        warnings.filterwarnings("error", message=".*degrees were asked for", category=DataWarning)
+        ds = load_dataset(tmp_path / "deg.csv", 6, degrees=True)
     np.testing.assert_allclose(ds.q, load_dataset(base / "D.csv", 6).q, rtol=1e-14, atol=1e-15)
     assert ds.meta["converted_from_degrees"] is True
     np.testing.assert_array_equal(ds.tau, load_dataset(base / "D.csv", 6).tau)  # torques untouched
+
+
+def test_degrees_asked_for_angles_in_radians_says_so(base: Path) -> None:
+    """--degrees on a file in radians read every angle 57 times too small without a word."""
+    with pytest.warns(DataWarning, match=r"D.csv: degrees were asked for \(--degrees\), but every angle lies within "
+                      r"\+-[\d.]+, as angles in radians do; if the file is in radians, drop --degrees"):  # fmt: skip
+        load_dataset(base / "D.csv", 6, degrees=True)
 
 
 # One wrist joint alone: joint 5.  Joint 6 peaks at 0.12 N m on this short run, and in mN m (122) it stays
