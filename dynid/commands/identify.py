@@ -197,7 +197,12 @@ def _bodies_lines(figures: dict) -> list[str]:
             f"  {body['joint']:<24} {body['mass_description']:8.3g} -> {body['mass']:8.3g} kg"
             + ("" if ratio is None else f" (x{ratio:.2f})")
             + f", centre of mass moved {1000 * body['com_shift']:.0f} mm"
-            + ("" if decided is None else f"; decided by {decided} (data share {100 * body['data_share']:.0f} %)")
+            + (
+                ""
+                if decided is None
+                else f"; decided by {'the consistency bound' if decided == 'bound' else decided} "
+                f"(data share {100 * body['data_share']:.0f} %)"
+            )
         )
     return lines
 

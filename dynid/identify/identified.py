@@ -412,8 +412,8 @@ class IdentifiedModel:
         """Each link's body as a URDF inertial takes it (:func:`dynid.identify.consistent.link_inertials`),
         with ``name`` (its joint), ``at_bound``, and how far it moved from the description and what
         decided it (:func:`dynid.identify.prior.link_report`: ``mass_description``, ``mass_ratio``,
-        ``com_shift``, ``divergence``, ``data_share``, ``decided_by``); None without consistent standard
-        parameters."""
+        ``com_shift``, ``divergence``, ``data_share``, ``decided_by``: ``bound`` for a link the description
+        would decide that sits at the consistency bound); None without consistent standard parameters."""
         phi = self.standard_params
         if phi is None:
             return None
@@ -421,7 +421,13 @@ class IdentifiedModel:
         share = (self.info.get("prior") or {}).get("data_share")
         moved = link_report(self.robot, phi, None if share is None else np.asarray(share, dtype=np.float64))
         keys = ("mass_description", "mass_ratio", "com_shift", "divergence", "data_share", "decided_by")
-        return [
+        out = [
             {"joint": name, **body, "at_bound": j + 1 in held, **{k: moved[j][k] for k in keys}}
             for j, (name, body) in enumerate(zip(self.robot.joint_names, link_inertials(phi), strict=True))
         ]
+        for body in out:
+            # a link the data hardly see, held at the consistency bound: the bound moved it (the data moved the
+            # links it shares base parameters with), not the description (a Z1's first link at 1.8x its mass)
+            if body["at_bound"] and body["decided_by"] == "description":
+                body["decided_by"] = "bound"
+        return out

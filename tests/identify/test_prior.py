@@ -43,6 +43,19 @@ def test_a_link_the_data_cannot_see_keeps_its_description(ur5, run):
     assert any(body["decided_by"] in ("data", "both") for body in links)
 
 
+def test_a_link_held_at_the_bound_is_not_said_to_be_the_descriptions(ur5, run):
+    """A link the data hardly see that sits at the consistency bound was moved by the bound: 'bound', not
+    'description' (which would read as unchanged)."""
+    from dataclasses import replace
+
+    model = identify(ur5, run, method="ols", friction="linear", gmm="off")
+    assert model.links()[0]["decided_by"] == "description"
+    info = {**model.info, "consistency": {**model.info["consistency"], "at_bound": [1]}}
+    links = replace(model, info=info).links()
+    assert links[0]["decided_by"] == "bound" and links[0]["at_bound"]
+    assert [b["decided_by"] for b in links[1:]] == [b["decided_by"] for b in model.links()[1:]]
+
+
 def test_described_bodies_change_no_identified_parameter(ur5, run):
     model = identify(ur5, run, method="ols", friction="linear", gmm="off", reference_weight=0.0)
     cols = model.columns
