@@ -181,7 +181,14 @@ class PipelineChoice:
     @property
     def said(self) -> str:
         """The reason, with the advice :data:`ONE_MOTION` gives when the folds hold one motion."""
-        return self.reason + (ONE_MOTION.get(self.folds, "") if self.one_motion else "")
+        shared = (
+            "; the seed friction keeps one static level for both directions (seed_shared): on one motion each "
+            "joint reverses at the same configurations in every period, where a level per direction would "
+            "also take the model's error there"
+            if self.one_motion and self.friction == "seed_shared"
+            else ""
+        )
+        return self.reason + shared + (ONE_MOTION.get(self.folds, "") if self.one_motion else "")
 
     @property
     def effects(self) -> str | None:
@@ -412,7 +419,9 @@ def _motion_distance(a, b) -> float:
     return float(max(np.median(d.min(axis=0)), np.median(d.min(axis=1))))
 
 
-def choose_pipeline(make, data, options: list[tuple[str, str, str | int]]) -> PipelineChoice:
+def choose_pipeline(
+    make, data, options: list[tuple[str, str, str | int]], *, share_static: bool = False
+) -> PipelineChoice:
     """Score candidate pipelines by two-fold blocked cross-validation on the training recording.
 
     Parameters
@@ -423,6 +432,10 @@ def choose_pipeline(make, data, options: list[tuple[str, str, str | int]]) -> Pi
         The training recording.
     options : list of tuple
         The candidates (:func:`candidates`); the first is the baseline.
+    share_static : bool
+        When the folds hold one motion (:func:`one_motion`), score and choose the seed friction with one
+        static level for both directions (``seed_shared``, :class:`dynid.identify.friction_models.
+        SharedSeedFriction`) instead of ``seed`` (the default pipeline's friction was not the user's).
 
     Returns
     -------
@@ -437,10 +450,13 @@ def choose_pipeline(make, data, options: list[tuple[str, str, str | int]]) -> Pi
             folds="none",
         )  # fmt: skip
     a, b, kind = folds(data)
+    one = one_motion(a, b)
+    if one and share_static:  # one static level for both directions: see SharedSeedFriction
+        options = [(m, "seed_shared" if f == "seed" else f, g) for m, f, g in options]
     with stage(f"choosing the pipeline by cross-validation on {_SAID[kind]}", total=2 * len(options)):
         mse = _cross_fit(make, (a, b), options, advance)
     choice = decide(options, np.sqrt(mse), data.meta.get("coarse", {}).get("rate_hz"), kind)
-    return replace(choice, one_motion=one_motion(a, b))
+    return replace(choice, one_motion=one)
 
 
 def gain_screen(system) -> list[int]:

@@ -6,7 +6,7 @@ checks of :class:`~dynid.identify.model.ThreeLayerModel` and the simulator expor
 module, imported only when the class is looked up, so that reading the names (``dynid --help``)
 imports neither SciPy nor CasADi.
 
->>> FRICTION_MODELS.names()        # ('none', 'linear', 'seed', 'stribeck', 'sigmoid')
+>>> FRICTION_MODELS.names()        # ('none', 'linear', 'seed', 'seed_shared', 'stribeck', 'sigmoid')
 >>> FRICTION_MODELS["seed"]        # SeedFriction (imports dynid.identify.friction_models)
 
 A built-in model is one line of a table below beside its class; a model of one's own is registered by
@@ -102,6 +102,7 @@ FRICTION_MODELS = Registry(
         "none": "dynid.identify.friction_models:NoFriction",
         "linear": "dynid.identify.friction_models:LinearFriction",
         "seed": "dynid.identify.friction_models:SeedFriction",
+        "seed_shared": "dynid.identify.friction_models:SharedSeedFriction",
         "stribeck": "dynid.identify.friction_models:StribeckFriction",
         "sigmoid": "dynid.identify.friction_models:SigmoidFriction",
     },

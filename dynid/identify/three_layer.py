@@ -372,6 +372,7 @@ class ThreeLayerModel:
             lambda m, f, g: self._with(method=m, friction=f, gmm=g, reference_weight=half, preprocessing=cv_pre),
             cv_data,
             candidates(self.friction, self.gmm),
+            share_static=self.friction == "auto",
         )
         if self.drive_gains and not self.effects:  # a gain per joint where the folds show one
             try:

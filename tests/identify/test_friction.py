@@ -163,6 +163,62 @@ def test_seed_model_holds_an_implausible_static_level_at_the_coulomb_level(rng) 
     assert FrictionLayer.from_dict({"model": "seed", "joints": [old_file]}).models_[0].tied_ == (False, False)
 
 
+def test_the_shared_seed_model_recovers_one_static_level_and_keeps_it_one(rng) -> None:
+    """seed_shared: Coulomb per direction, one static level; recovered from friction data, filtered or
+    not; the joint refit, the file and the C export's columns keep the two levels one. A seed truth with
+    different static levels is fitted at a level between them (it cannot take both)."""
+    from dynid.identify.friction_models import SharedSeedFriction
+
+    dq = velocities(rng)
+    truth = with_coef(SeedFriction(), [1.0, 0.8, 0.5, 0.2, 0.05, 1.5, 1.5, 0.08])
+    F = truth.predict(dq) + 0.02 * rng.normal(size=dq.size)
+    fit = SharedSeedFriction().fit(dq, F)
+    assert fit.shared_ and fit.tied_ == (False, False) and fit.coef_[5] == fit.coef_[6]
+    np.testing.assert_allclose(fit.coef_[:2], truth.coef_[:2], rtol=0.03)
+    np.testing.assert_allclose(fit.coef_[5], 1.5, rtol=0.03)
+    np.testing.assert_allclose(fit.coef_[7], 0.08, rtol=0.05)
+    assert len(fit.linear_coef()) == len(fit.basis(dq[:5]).T) == 6
+    np.testing.assert_allclose(fit.basis(dq) @ fit.linear_coef(), fit.predict(dq), atol=1e-12)
+    np.testing.assert_allclose(fit.predict(dq), truth.predict(dq), atol=0.05)
+    fit.set_linear(fit.linear_coef() * 1.5)  # a joint refit keeps one level
+    assert fit.coef_[5] == fit.coef_[6]
+    again = FrictionLayer.from_dict(FrictionLayer(model="seed_shared").fit(dq[:, None], F[:, None]).to_dict())
+    back = again.models_[0]
+    assert isinstance(back, SharedSeedFriction) and back.shared_ and len(back.linear_coef()) == 6
+    symbols = [f"c{k}" for k in range(7)]  # the C export adds the columns as it merges them
+    assert back.merged(symbols) == ["c0", "c1", "c2", "c3", "c4", "c5c6"]
+    # different static levels: one level between them, the seed model takes both
+    two = with_coef(SeedFriction(), [1.0, 0.8, 0.5, 0.2, 0.05, 1.9, 1.1, 0.08])
+    F2 = two.predict(dq) + 0.02 * rng.normal(size=dq.size)
+    shared = SharedSeedFriction().fit(dq, F2)
+    assert 1.1 < shared.coef_[5] == shared.coef_[6] < 1.9
+    np.testing.assert_allclose(SeedFriction().fit(dq, F2).coef_[5:7], [1.9, 1.1], rtol=0.05)
+
+
+def test_a_shared_static_level_past_its_cap_is_held_at_the_coulomb_levels(rng) -> None:
+    """The burst of a reversal's timing error (Coulomb and viscous friction, no stiction): the shared level
+    takes it past the cap, and the static levels are held at their Coulomb levels, as the seed model's are;
+    the model predicts a slow motion as the truth does, where the free level is several Coulomb levels off."""
+    from dynid.identify.friction_models import SharedSeedFriction
+
+    dq = velocities(rng)
+    burst = np.where((np.abs(dq) < 0.004) & (dq < 0), -6.0, 0.0)
+    F = 1.0 * np.sign(dq) + 0.5 * dq + burst + 0.02 * rng.normal(size=dq.size)
+    free = SharedSeedFriction()
+    free.static_ratio = np.inf
+    free.fit(dq, F)
+    assert free.shared_ and free.coef_[5] > 3 * free.coef_[0]
+    fit = SharedSeedFriction().fit(dq, F)
+    assert not fit.shared_ and fit.tied_ == (True, True) and np.array_equal(fit.coef_[5:7], fit.coef_[:2])
+    assert len(fit.linear_coef()) == len(fit.basis(dq[:5]).T) == 5
+    np.testing.assert_allclose(fit.basis(dq) @ fit.linear_coef(), fit.predict(dq), atol=1e-12)
+    slow = np.linspace(-0.05, 0.05, 201)
+    truth = np.sign(slow) + 0.5 * slow
+    assert np.max(np.abs(fit.predict(slow) - truth)) < 1.1 and np.max(np.abs(free.predict(slow) - truth)) > 3
+    back = FrictionLayer.from_dict(FrictionLayer(model="seed_shared").fit(dq[:, None], F[:, None]).to_dict())
+    assert not back.models_[0].shared_ and back.models_[0].tied_ == (True, True)
+
+
 def test_the_threshold_search_stops_where_its_cost_is_flat_and_not_before_a_sharp_minimum() -> None:
     """A measured cost is flat near its minimum: the golden section stops at a 0.5 % bracket. A
     noise-free cost has a sharp minimum: it is searched its 20 steps and lands on it."""

@@ -84,7 +84,7 @@ def toy_data(ur5):
 
 # ---------------------------------------------------------------------------- the registries
 def test_builtin_entries_are_classes_of_the_base_under_their_own_names() -> None:
-    assert FRICTION_MODELS.names() == ("none", "linear", "seed", "stribeck", "sigmoid")
+    assert FRICTION_MODELS.names() == ("none", "linear", "seed", "seed_shared", "stribeck", "sigmoid")
     for name in FRICTION_MODELS:
         cls = FRICTION_MODELS[name]
         assert issubclass(cls, FrictionModel) and cls.name == name
