@@ -35,6 +35,12 @@ seed friction's gain on the halves says little about another motion (5 of 10 one
 each with the seed friction chosen; irls + linear friction would have been within 1.06 on 9 of 10, but 1.55 on
 UR3 b, where the seed friction is right).  Two excitations: 3 of 5 within 1.05 (UR3 b2 1.25: ols + seed chosen
 on the runs, 0.95 there on joint 3).
+
+With one static level for both directions on a recording of one motion (``seed_shared``, the same install):
+a / b / b2 UR10 0.99 / 0.74 / 0.74, UR3 0.95 / 0.97 / 1.25, xArm 7 0.95 / 1.57 / 1.03, Z1 0.99 / 1.16 / 1.02,
+double pendulum 0.98 / 1.16 / 0.60: 7 of 10 one-excitation cases within 1.05 (5 before); xArm 7 b worse
+(1.39 -> 1.57: its Coulomb levels took the asymmetry the static levels had held), Z1 b worse (1.08 -> 1.16,
+the mixture on joint 4); masses x0.97-1.12 but Z1 b2 x1.48.
 """
 
 from __future__ import annotations
