@@ -135,7 +135,7 @@ def read_dataset(path: str | os.PathLike[str], n_joints: int | None = None, *, r
         data = load_dataset(path, n_joints, **kwargs)
     if robot is not None and data.n == robot.n:
         source = Path(path).name
-        other = simulated_on(robot, data, joints=True)
+        other = simulated_on(robot, data)
         if other is not None:  # identify, diagnose and export read it as the robot's own otherwise
             raise UsageError(
                 f"--{option} {source} was simulated on '{other}' (its {source}.truth.json says so), not on "

@@ -92,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
     heldout = None
     if args.heldout is not None:
         heldout = read_dataset(
-            args.heldout, degrees=args.degrees, topic=args.topic, joint_names=model.robot.joint_names
+            args.heldout, degrees=args.degrees, topic=args.topic, robot=model.robot, option="heldout"
         )
         check_data_fits_model(model, heldout, model_path=args.model, data_option="heldout")
     say(f"writing the {args.format.upper()} description and reloading it to check")

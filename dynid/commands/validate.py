@@ -19,7 +19,7 @@ from dynid.commands.common import (
     training_match,
     write_figures,
 )
-from dynid.exceptions import DataWarning
+from dynid.exceptions import DataWarning, IdentificationWarning
 
 __all__ = ["HELP", "add_arguments", "run"]
 
@@ -143,14 +143,19 @@ def run(args: argparse.Namespace) -> int:
     results = []
     for model, label, path in zip(models, labels, files, strict=True):
         say(f"predicting with {Path(path).name} and measuring the noise floor")
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            results.append(
-                validate(model, data, period=args.period, label=label, info={"model_file": Path(path).name})
-            )
-        for w in caught:  # with --compare, each model's warnings say which model they are about
-            text = f"{Path(path).name}: {w.message}" if len(files) > 1 else str(w.message)
-            warnings.warn(text, w.category, stacklevel=2)
+        caught: list[warnings.WarningMessage] = []
+        try:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                results.append(
+                    validate(model, data, period=args.period, label=label, info={"model_file": Path(path).name})
+                )
+        finally:  # said even when the validation then fails
+            for w in caught:  # with --compare, a model's own warnings say which model they are about
+                if len(files) > 1 and issubclass(w.category, IdentificationWarning):
+                    warnings.warn(f"{Path(path).name}: {w.message}", w.category, stacklevel=2)
+                else:
+                    warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     rows = compare(results)
     first = results[0]
     figures = {

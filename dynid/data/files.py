@@ -696,9 +696,14 @@ def truth_sidecar(data: Dataset) -> dict[str, Any] | None:
     return doc if isinstance(doc, dict) else None
 
 
-def simulated_on(robot: Any, data: Dataset, *, joints: bool = False) -> str | None:
-    """The robot a simulated dataset's sidecar (:func:`truth_sidecar`) names when it is not ``robot`` (by both
-    its description's source and its name), else None (no sidecar, or the same robot).
+def simulated_on(robot: Any, data: Dataset) -> str | None:
+    """The robot a simulated dataset's sidecar (:func:`truth_sidecar`) names when it is not ``robot``, else
+    None (no sidecar, or the same robot).
+
+    Another robot: the sidecar's description differs by its source and its name, and by its joint names
+    or its nominal bodies (``params.nominal``). A copy of the description under another file and robot
+    name (``arm.urdf``, the UR5's) is the same robot; a UR10 for data simulated on a UR5 (the same joint
+    names) or a Kinova's data for an SO-101 are not.
 
     Parameters
     ----------
@@ -706,10 +711,6 @@ def simulated_on(robot: Any, data: Dataset, *, joints: bool = False) -> str | No
         The robot the data are given for.
     data : Dataset
         The data, read from a file (``meta["source"]``).
-    joints : bool
-        Also require other joint names (when the sidecar lists them): a copy of the description under
-        another file and robot name (``arm.urdf``, the UR5's) is then the same robot, and an arm of another
-        family (a Kinova's data for an SO-101) is not.
 
     Returns
     -------
@@ -722,6 +723,14 @@ def simulated_on(robot: Any, data: Dataset, *, joints: bool = False) -> str | No
     if source is None or name is None or source == robot.source or name == robot.name:
         return None
     listed = side.get("joint_names")
-    if joints and isinstance(listed, list) and list(listed) == list(robot.joint_names):
+    params = side.get("params")
+    nominal = params.get("nominal") if isinstance(params, dict) else None
+    same_joints = not isinstance(listed, list) or list(listed) == list(robot.joint_names)
+    same_bodies = True
+    if isinstance(nominal, list):
+        mine = np.asarray(robot.params, dtype=np.float64).ravel()
+        theirs = np.asarray(nominal, dtype=np.float64).ravel()
+        same_bodies = theirs.shape == mine.shape and bool(np.allclose(theirs, mine, rtol=1e-6, atol=1e-9))
+    if same_joints and same_bodies:
         return None
     return str(name)

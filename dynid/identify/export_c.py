@@ -127,7 +127,7 @@ def _friction_basis(mdl: Any, v: ca.SX) -> list[tuple[str, ca.SX]] | None:
     if kind is LinearFriction:
         k = len(mdl.linear_coef())
         return list(zip(("fc", "fv", "fo")[:k], [ca.sign(v), v, ca.SX(1.0)][:k], strict=True))
-    if kind is SeedFriction:  # a static level held at its Coulomb level shares the Coulomb column
+    if issubclass(kind, SeedFriction):  # held or shared static levels share a column (merged)
         cols = mdl.merged(_seed(v, float(mdl.coef_[-1])))
         return list(zip((mdl.coef_names[k] for k in mdl._linear), cols, strict=True))
     if kind is StribeckFriction:
@@ -213,7 +213,7 @@ def _plan(model: IdentifiedModel) -> _Plan:
                 {
                     "what": f"layer-2 friction ({fric.model})",
                     "joints": list(range(1, n + 1)),
-                    "why": f"'{fric.model}' is not a built-in friction model (linear, seed, stribeck, sigmoid), "
+                    "why": f"'{fric.model}' is not a built-in friction model (linear, seed, seed_shared, stribeck, sigmoid), "
                     "so its form is not known to the C generator; add it to the C torque yourself (its "
                     "coefficients are in manifest.json's model.friction)",
                 }

@@ -397,13 +397,14 @@ class SharedSeedFriction(SeedFriction):
     reversals, and a recording that repeats one excitation reverses each joint at the same few
     configurations in every period: a level per direction then also takes the model's error at those
     configurations (gravity, for a shoulder), which another motion, reversing elsewhere, does not share.
-    On the unseen-arms benchmark's one-excitation runs (``benchmarks/unseen_arms_benchmark.py``) the seed
-    model's held-out RMS on its worst joint, against dynid's OLS with linear friction, went 1.25 -> 0.99 (Z1),
-    1.14 -> 0.86 (UR3), 1.08 -> 0.93 (Z1, Stribeck friction) and 1.54 -> 0.95 (an SO-101) with one shared level,
-    and 1.38 -> 1.57 on one (xArm 7, Stribeck friction); the gains where the seed friction is right (UR10,
-    UR3 with Stribeck friction) stayed.  On the TX40's recording, whose halves are two motions, a shared
-    level predicted the held-out run 6-13 % worse on joints 2 and 4: where the reversals vary, the levels per
-    direction keep their meaning, and the seed model is used.
+    On the unseen-arms benchmark's one-excitation runs (``benchmarks/unseen_arms_benchmark.py``), the default's
+    worst joint against dynid's OLS with linear friction went 1.15 -> 0.95 (UR3), 1.24 -> 0.99 (Z1) and 0.99 ->
+    0.95 (xArm 7), and 1.39 -> 1.57 (xArm 7, Stribeck friction: its Coulomb levels took the asymmetry) and
+    1.08 -> 1.16 (Z1, Stribeck friction: the mixture on joint 4); the gains where the seed friction is right
+    (UR10 0.74, UR3 0.97 with Stribeck friction) stayed: 7 of 10 cases within 1.05 instead of 5.  On the
+    TX40's recording, whose halves are two motions, a shared level predicted the held-out run 6-13 % worse on
+    joints 2 and 4: where the reversals vary, the levels per direction keep their meaning, and the seed model
+    is used.
     """
 
     name = "seed_shared"
@@ -463,18 +464,25 @@ class SharedSeedFriction(SeedFriction):
         c = self.coef_  # kc+, kc-, kv1, kv2, kv3, ks, lam
         self.coef_ = np.concatenate([c[:6], c[5:6], c[6:]])
         c = self.coef_
-        held = tuple(bool(c[st] > self.static_ratio * c[k] + 1e-12) for k, st in _STATIC_PAIRS)
+        held = [bool(c[st] > self.static_ratio * c[k] + 1e-12) for k, st in _STATIC_PAIRS]
         if not any(held):
             return
-        # a direction whose shared level passes its cap is held at its Coulomb level; the other keeps its own
+        # a direction whose shared level passes its cap is held at its Coulomb level; the other keeps a level
+        # of its own, held too if that passes its cap (refitted until no level is past it)
         self._shared = False
-        self._tied = held
         A = _seed_columns(dq, c[-1])
         if sampling is not None:
             A = sampling.full(A)
-        merged = np.column_stack(self.merged(A.T))
-        coef, rss = bounded_lsq(merged, F, (0.0,) * merged.shape[1])
-        self.set_linear(coef)
+        while True:
+            self._tied = (held[0], held[1])
+            merged = np.column_stack(self.merged(A.T))
+            coef, rss = bounded_lsq(merged, F, (0.0,) * merged.shape[1])
+            self.set_linear(coef)
+            c = self.coef_
+            more = [h or bool(c[st] > self.static_ratio * c[k] + 1e-12) for (k, st), h in zip(_STATIC_PAIRS, held, strict=True)]
+            if more == held:
+                break
+            held = more
         if sampling is not None:
             self._filtered_basis = merged
         self._set(self.coef_, rss, len(F))

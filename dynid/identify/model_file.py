@@ -51,7 +51,8 @@ version-1 to -3 files still load."""
 def _file_version(model: IdentifiedModel) -> int:
     """The lowest version that holds the model (see :data:`VERSION`)."""
     terms = getattr(model, "effects", None) or ()
-    return VERSION if any(t.hyper.get("mix", 1.0) != 1.0 for t in terms) else 3
+    shared = getattr(getattr(model, "friction", None), "model", None) == "seed_shared"  # a model of version 4
+    return VERSION if shared or any(t.hyper.get("mix", 1.0) != 1.0 for t in terms) else 3
 
 
 def _recorded_robot(info_robot: dict[str, Any], path: Path, name: str, load_robot) -> Any:
@@ -326,8 +327,13 @@ def _read_arrays(arrays_path: Path, name: str, doc: dict[str, Any], renamed: Pat
         raise ModelFileError(
             f"{name} keeps its arrays in {arrays_path.name}, which is missing"
             + (f", and {renamed.name} beside it is another model's arrays (checksum differs)" if there else "")
-            + f"; copy {arrays_path.name} beside {name} (or as {Path(name).stem}.npz, if the pair was renamed) "
-            "or identify again"
+            + f"; copy {arrays_path.name} beside {name}"
+            + (
+                f" (or as {renamed.name}, if the pair was renamed)"
+                if renamed is not None and renamed != arrays_path
+                else ""
+            )
+            + " or identify again"
         )
     raise ModelFileError(
         f"{arrays_path.name} is not the arrays file {name} was written with (checksum differs){also}: the pair "

@@ -188,7 +188,7 @@ class PipelineChoice:
             if self.one_motion and self.friction == "seed_shared"
             else ""
         )
-        return self.reason + shared + (ONE_MOTION.get(self.folds, "") if self.one_motion else "")
+        return self.reason + (ONE_MOTION.get(self.folds, "") if self.one_motion else "") + shared
 
     @property
     def effects(self) -> str | None:

@@ -172,7 +172,7 @@ def model_exports(ur5, model_data, tmp_path_factory):
     from dynid.identify.export_c import export_model_c
 
     out = {}
-    for friction in ("linear", "seed", "stribeck", "sigmoid"):
+    for friction in ("linear", "seed", "seed_shared", "stribeck", "sigmoid"):
         model = _identified(ur5, model_data, friction=friction)
         folder = tmp_path_factory.mktemp("model_c") / friction
         out[friction] = (model, export_model_c(model, folder, model_file=f"{friction}.json", progress=None))
@@ -189,7 +189,7 @@ def _states(robot, rng, m=300):
     return q, dq, ddq
 
 
-@pytest.mark.parametrize("friction", ["linear", "seed", "stribeck", "sigmoid"])
+@pytest.mark.parametrize("friction", ["linear", "seed", "seed_shared", "stribeck", "sigmoid"])
 def test_the_c_prediction_is_the_models(model_exports, friction, rng):
     model, result = model_exports[friction]
     assert result.not_carried == []

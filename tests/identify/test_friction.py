@@ -219,6 +219,22 @@ def test_a_shared_static_level_past_its_cap_is_held_at_the_coulomb_levels(rng) -
     assert not back.models_[0].shared_ and back.models_[0].tied_ == (True, True)
 
 
+def test_after_a_split_no_static_level_is_left_past_its_cap(rng) -> None:
+    """A shared level past the cap on one side only: that side is held, and the other side's own level,
+    refitted, is held too if it passes its cap (a burst of timing error on the side of a small Coulomb
+    level: the seed model holds it there, and so must seed_shared)."""
+    from dynid.identify.friction_models import SharedSeedFriction
+
+    dq = velocities(rng)
+    burst = np.where((np.abs(dq) < 0.004) & (dq > 0), 3.0, 0.0)
+    F = np.where(dq > 0, 1.0, -0.2) + 0.5 * dq + burst + 0.02 * rng.normal(size=dq.size)
+    for model in (SeedFriction(), SharedSeedFriction()):
+        fit = model.fit(dq, F)
+        c = fit.coef_
+        assert c[5] <= fit.static_ratio * c[0] + 1e-12 and c[6] <= fit.static_ratio * c[1] + 1e-12, (model, c)
+        np.testing.assert_allclose(fit.basis(dq) @ fit.linear_coef(), fit.predict(dq), atol=1e-12)
+
+
 def test_the_threshold_search_stops_where_its_cost_is_flat_and_not_before_a_sharp_minimum() -> None:
     """A measured cost is flat near its minimum: the golden section stops at a 0.5 % bracket. A
     noise-free cost has a sharp minimum: it is searched its 20 steps and lands on it."""

@@ -18,6 +18,7 @@ from dynid.data.files import load_dataset, save_dataset
 from dynid.data.preparation import Preprocessing, prepare
 from dynid.exceptions import DataError, IdentificationWarning, ModelFileError, ShapeError, UsageError
 from dynid.identify.model import load_model
+from dynid.symbolic.robot import load_robot
 from dynid.validation import plots, report
 from dynid.validation import validate as validate_module
 from dynid.validation.metrics import torque_metrics
@@ -272,32 +273,53 @@ def test_simulated_data_of_another_robot_is_refused_by_its_sidecar(case, full, t
     data = tmp_path / "V10.csv"
     shutil.copy(case.heldout, data)
     side = json.loads(Path(str(case.heldout) + ".truth.json").read_text())
-    side.update(robot="ur10", source="ur10")
+    side.update(robot="ur10", source="ur10")  # the same joint names as the UR5's, other bodies
+    side["params"]["nominal"] = load_robot("ur10").params.tolist()
     Path(str(data) + ".truth.json").write_text(json.dumps(side))
     with pytest.raises(ModelFileError, match=r"but V10.csv was simulated on 'ur10'"):
         validate(full, load_dataset(data), info={"model_file": "M.json"})
 
 
-@pytest.mark.parametrize("command", ["identify", "validate"])
-def test_commands_refuse_data_simulated_on_another_robot(case, tmp_path, capsys, command):
-    """identify took a recording its sidecar says was simulated on another arm of as many joints (other joint
-    names) and fitted it (validate refused it): every command that reads data for a robot now refuses it, in
-    one sentence."""
+@pytest.mark.parametrize("other", ["kinova", "ur10"])
+@pytest.mark.parametrize("command", ["identify", "validate", "export"])
+def test_commands_refuse_data_simulated_on_another_robot(case, tmp_path, capsys, command, other):
+    """identify took a recording its sidecar says was simulated on another arm of as many joints and fitted
+    it (validate refused it): every command that reads data for a robot now refuses it, in one sentence, by
+    one rule: another description (source and name) with other joint names (a Kinova's) or other nominal
+    bodies (a UR10's, whose joint names are the UR5's)."""
     data = tmp_path / "V10.csv"
     shutil.copy(case.heldout, data)
     side = json.loads(Path(str(case.heldout) + ".truth.json").read_text())
-    side.update(robot="kinova", source="kinova.urdf", joint_names=[f"j2s6s200_joint_{k}" for k in range(1, 7)])
+    if other == "kinova":
+        side.update(robot="kinova", source="kinova.urdf", joint_names=[f"j2s6s200_joint_{k}" for k in range(1, 7)])
+    else:
+        side.update(robot="ur10", source="ur10")
+        side["params"]["nominal"] = load_robot("ur10").params.tolist()
     Path(str(data) + ".truth.json").write_text(json.dumps(side))
-    out = tmp_path / "M.json"
-    argv = (
-        ["identify", "--robot", "ur5", "--data", str(data), "--out", str(out), "--method", "ols"]
-        if command == "identify"
-        else ["validate", "--model", str(case.full), "--data", str(data)]
-    )
+    out = tmp_path / ("M.urdf" if command == "export" else "M.json")
+    option = "heldout" if command == "export" else "data"
+    argv = {
+        "identify": ["identify", "--robot", "ur5", "--data", str(data), "--out", str(out), "--method", "ols"],
+        "validate": ["validate", "--model", str(case.full), "--data", str(data)],
+        "export": ["export", "--model", str(case.full), "--format", "urdf", "--heldout", str(data), "--out", str(out)],
+    }[command]
     assert main(argv) == 2
     err = capsys.readouterr().err
-    assert "--data V10.csv was simulated on 'kinova' (its V10.csv.truth.json says so), not on 'ur5'" in err
+    assert f"--{option} V10.csv was simulated on '{other}' (its V10.csv.truth.json says so), not on 'ur5'" in err
     assert "Traceback" not in err and not out.exists()
+
+
+def test_a_copy_of_the_description_keeps_its_simulated_data(case, tmp_path):
+    """The same bodies and joint names under another file and robot name: the same robot, its data read."""
+    from dynid.data.files import simulated_on
+    from dynid.symbolic.robot import example_robot_data_dir
+
+    copy = tmp_path / "arm.urdf"
+    shutil.copy(example_robot_data_dir() / "ur_description" / "urdf" / "ur5_robot.urdf", copy)
+    robot = load_robot(copy)
+    assert robot.name == "arm" and robot.source != "ur5"
+    assert simulated_on(robot, load_dataset(case.heldout)) is None
+    assert simulated_on(load_robot("ur10"), load_dataset(case.heldout)) == "ur5"
 
 
 def test_too_short_data_is_refused(full, heldout):
