@@ -8,6 +8,7 @@
 from __future__ import annotations
 
 import math
+import os
 import tomllib
 from collections import Counter
 from pathlib import Path
@@ -160,6 +161,45 @@ def _table_floats(path: Path, label: str, value, size: int) -> np.ndarray:
     return out
 
 
+def _snapped_angles(alpha, theta, path: Path):
+    """The table's alpha and theta with rounded right angles snapped, as a URDF's placements are.
+
+    A table written from a datasheet gives pi/2 as 1.5708: the axes are then 3.7e-6 rad off parallel or
+    perpendicular, and the base parameters take near-dependent combinations (``Ixy2R = Ixy2 - 3.67e-06*Ixy3``)
+    whose values no recording determines.  An angle within :data:`~dynid.symbolic.urdf.SNAP_RAD` of a multiple
+    of pi/2 is snapped to it (with the URDF loader's warning, naming the joints), one closer than 1e-7 rad is
+    exact as written and left as it is.
+    """
+    import warnings
+
+    from dynid.exceptions import RobotModelWarning
+    from dynid.symbolic.urdf import _EXACT_RAD, _QUIET_SNAP_RAD, SNAP_RAD
+
+    out, moved, worst = [], set(), 0.0
+    for values in (alpha, theta):
+        snapped = []
+        for i, x in enumerate(values):
+            right = (math.pi / 2) * round(float(x) / (math.pi / 2))
+            off = abs(float(x) - right)
+            if _EXACT_RAD < off <= SNAP_RAD:
+                snapped.append(right)
+                moved.add(i + 1)
+                worst = max(worst, off)
+            else:
+                snapped.append(float(x))
+        out.append(np.asarray(snapped, dtype=np.float64))
+    if worst > _QUIET_SNAP_RAD:
+        warnings.warn(
+            f"the robot description '{os.path.normpath(os.path.abspath(path))}' places joint(s) "
+            f"{', '.join(f'joint_{i}' for i in sorted(moved))} within {SNAP_RAD:g} rad of a right angle (rounded "
+            f"values, as datasheets write them; largest change {worst:.2g} rad); dynid snapped them, so that the "
+            "base parameters are those of the exact arm. Write the exact values in the file to silence this.",
+            RobotModelWarning,
+            stacklevel=4,
+        )
+    return out[0], out[1]
+
+
 def load_mdh(path: Path, *, name: str) -> RobotModel:
     """A modified-DH TOML table (module docstring; ``name`` unless the table names the robot); inertias unchecked."""
     if not path.is_file():
@@ -186,6 +226,7 @@ def load_mdh(path: Path, *, name: str) -> RobotModel:
             "column, for an arm with at least one joint."
         )
     dh = {k: _column(table, "joints", k, n, path) for k in _DH_COLUMNS}
+    dh["alpha"], dh["theta"] = _snapped_angles(dh["alpha"], dh["theta"], path)
     kinds = table["joints"].get("type", ["R"] * n)
     if not isinstance(kinds, list) or len(kinds) != n or any(k not in ("R", "P") for k in kinds):
         raise RobotModelError(

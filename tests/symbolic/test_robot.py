@@ -162,6 +162,26 @@ def test_panda_mdh_table_matches_the_urdf(tmp_path, panda, rng):
     _rnea_agree(load_robot(table), panda, rng, armature=False)
 
 
+def test_a_table_with_rounded_right_angles_is_the_exact_arm(tmp_path):
+    """alpha written as 1.5708 (a datasheet's rounding) is snapped, with a warning, to the exact arm's
+    placements: the same joints and the same base parameters (without the snap, Ixy2R = Ixy2 - 3.67e-06*Ixy3)."""
+    from dynid.exceptions import RobotModelWarning
+    from dynid.symbolic import base_parameters, robot_functions
+
+    exact_path = DATA / "rrpr_mdh.toml"
+    text = exact_path.read_text()
+    rounded = text.replace("-1.5707963267948966", "-1.5708").replace(" 1.5707963267948966", " 1.5708")
+    assert rounded != text
+    path = tmp_path / "rrpr_rounded.toml"
+    path.write_text(rounded)
+    with pytest.warns(RobotModelWarning, match=r"places joint\(s\) joint_2, joint_3 within 0.0001 rad of a right angle"):
+        robot = load_robot(path)
+    exact = load_robot(exact_path)
+    for a, b in zip(robot.joints, exact.joints, strict=True):
+        assert np.array_equal(a.rotation, b.rotation) and np.array_equal(a.translation, b.translation)
+    assert base_parameters(robot_functions(robot)).expressions == base_parameters(robot_functions(exact)).expressions
+
+
 def test_mdh_placement_is_craigs_convention():
     rot, trans = mdh_placement(alpha=0.3, a=0.2, d=0.5, theta=0.4)
     c, s = math.cos(0.3), math.sin(0.3)
