@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import errno
 import importlib
+import os
 import re
 import signal
 import sys
@@ -144,6 +145,43 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class _ReaderMayStop:
+    """stdout for the console command: a reader that stops (``dynid validate ... | head -1``) ends the
+    printing, not the command, which writes its files to the end (a ``BrokenPipeError`` on the second line
+    had stopped validate before its report, with an error about the system refusing an operation)."""
+
+    def __init__(self, stream) -> None:
+        self._stream = stream
+        self._gone = False
+
+    def _stopped(self) -> None:
+        self._gone = True
+        try:  # the interpreter flushes stdout at exit: point the descriptor at nothing
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, self._stream.fileno())
+            os.close(devnull)
+        except (OSError, ValueError):
+            pass
+
+    def write(self, text: str) -> int:
+        if not self._gone:
+            try:
+                return self._stream.write(text)
+            except BrokenPipeError:
+                self._stopped()
+        return len(text)
+
+    def flush(self) -> None:
+        if not self._gone:
+            try:
+                self._stream.flush()
+            except BrokenPipeError:
+                self._stopped()
+
+    def __getattr__(self, name: str):
+        return getattr(self._stream, name)
+
+
 def _one_line_warnings(command: str, fallback):
     """A ``warnings.showwarning`` that prints dynid's own warnings as one line each, once per message.
 
@@ -189,6 +227,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         with warnings.catch_warnings():
             if argv is None:  # the console command (tests calling main(argv) keep pytest's warning capture)
                 warnings.showwarning = _one_line_warnings(args.command, warnings.showwarning)
+                sys.stdout = _ReaderMayStop(sys.stdout)
             _check_matplotlib_backend()
             with _progress.session(args.command, quiet=bool(getattr(args, "quiet", False))):
                 return int(args._module.run(args) or 0)

@@ -322,6 +322,27 @@ def test_a_copy_of_the_description_keeps_its_simulated_data(case, tmp_path):
     assert simulated_on(load_robot("ur10"), load_dataset(case.heldout)) == "ur5"
 
 
+def test_a_reader_that_stops_does_not_stop_the_command(case, tmp_path):
+    """dynid validate ... | head -1: the reader goes, the command writes its report to the end and exits 0
+    (a BrokenPipeError on the second line had ended it with 'the system refused an operation')."""
+    import os
+    import subprocess
+    import sys
+
+    report = tmp_path / "R.html"
+    r, w = os.pipe()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "dynid", "validate", "--model", str(case.full), "--data", str(case.heldout),
+         "--report", str(report), "--quiet"],
+        stdout=w, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    os.close(w)
+    os.close(r)  # the reader is gone before the first line
+    _, err = proc.communicate(timeout=600)
+    assert proc.returncode == 0, err
+    assert "error" not in err and report.is_file() and report.stat().st_size > 10_000
+
+
 def test_too_short_data_is_refused(full, heldout):
     short = heldout.select_rows(np.arange(100))
     with pytest.raises(
