@@ -477,7 +477,7 @@ BAD_ROBOTS: list[tuple[str, Callable[[Path], str], str]] = [
     ),
     (
         "short_alpha",
-        lambda f: _toml(f, "alpha = [0.0, -1.5708, 1.5708]", "alpha = [0.0, -1.5708]"),
+        lambda f: _toml(f, "alpha = [0.0, -1.5707963267948966, 1.5707963267948966]", "alpha = [0.0, -1.5707963267948966]"),
         r"column 'joints\.alpha' of the table '.*bad\.toml' has 2 values; the table has 3 joints",
     ),
     (
@@ -505,7 +505,7 @@ BAD_ROBOTS: list[tuple[str, Callable[[Path], str], str]] = [
     ("bad_toml", lambda f: _toml(f, "[links]", "[links"), r"is not valid TOML"),
     (
         "alpha_in_degrees",
-        lambda f: _toml(f, "alpha = [0.0, -1.5708, 1.5708]", "alpha = [0.0, -90.0, 90.0]"),
+        lambda f: _toml(f, "alpha = [0.0, -1.5707963267948966, 1.5707963267948966]", "alpha = [0.0, -90.0, 90.0]"),
         r"column 'joints\.alpha' of the table '.*bad\.toml' holds -90 for joint 2, beyond the 6\.28319 rad of any "
         r"arm; give radians \(the angles look like degrees\)",
     ),

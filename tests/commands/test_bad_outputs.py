@@ -26,7 +26,7 @@ from dynid.cli import main
 
 ARM_TOML = """name = "arm"
 [joints]
-alpha = [0.0, -1.5708]
+alpha = [0.0, -1.5707963267948966]
 a = [0.0, 0.3]
 d = [0.3, 0.0]
 theta = [0.0, 0.0]
