@@ -586,6 +586,11 @@ def load_dataset(
             f"{path} is a folder; give the path of a .csv or .npz dataset file (a ROS 2 rosbag2 folder holds "
             "a metadata.yaml)"
         )
+    if path.suffix.lower() not in _EXTENSIONS and not path.exists():  # a mistyped name, a rosbag2 folder not there
+        raise DataError(
+            f"no file or folder at {path}; give a dataset file (.csv, .npz) or a ROS 2 recording (.mcap, or a "
+            "rosbag2 folder) that exists"
+        )
     suffix = _check_extension(path)
     if robot is not None:
         n_joints = robot.n if n_joints is None else n_joints

@@ -296,6 +296,9 @@ def test_text_in_numbers(tmp_path: Path) -> None:
 def test_missing_file_and_unknown_extension(rng: np.random.Generator, tmp_path: Path) -> None:
     with pytest.raises(DataError, match="no dataset file at"):
         load_dataset(tmp_path / "absent.csv")
+    # a rosbag2 folder's name mistyped: not there, not an 'unknown extension'
+    with pytest.raises(DataError, match=r"no file or folder at .*run_2026_11_23; give a dataset file"):
+        load_dataset(tmp_path / "run_2026_11_23")
     (tmp_path / "data.txt").write_text("t,q_1,tau_1\n0,0,0\n1,0,0\n")
     with pytest.raises(DataError, match=r"data\.txt: unknown extension '\.txt'; a dataset file ends in"):
         load_dataset(tmp_path / "data.txt")
