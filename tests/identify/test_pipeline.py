@@ -218,7 +218,7 @@ def test_two_excitations_show_a_pipeline_that_only_fits_one_motion(tmp_path, cap
     assert main(["diagnose", "--model", model, "--data", *both, "--heldout", str(tmp_path / "H.csv"),
                  "--report", str(report), "--json", str(found), "--quiet"]) == 0  # fmt: skip
     assert f"{both[0]}, {both[1]}" in report.read_text()
-    settle = json.loads(found.read_text())["settle"]
+    settle = json.loads(found.read_text()).get("settle")  # only when a verdict is left to settle
     assert settle is None or f"--data {both[0]} {both[1]} " in settle["commands"][-1]
 
 
@@ -235,7 +235,9 @@ def test_nonlinear_friction_makes_the_papers_pipeline_the_choice(ur5):
     run = dynid.simulate(ur5, traj, truth=truth, seed=1, duration=2 * traj.period).to_dataset()
     model = identify(ur5, run)
     pipe = model.info["pipeline"]
-    assert pipe["friction"] == "seed", pipe["reason"]
+    # two periods of one excitation: the paper's friction with one static level (seed_shared, said so)
+    assert pipe["one_motion"] and pipe["friction"] == "seed_shared", pipe["reason"]
+    assert "one static level for both directions" in pipe["reason"]
     cv = np.asarray(pipe["cv_rms"])
     chosen = [tuple(c) for c in pipe["candidates"]].index((pipe["method"], pipe["friction"], pipe["gmm"]))
     assert np.mean(cv[chosen] / cv[0]) < 0.9
