@@ -123,7 +123,12 @@ def run(args: argparse.Namespace) -> int:
     u = p.unidentifiable
     print(
         f"  {u['dimension']} directions the data cannot see pulled toward the template"
-        + (f" (never seen: {', '.join(u['unseen'])})" if u["unseen"] else "")
+        + (
+            f" ({len(u['unseen'])} parameters never seen at all: {', '.join(u['unseen'])}; the other "
+            f"{u['dimension'] - len(u['unseen'])} are combinations of parameters the data see only together)"
+            if u["unseen"]
+            else ""
+        )
     )
     print(f"{'joint':>5} {'mass kg':>10} {'armature':>10} {'damping':>10} {'frictionloss':>12}")
     for row in figures["joints"]:

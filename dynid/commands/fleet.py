@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import os
 
 from dynid._extras import install_hint
 from dynid.commands.common import (
@@ -155,6 +156,6 @@ def run(args: argparse.Namespace) -> int:
     )
     result.write(args.out)
     print(result.summary())
-    print(f"wrote {args.out}/: fleet.parquet, fleet.csv, drift.csv, report.html, summary.json")
+    print(f"wrote {os.path.join(args.out, '')}: fleet.parquet, fleet.csv, drift.csv, report.html, summary.json")
     write_figures(args.json, result.figures())
     return 0

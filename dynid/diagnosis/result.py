@@ -480,7 +480,8 @@ def _sensitivity_text(d: Diagnosis) -> list[str]:
         f"{d.joint_names[j]} ({tested[j]:.2g} noise variances of held-out error, {allow[j]:.2g} allowed)" for j in near
     )
     return [
-        f"At this run's sensitivity \"none\" leaves room for a small effect: {names} stand above the floor but "
+        f"At this run's sensitivity \"none\" leaves room for a small effect: {names} "
+        f"{'stands' if len(near) == 1 else 'stand'} above the floor but "
         "within what the tests allow for (the floor's own error, the refit's misfit, quantised angles), and an "
         "effect that small is not told apart from them.  More held-out periods (a better-measured floor) "
         "narrow the allowance."
