@@ -31,7 +31,7 @@ from typing import TextIO
 
 __all__ = ["HEARTBEAT_S", "Session", "active", "advance", "say", "session", "stage", "touch"]
 
-HEARTBEAT_S = 4.0
+HEARTBEAT_S = 3.0  # under load a beat slips by 1-2 s (a busy core, a call holding the interpreter): 5 s at most
 """Longest silence (s) inside a session before the heartbeat prints the current stage."""
 SHOW_AFTER_S = 1.0
 """A stage or a said line is printed once it has lasted this long (s)."""
