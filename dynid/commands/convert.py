@@ -27,6 +27,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "or --root)",
     )
     source.add_argument("--root", metavar="DIR", help="folder holding the named recordings")
+    source.add_argument(
+        "--run",
+        type=int,
+        metavar="N",
+        help="the run of a recording that holds several (kuka_lwr4_flobaroid: 1, 2 or 3; default 1)",
+    )
     columns = parser.add_argument_group("columns of --data (names, or one pattern with *)")
     columns.add_argument("--time", default="t", metavar="COL", help="time column (default t)")
     columns.add_argument(
@@ -57,6 +63,8 @@ def run(args: argparse.Namespace) -> int:
 
     if (args.data is None) == (args.recording is None):
         raise UsageError("give --data RAW.csv (with --q and --tau) or --recording NAME, one of them")
+    if args.run is not None and args.recording is None:
+        raise UsageError("--run picks a run of a named recording; give --recording NAME with it")
     check_outputs(
         [output("out", args.out, (".csv", ".npz")), output("json", args.json, (".json",))],
         {"data": args.data},
@@ -65,9 +73,20 @@ def run(args: argparse.Namespace) -> int:
         from dynid._progress import stage
         from dynid.data.adapters import load_recording
 
+        runs = {"kuka_lwr4_flobaroid": 3}.get(args.recording)
+        if args.run is not None and (runs is None or not 1 <= args.run <= runs):
+            raise UsageError(
+                f"--run {args.run}: the recording {args.recording} "
+                + (f"has runs 1 to {runs}; give one of them" if runs else "is one run; leave --run out")
+            )
         with stage(f"reading the recording {args.recording}"):
-            ds = load_recording(args.recording, args.root)
-        source = f"the recording {args.recording}"
+            if runs is not None:
+                from dynid.data.adapters import load_kuka_lwr4
+
+                ds = load_kuka_lwr4(args.root, run=args.run or 1)
+            else:
+                ds = load_recording(args.recording, args.root)
+        source = f"the recording {args.recording}" + (f", run {args.run or 1} of {runs}" if runs else "")
     else:
         if args.q is None or args.tau is None:
             raise UsageError(

@@ -141,3 +141,22 @@ def test_a_named_recording_is_converted(shared_data, tmp_path, capsys):
     )
     ds = load_dataset(tmp_path / "tx40.npz")
     assert ds.n == 6 and ds.m == 45000 and math.isclose(ds.duration, 9.0, rel_tol=1e-3)
+
+
+@pytest.mark.realdata
+def test_a_run_of_a_recording_of_several_is_converted(shared_data, tmp_path, capsys):
+    """The KUKA LWR4+ recording holds three runs: --run picks one (run 1 was written silently before); a
+    recording of one run refuses --run in one sentence."""
+    from dynid.data.adapters import load_kuka_lwr4
+
+    out = tmp_path / "k3.npz"
+    argv = ["convert", "--recording", "kuka_lwr4_flobaroid", "--root", str(shared_data), "--out", str(out)]
+    assert main([*argv, "--run", "3"]) == 0
+    assert "kuka_lwr4_flobaroid, run 3 of 3:" in capsys.readouterr().out
+    np.testing.assert_array_equal(load_dataset(out).q, load_kuka_lwr4(shared_data, run=3).q)
+    assert main([*argv[:-1], str(tmp_path / "k.npz"), "--run", "4"]) == 2
+    assert "--run 4: the recording kuka_lwr4_flobaroid has runs 1 to 3" in capsys.readouterr().err
+    assert main(["convert", "--recording", "tx40", "--root", str(shared_data), "--run", "2",
+                 "--out", str(tmp_path / "t.npz")]) == 2  # fmt: skip
+    assert "the recording tx40 is one run; leave --run out" in capsys.readouterr().err
+    assert not (tmp_path / "k.npz").exists() and not (tmp_path / "t.npz").exists()
