@@ -173,22 +173,19 @@ def _snapped_angles(alpha, theta, path: Path):
     import warnings
 
     from dynid.exceptions import RobotModelWarning
-    from dynid.symbolic.urdf import _EXACT_RAD, _QUIET_SNAP_RAD, SNAP_RAD
+    from dynid.symbolic.urdf import QUIET_SNAP_RAD, SNAP_RAD, snapped_angle
 
     out, moved, worst = [], set(), 0.0
     for values in (alpha, theta):
         snapped = []
         for i, x in enumerate(values):
-            right = (math.pi / 2) * round(float(x) / (math.pi / 2))
-            off = abs(float(x) - right)
-            if _EXACT_RAD < off <= SNAP_RAD:
-                snapped.append(right)
+            angle, off = snapped_angle(x)
+            snapped.append(angle)
+            if off > 0:
                 moved.add(i + 1)
                 worst = max(worst, off)
-            else:
-                snapped.append(float(x))
         out.append(np.asarray(snapped, dtype=np.float64))
-    if worst > _QUIET_SNAP_RAD:
+    if worst > QUIET_SNAP_RAD:
         warnings.warn(
             f"the robot description '{os.path.normpath(os.path.abspath(path))}' places joint(s) "
             f"{', '.join(f'joint_{i}' for i in sorted(moved))} within {SNAP_RAD:g} rad of a right angle (rounded "

@@ -24,7 +24,16 @@ import numpy as np
 from dynid.exceptions import RobotModelError, RobotModelWarning
 from dynid.symbolic.robot_model import DEFAULT_DDQ_MAX, Joint, RobotModel
 
-__all__ = ["CONTINUOUS_RANGE", "SNAP_M", "SNAP_RAD", "load_mjcf", "load_urdf", "pin_model_from_urdf"]
+__all__ = [
+    "CONTINUOUS_RANGE",
+    "QUIET_SNAP_RAD",
+    "SNAP_M",
+    "SNAP_RAD",
+    "load_mjcf",
+    "load_urdf",
+    "pin_model_from_urdf",
+    "snapped_angle",
+]
 
 _JOINT_TYPES = {
     "JointModelRX": "RX",
@@ -45,11 +54,32 @@ SNAP_RAD = 1e-4
 """A joint placement or axis within this angle (rad) of a right-angle orientation is snapped to it."""
 SNAP_M = 1e-6
 """A joint offset component below this length (m) is snapped to 0."""
-_QUIET_SNAP_RAD = 1e-6  # snaps smaller than this (pi/2 written as 1.5707963) need no warning
+QUIET_SNAP_RAD = 1e-6
+"""Snaps smaller than this (pi/2 written as 1.5707963) need no warning."""
 # Below these the value is exact as written (float noise of a file's 9 decimals, 5e-10 rad at most): left as it
 # is, so that a robot's key, and the model files identified on it, do not change
 _EXACT_RAD = 1e-7
 _EXACT_M = 1e-9
+
+
+def snapped_angle(value: float) -> tuple[float, float]:
+    """An angle (rad) and the change: snapped to the nearest multiple of pi/2 when within :data:`SNAP_RAD`
+    of it (a datasheet's 1.5708), else as given (float noise of an exact value, below 1e-7 rad, included).
+
+    Parameters
+    ----------
+    value : float
+        The angle as written.
+
+    Returns
+    -------
+    angle : float
+    change : float
+        ``|angle - value|`` (0 when left as given).
+    """
+    right = (math.pi / 2) * round(float(value) / (math.pi / 2))
+    off = abs(float(value) - right)
+    return (right, off) if _EXACT_RAD < off <= SNAP_RAD else (float(value), 0.0)
 
 
 def _snap_rotation(R: np.ndarray) -> tuple[np.ndarray, float]:
@@ -99,7 +129,7 @@ def _snapped(joints: list[Joint], source: str) -> list[Joint]:
             j = replace(j, rotation=R, axis=axis, translation=t)
         out.append(j)
     worst = max((a for _, a in moved), default=0.0)
-    if worst > _QUIET_SNAP_RAD:  # values written to 7 decimals or better are the exact ones, silently
+    if worst > QUIET_SNAP_RAD:  # values written to 7 decimals or better are the exact ones, silently
         if os.path.isfile(source):  # one path per file (a model and its --compare name it from two folders)
             source = os.path.normpath(os.path.abspath(source))
         warnings.warn(
