@@ -21,7 +21,7 @@ import pytest  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = Path(__file__).resolve().parent / "fixtures"
-SHARED_DATA = Path(os.environ.get("DYNID_SHARED_DATA", REPO.parent / "shared" / "data"))
+SHARED_DATA = Path(os.environ.get("DYNID_SHARED_DATA") or REPO.parent / "shared" / "data")  # set but empty: unset, as the library reads it
 
 DH_TABLE = """\
 name = "my_arm"
