@@ -396,8 +396,10 @@ def _print_design(args: argparse.Namespace, result, paths: list[Path], csv: Path
     import numpy as np
 
     ratio = result.cond / result.baseline_cond
+    k = len(result.trajectories)
     print(
-        f"cond {result.cond:.4g} (best of {args.baseline} random feasible: {result.baseline_cond:.4g}, ratio "
+        f"cond {result.cond:.4g}{f' (the {k} trajectories stacked)' if k > 1 else ''} (best of {args.baseline} "
+        f"random feasible: {result.baseline_cond:.4g}, ratio "
         f"{ratio:.2f}); {args.criterion} objective {result.objective:.4g}; feasible: {result.feasible}; "
         f"{result.seconds:.1f} s"
     )
