@@ -288,8 +288,11 @@ def run(args: argparse.Namespace) -> int:
     for note in figures["notes"]:
         print(f"  note: {note}")
     print(f"{'name':<8} {'value':>13} {'std %':>9}  expression")
+    held_at_bound = set((figures.get("bounds") or {}).get("active", []))
     for row in figures["parameters"]:
         pct = "-" if row["std_percent"] is None else f"{row['std_percent']:.3g}"
+        if row["name"] in held_at_bound:  # held at its bound (0): a percentage of ~0 says nothing
+            pct = "at bound"
         print(f"{row['name']:<8} {row['value']:>13.6g} {pct:>9}  {row['expression']}")
     layers = figures["rms_layers"]
     for key, label in (
