@@ -71,22 +71,12 @@ def run(args: argparse.Namespace) -> int:
     )
     if args.recording is not None:
         from dynid._progress import stage
-        from dynid.data.adapters import load_recording
+        from dynid.data.adapters import ADAPTERS, load_recording
 
-        runs = {"kuka_lwr4_flobaroid": 3}.get(args.recording)
-        if args.run is not None and (runs is None or not 1 <= args.run <= runs):
-            raise UsageError(
-                f"--run {args.run}: the recording {args.recording} "
-                + (f"has runs 1 to {runs}; give one of them" if runs else "is one run; leave --run out")
-            )
         with stage(f"reading the recording {args.recording}"):
-            if runs is not None:
-                from dynid.data.adapters import load_kuka_lwr4
-
-                ds = load_kuka_lwr4(args.root, run=args.run or 1)
-            else:
-                ds = load_recording(args.recording, args.root)
-        source = f"the recording {args.recording}" + (f", run {args.run or 1} of {runs}" if runs else "")
+            ds = load_recording(args.recording, args.root, run=args.run)
+        runs = ADAPTERS[args.recording].runs
+        source = f"the recording {args.recording}" + (f", run {args.run or 1} of {runs}" if runs > 1 else "")
     else:
         if args.q is None or args.tau is None:
             raise UsageError(

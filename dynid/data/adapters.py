@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynid.data.dataset import Dataset
-from dynid.exceptions import DataError
+from dynid.exceptions import DataError, UsageError
 
 __all__ = [
     "ADAPTERS",
@@ -402,28 +402,43 @@ class Recording:
         One line for listings.
     transmission : callable, optional
         ``() -> R``: the robot's coupled transmission (:attr:`RobotModel.transmission`), if it has one.
+    runs : int
+        How many runs it holds (its loader then takes ``run=1..runs``).
     """
 
     name: str
-    loader: Callable[[str | os.PathLike[str] | None], Dataset]
+    loader: Callable[..., Dataset]
     model: Path
     n_joints: int
     description: str
     transmission: Callable[[], NDArray[np.float64]] | None = None
+    runs: int = 1
 
-    def __call__(self, root: str | os.PathLike[str] | None = None) -> Dataset:
-        """Load the recording.
+    def __call__(self, root: str | os.PathLike[str] | None = None, *, run: int | None = None) -> Dataset:
+        """Load the recording, or one of its runs.
 
         Parameters
         ----------
         root : str or path-like, optional
             Folder holding the recordings, or the recording's own folder; default :func:`find_shared_data`.
+        run : int, optional
+            The run, 1 to :attr:`runs` (default 1) of a recording of several.
 
         Returns
         -------
         Dataset
+
+        Raises
+        ------
+        UsageError
+            A run the recording does not hold.
         """
-        return self.loader(root)
+        if run is not None and not 1 <= run <= self.runs:
+            raise UsageError(
+                f"--run {run}: the recording {self.name} "
+                + (f"has runs 1 to {self.runs}; give one of them" if self.runs > 1 else "is one run; leave --run out")
+            )
+        return self.loader(root) if self.runs == 1 else self.loader(root, run=run or 1)
 
     def model_path(self, root: str | os.PathLike[str] | None = None) -> Path:
         """Path of the recording's URDF model.
@@ -462,7 +477,8 @@ ADAPTERS: dict[str, Recording] = {
         loader=load_kuka_lwr4,
         model=_KUKA_MODEL,
         n_joints=_KUKA_JOINTS,
-        description="KUKA LWR4+, 7 DOF, ~200 Hz, joint torque sensors, run 1 of 3 (FloBaRoID; pre-filtered)",
+        description="KUKA LWR4+, 7 DOF, ~200 Hz, joint torque sensors, 3 runs (FloBaRoID; pre-filtered)",
+        runs=3,
     ),
 }
 
@@ -476,7 +492,7 @@ def _recording(name: str) -> Recording:
         ) from None
 
 
-def load_recording(name: str, root: str | os.PathLike[str] | None = None) -> Dataset:
+def load_recording(name: str, root: str | os.PathLike[str] | None = None, *, run: int | None = None) -> Dataset:
     """Load a real recording by name.
 
     Parameters
@@ -485,12 +501,14 @@ def load_recording(name: str, root: str | os.PathLike[str] | None = None) -> Dat
         A key of :data:`ADAPTERS` (``"panda_gaz2019"``, ``"tx40"``).
     root : str or path-like, optional
         Folder holding the recordings; default :func:`find_shared_data`.
+    run : int, optional
+        The run of a recording of several (:attr:`Recording.runs`; default 1).
 
     Returns
     -------
     Dataset
     """
-    return _recording(name)(root)
+    return _recording(name)(root, run=run)
 
 
 def recording_model_path(name: str, root: str | os.PathLike[str] | None = None) -> Path:
