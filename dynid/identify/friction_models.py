@@ -353,6 +353,12 @@ class SeedFriction(ShapedFriction):
                 new[st] = new[c]
         self.coef_ = new
 
+    def _past_cap(self, c: NDArray[np.float64]) -> tuple[bool, bool]:
+        """Per direction, whether the static level in ``coef_``-ordered ``c`` exceeds :attr:`static_ratio`
+        times its Coulomb level."""
+        pos, neg = (bool(c[st] > self.static_ratio * c[k] + 1e-12) for k, st in _STATIC_PAIRS)
+        return pos, neg
+
     def _fit(self, dq, F, dq_k, sampling, around) -> None:
         self._tied = (False, False)
         self.__dict__.pop("_filtered_basis", None)  # an earlier fit's
@@ -361,7 +367,7 @@ class SeedFriction(ShapedFriction):
         if A is None:
             A = self._columns(dq if sampling is None else dq_k, self.coef_[-1])
         c = self.coef_
-        held = tuple(bool(c[st] > self.static_ratio * c[k] + 1e-12) for k, st in _STATIC_PAIRS)
+        held = self._past_cap(c)
         if not any(held):
             return
         self._tied = held
@@ -464,7 +470,7 @@ class SharedSeedFriction(SeedFriction):
         c = self.coef_  # kc+, kc-, kv1, kv2, kv3, ks, lam
         self.coef_ = np.concatenate([c[:6], c[5:6], c[6:]])
         c = self.coef_
-        held = [bool(c[st] > self.static_ratio * c[k] + 1e-12) for k, st in _STATIC_PAIRS]
+        held = self._past_cap(c)
         if not any(held):
             return
         # a direction whose shared level passes its cap is held at its Coulomb level; the other keeps a level
@@ -474,12 +480,13 @@ class SharedSeedFriction(SeedFriction):
         if sampling is not None:
             A = sampling.full(A)
         while True:
-            self._tied = (held[0], held[1])
+            self._tied = held
             merged = np.column_stack(self.merged(A.T))
             coef, rss = bounded_lsq(merged, F, (0.0,) * merged.shape[1])
             self.set_linear(coef)
             c = self.coef_
-            more = [h or bool(c[st] > self.static_ratio * c[k] + 1e-12) for (k, st), h in zip(_STATIC_PAIRS, held, strict=True)]
+            past = self._past_cap(c)
+            more = (held[0] or past[0], held[1] or past[1])
             if more == held:
                 break
             held = more

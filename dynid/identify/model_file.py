@@ -292,49 +292,41 @@ def _read_arrays(arrays_path: Path, name: str, doc: dict[str, Any], renamed: Pat
     whose JSON still names ``M.npz``.
     """
     sha = doc.get("arrays_sha256")
+    renamed = None if renamed == arrays_path else renamed  # the pair's own name: nothing else to look for
 
-    def read(p: Path) -> bytes | None:
+    def read(p: Path | None) -> bytes | None:
         try:
-            return p.read_bytes()
+            return None if p is None else p.read_bytes()
         except OSError:
             return None
 
-    blob = read(arrays_path)
-    if blob is not None and hashlib.sha256(blob).hexdigest() == sha:
-        return blob
-    if renamed is not None and renamed != arrays_path:
-        other = read(renamed)
-        if other is not None and hashlib.sha256(other).hexdigest() == sha:
-            return other
+    def matches(b: bytes | None) -> bool:
+        return b is not None and hashlib.sha256(b).hexdigest() == sha
+
+    blob, other = read(arrays_path), read(renamed)
+    for found in (blob, other):
+        if matches(found):
+            return found  # type: ignore[return-value]
     # a save killed between its renames leaves the old arrays beside the old JSON, under their checksum
     kept = _old_arrays_name(arrays_path, str(sha))
     old_blob = read(kept)
-    if blob is not None and old_blob and hashlib.sha256(old_blob).hexdigest() == sha:
+    if blob is not None and matches(old_blob):
         warnings.warn(
             f"{name}: a save was interrupted after it replaced {arrays_path.name}; the arrays {name} was "
             f"written with were read from {kept.name} (save the model again to tidy up)",
             IdentificationWarning,
             stacklevel=3,  # the caller of load_model
         )
-        return old_blob
-    also = (
-        f" (nor is {renamed.name}, the name a pair renamed together would give it)"
-        if renamed is not None and renamed != arrays_path and renamed.is_file()
-        else ""
-    )
+        return old_blob  # type: ignore[return-value]
     if blob is None:
-        there = renamed is not None and renamed != arrays_path and renamed.is_file()
         raise ModelFileError(
             f"{name} keeps its arrays in {arrays_path.name}, which is missing"
-            + (f", and {renamed.name} beside it is another model's arrays (checksum differs)" if there else "")
+            + ("" if other is None else f", and {renamed.name} beside it is another model's arrays (checksum differs)")
             + f"; copy {arrays_path.name} beside {name}"
-            + (
-                f" (or as {renamed.name}, if the pair was renamed)"
-                if renamed is not None and renamed != arrays_path
-                else ""
-            )
+            + ("" if renamed is None else f" (or as {renamed.name}, if the pair was renamed)")
             + " or identify again"
         )
+    also = "" if other is None else f" (nor is {renamed.name}, the name a pair renamed together would give it)"
     raise ModelFileError(
         f"{arrays_path.name} is not the arrays file {name} was written with (checksum differs){also}: the pair "
         "was copied or renamed apart, or its writing was interrupted; copy the two files together or identify again"

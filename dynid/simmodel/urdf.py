@@ -173,19 +173,19 @@ def match_template(root: ET.Element, path: str | Path, robot) -> TemplateMatch:
             f"{', '.join(robot.joint_names)}; give the URDF of the robot the model was identified for"
         )
     axes = _motion_axes(reduced), _motion_axes(robot.pin_model)
+    # the loader snaps a CAD export's rounded right angles (SNAP_RAD) and sub-micrometre offsets (SNAP_M):
+    # its own template, read raw, differs by that much and is the same robot
+    move_tol, turn_tol = max(_KINEMATIC_TOL, 1.01 * SNAP_M), max(_KINEMATIC_TOL, 1.01 * SNAP_RAD)
     for i, joint in enumerate(robot.joints):
         M = reduced.jointPlacements[i + 1]
         turned = float(np.abs(np.asarray(M.rotation) - joint.rotation).max())
         moved = float(np.abs(np.asarray(M.translation) - joint.translation).max())
-        # the loader snaps a CAD export's rounded right angles (SNAP_RAD) and sub-micrometre offsets (SNAP_M):
-        # its own template, read raw, differs by that much and is the same robot
-        far = moved > max(_KINEMATIC_TOL, 1.01 * SNAP_M)
-        if far or turned > max(_KINEMATIC_TOL, 1.01 * SNAP_RAD) or int(reduced.parents[i + 1]) != joint.parent:
+        if moved > move_tol or turned > turn_tol or int(reduced.parents[i + 1]) != joint.parent:
             what = (
                 f"its offset differs by {moved:.3g} m"
-                if far
+                if moved > move_tol
                 else f"its orientation differs by {turned:.3g}"
-                if turned > max(_KINEMATIC_TOL, 1.01 * SNAP_RAD)
+                if turned > turn_tol
                 else "its parent differs"
             )
             raise UsageError(
@@ -194,7 +194,7 @@ def match_template(root: ET.Element, path: str | Path, robot) -> TemplateMatch:
                 "with the same kinematics"
             )
         about = float(np.abs(axes[0][i] - axes[1][i]).max())
-        if about > max(_KINEMATIC_TOL, 1.01 * SNAP_RAD):
+        if about > turn_tol:
             kind = "turns" if joint.revolute else "slides"
             raise UsageError(
                 f"the joint '{joint.name}' {kind} about another axis in the template '{path}' than in the model "

@@ -8,7 +8,6 @@
 from __future__ import annotations
 
 import math
-import os
 import tomllib
 from collections import Counter
 from pathlib import Path
@@ -170,10 +169,7 @@ def _snapped_angles(alpha, theta, path: Path):
     of pi/2 is snapped to it (with the URDF loader's warning, naming the joints), one closer than 1e-7 rad is
     exact as written and left as it is.
     """
-    import warnings
-
-    from dynid.exceptions import RobotModelWarning
-    from dynid.symbolic.urdf import QUIET_SNAP_RAD, SNAP_RAD, snapped_angle
+    from dynid.symbolic.urdf import snapped_angle, warn_snapped
 
     out, moved, worst = [], set(), 0.0
     for values in (alpha, theta):
@@ -185,15 +181,7 @@ def _snapped_angles(alpha, theta, path: Path):
                 moved.add(i + 1)
                 worst = max(worst, off)
         out.append(np.asarray(snapped, dtype=np.float64))
-    if worst > QUIET_SNAP_RAD:
-        warnings.warn(
-            f"the robot description '{os.path.normpath(os.path.abspath(path))}' places joint(s) "
-            f"{', '.join(f'joint_{i}' for i in sorted(moved))} within {SNAP_RAD:g} rad of a right angle (rounded "
-            f"values, as datasheets write them; largest change {worst:.2g} rad); dynid snapped them, so that the "
-            "base parameters are those of the exact arm. Write the exact values in the file to silence this.",
-            RobotModelWarning,
-            stacklevel=4,
-        )
+    warn_snapped(str(path), [f"joint_{i}" for i in sorted(moved)], worst, offsets=False, by="datasheets")
     return out[0], out[1]
 
 

@@ -26,13 +26,13 @@ from dynid.symbolic.robot_model import DEFAULT_DDQ_MAX, Joint, RobotModel
 
 __all__ = [
     "CONTINUOUS_RANGE",
-    "QUIET_SNAP_RAD",
     "SNAP_M",
     "SNAP_RAD",
     "load_mjcf",
     "load_urdf",
     "pin_model_from_urdf",
     "snapped_angle",
+    "warn_snapped",
 ]
 
 _JOINT_TYPES = {
@@ -54,8 +54,7 @@ SNAP_RAD = 1e-4
 """A joint placement or axis within this angle (rad) of a right-angle orientation is snapped to it."""
 SNAP_M = 1e-6
 """A joint offset component below this length (m) is snapped to 0."""
-QUIET_SNAP_RAD = 1e-6
-"""Snaps smaller than this (pi/2 written as 1.5707963) need no warning."""
+_QUIET_SNAP_RAD = 1e-6  # snaps smaller than this (pi/2 written as 1.5707963) need no warning
 # Below these the value is exact as written (float noise of a file's 9 decimals, 5e-10 rad at most): left as it
 # is, so that a robot's key, and the model files identified on it, do not change
 _EXACT_RAD = 1e-7
@@ -128,19 +127,42 @@ def _snapped(joints: list[Joint], source: str) -> list[Joint]:
             moved.append((j.name, max(a_rot, a_axis)))  # an offset alone: 0 rad
             j = replace(j, rotation=R, axis=axis, translation=t)
         out.append(j)
-    worst = max((a for _, a in moved), default=0.0)
-    if worst > QUIET_SNAP_RAD:  # values written to 7 decimals or better are the exact ones, silently
-        if os.path.isfile(source):  # one path per file (a model and its --compare name it from two folders)
-            source = os.path.normpath(os.path.abspath(source))
-        warnings.warn(
-            f"the robot description '{source}' places joint(s) {', '.join(name for name, _ in moved)} within "
-            f"{SNAP_RAD:g} rad of a right angle or {SNAP_M:g} m of zero (rounded values, as CAD exports write "
-            f"them; largest change {worst:.2g} rad); dynid snapped them, so that the base parameters are "
-            "those of the exact arm. Write the exact values in the file to silence this.",
-            RobotModelWarning,
-            stacklevel=4,
-        )
+    warn_snapped(source, [name for name, _ in moved], max((a for _, a in moved), default=0.0))
     return out
+
+
+def warn_snapped(source: str, joints: list[str], worst: float, *, offsets: bool = True, by: str = "CAD exports") -> None:
+    """The one warning of a description whose rounded right angles (and, with ``offsets``, sub-micrometre
+    offsets) were snapped: the joints, the largest change (rad) and what to write instead.  Silent when the
+    largest change is at most 1e-6 rad (values written to 7 decimals or better are the exact
+    ones).
+
+    Parameters
+    ----------
+    source : str
+        The description's path (named once, absolute, when it is a file) or name.
+    joints : list of str
+        The joints snapped.
+    worst : float
+        The largest change (rad).
+    offsets : bool
+        Whether offsets were snapped too (a URDF's; a DH table's angles alone).
+    by : str
+        Who writes such values (CAD exports, datasheets).
+    """
+    if worst <= _QUIET_SNAP_RAD:
+        return
+    if os.path.isfile(source):  # one path per file (a model and its --compare name it from two folders)
+        source = os.path.normpath(os.path.abspath(source))
+    zero = f" or {SNAP_M:g} m of zero" if offsets else ""
+    warnings.warn(
+        f"the robot description '{source}' places joint(s) {', '.join(joints)} within {SNAP_RAD:g} rad of a "
+        f"right angle{zero} (rounded values, as {by} write them; largest change {worst:.2g} rad); dynid snapped "
+        "them, so that the base parameters are those of the exact arm. Write the exact values in the file to "
+        "silence this.",
+        RobotModelWarning,
+        stacklevel=5,
+    )
 
 
 def _from_pin_model(model, *, name: str, source: str, tool: str | None, ddq_max) -> RobotModel:
