@@ -418,7 +418,9 @@ def tune_terms(
             b = residual.reshape(-1)
             coef, *_ = np.linalg.lstsq(A, b, rcond=1e-10)
             rss = float(np.sum((b - A @ coef) ** 2))
-            if rss < best_rss:
+            # a later variant must do better than rounding: where the data cannot tell two apart (an output
+            # stage's sign, when the joint's own friction takes its other joint's part) the first is kept
+            if rss < best_rss * (1.0 - 1e-9):
                 best, best_rss = v, rss
         out.append(best)
     return tuple(out)
