@@ -30,6 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from dynid._threads import single_blas_thread
 from dynid.exceptions import DataError, ShapeError, UsageError
+from dynid.identify.rest import direction
 
 __all__ = [
     "CHUNK_SAMPLES",
@@ -227,7 +228,7 @@ class ColumnSet:
             if kind == "armature":
                 out[:, k] = ddu[:, j]
             elif kind == "coulomb":
-                out[:, k] = np.sign(du[:, j])
+                out[:, k] = direction(du[:, j])
             elif kind == "viscous":
                 out[:, k] = du[:, j]
             else:
@@ -351,7 +352,7 @@ def _column_set(robot, friction: bool, armature: bool) -> ColumnSet:
     ones = np.ones(m)
     for e in np.flatnonzero(enabled):
         kind, j = EXTRA_KINDS[e // n], e % n
-        values = {"armature": ddu[:, j], "coulomb": np.sign(du[:, j]), "viscous": du[:, j], "offset": ones}[
+        values = {"armature": ddu[:, j], "coulomb": direction(du[:, j]), "viscous": du[:, j], "offset": ones}[
             kind
         ]
         col = values[:, None] * _extra_weights(n, [e], coupling)[:, 0][None, :]

@@ -64,6 +64,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynid.exceptions import UsageError
+from dynid.identify.rest import direction
 
 __all__ = [
     "BUILDERS",
@@ -85,7 +86,6 @@ __all__ = [
     "unregister_builder",
 ]
 
-_SIGN_EPS = 1e-3  # rad/s: velocities below this count as zero in sign(dq) (quantised encoders)
 
 COMMON_EFFECTS = ("delay",)
 """Per-joint effects that also have a form common to all joints, one parameter for the arm
@@ -166,8 +166,8 @@ class FeatureSource:
         return out
 
     def sign(self, v: NDArray[np.float64]) -> NDArray[np.float64]:
-        """``sign(v)`` with |v| < 1e-3 counted as zero."""
-        return np.where(np.abs(v) < _SIGN_EPS, 0.0, np.sign(v))
+        """``sign(v)`` with a joint at rest counted as zero (:func:`dynid.identify.rest.direction`)."""
+        return direction(v)
 
     def mass_column(self, j: int) -> NDArray[np.float64]:
         """Column j of the mass matrix M(q) at every sample, (M, n) (kg m^2)."""

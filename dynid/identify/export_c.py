@@ -48,6 +48,7 @@ from dynid.identify.friction import (
     StribeckFriction,
 )
 from dynid.identify.model import IdentifiedModel
+from dynid.identify.rest import AT_REST
 from dynid.symbolic.base import random_states
 from dynid.symbolic.build import Progress, stderr_progress
 from dynid.symbolic.export import CompiledLibrary, ExportResult, export_c
@@ -97,18 +98,24 @@ class ModelExportResult:
 
 
 # ---------------------------------------------------------------------------- layer-2 friction in CasADi
+def _direction(v: ca.SX) -> ca.SX:
+    """:func:`dynid.identify.rest.direction` of one speed: its sign, 0 at rest."""
+    return ca.if_else(ca.fabs(v) < AT_REST, 0.0, ca.sign(v))
+
+
 def _seed(v: ca.SX, lam: float) -> list[ca.SX]:
     """The columns of :class:`SeedFriction` at threshold ``lam`` (its ``_seed_rows``, one speed)."""
     a = ca.fabs(v)
     high = a >= lam
     low = a < lam
     r = a / lam
-    pos_low = ca.logic_and(v > 0, low)
-    neg_low = ca.logic_and(v < 0, low)
+    pos, neg = v >= AT_REST, v <= -AT_REST  # a joint at rest has no direction
+    pos_low = ca.logic_and(pos, low)
+    neg_low = ca.logic_and(neg, low)
     signed = ca.if_else(pos_low, r, ca.if_else(neg_low, -r, 0.0))
     return [
-        ca.if_else(pos_low, r, ca.if_else(ca.logic_and(v > 0, high), 1.0, 0.0)),
-        ca.if_else(neg_low, -r, ca.if_else(ca.logic_and(v < 0, high), -1.0, 0.0)),
+        ca.if_else(pos_low, r, ca.if_else(ca.logic_and(pos, high), 1.0, 0.0)),
+        ca.if_else(neg_low, -r, ca.if_else(ca.logic_and(neg, high), -1.0, 0.0)),
         ca.if_else(high, v, signed * lam),
         ca.if_else(high, v * a, signed * lam**2),
         ca.if_else(high, v**3, signed * lam**3),
@@ -126,14 +133,14 @@ def _friction_basis(mdl: Any, v: ca.SX) -> list[tuple[str, ca.SX]] | None:
         return []
     if kind is LinearFriction:
         k = len(mdl.linear_coef())
-        return list(zip(("fc", "fv", "fo")[:k], [ca.sign(v), v, ca.SX(1.0)][:k], strict=True))
+        return list(zip(("fc", "fv", "fo")[:k], [_direction(v), v, ca.SX(1.0)][:k], strict=True))
     if issubclass(kind, SeedFriction):  # held or shared static levels share a column (merged)
         cols = mdl.merged(_seed(v, float(mdl.coef_[-1])))
         return list(zip((mdl.coef_names[k] for k in mdl._linear), cols, strict=True))
     if kind is StribeckFriction:
         vs = float(mdl.coef_[-1])
         e = ca.exp(-((v / vs) ** 2))
-        sg = ca.sign(v)
+        sg = _direction(v)
         return list(zip(("fc", "fs", "fv", "fo"), [sg * (1.0 - e), sg * e, v, ca.SX(1.0)], strict=True))
     if kind is SigmoidFriction:
         phi2, phi3 = float(mdl.coef_[1]), float(mdl.coef_[2])
@@ -286,7 +293,7 @@ def model_functions(model: IdentifiedModel) -> tuple[ca.Function, ca.Function, d
         if not used[nb + k]:
             continue
         kind, j = EXTRA_KINDS[e // n], e % n
-        value = {"armature": ddu[j], "coulomb": ca.sign(du[j]), "viscous": du[j], "offset": ca.SX(1.0)}[kind]
+        value = {"armature": ddu[j], "coulomb": _direction(du[j]), "viscous": du[j], "offset": ca.SX(1.0)}[kind]
         columns.append(value * ca.DM(cols.extra_weights[:, k]))
     fric = plan.reference.friction if plan.reference.friction_source == "layer2" else None
     if fric is not None:

@@ -26,6 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from dynid.exceptions import DataError
 from dynid.identify.friction_base import FrictionModel
+from dynid.identify.rest import AT_REST, direction
 from dynid.identify.friction_fitting import (
     bounded_lsq,
     bounded_solve,
@@ -115,7 +116,7 @@ class LinearFriction(FrictionModel):
 
     @staticmethod
     def _columns(dq):
-        return np.column_stack([np.sign(dq), dq, np.ones_like(dq)])
+        return np.column_stack([direction(dq), dq, np.ones_like(dq)])
 
     def columns(self, dq):
         return self._columns(dq)[:, : len(self._linear)]
@@ -144,7 +145,7 @@ class _SeedSpeeds:
     def __init__(self, dq: NDArray[np.float64]) -> None:
         self.dq = dq
         self.a = np.abs(dq)
-        self.pos, self.neg = dq > 0, dq < 0
+        self.pos, self.neg = dq >= AT_REST, dq <= -AT_REST  # a joint at rest has no direction
         self.dqa = dq * self.a
         self.dq3 = dq**3
 
@@ -524,7 +525,7 @@ class StribeckFriction(ShapedFriction):
     @staticmethod
     def _columns(dq, vs):
         e = np.exp(-((dq / vs) ** 2))
-        sg = np.sign(dq)
+        sg = direction(dq)
         return np.column_stack([sg * (1.0 - e), sg * e, dq, np.ones_like(dq)])
 
     @classmethod

@@ -59,6 +59,7 @@ from dynid.exceptions import DataError, UsageError
 from dynid.identify.columns import CHUNK_SAMPLES, compiled_base_regressor
 from dynid.identify.consistent import pseudo_inertia
 from dynid.identify.estimators import long_run_factor
+from dynid.identify.rest import direction
 from dynid.symbolic.bodies import (
     PayloadFrame,
     body_figures,
@@ -109,7 +110,7 @@ def _payload_columns(model, prep: Prepared, link_to_params: NDArray[np.float64])
 def _nuisance(prep: Prepared) -> NDArray[np.float64]:
     """(m, n, 3): per joint, a change of Coulomb friction, viscous friction and offset, filtered."""
     dq = prep.dq
-    N = np.stack([np.sign(dq), dq, np.ones_like(dq)], axis=2)
+    N = np.stack([direction(dq), dq, np.ones_like(dq)], axis=2)
     return prep.filter(N)[prep.rows]
 
 

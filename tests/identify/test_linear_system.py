@@ -75,7 +75,8 @@ def _reference_torque(ur5, phi, q, dq, ddq):
     rigid = np.array([pin.rnea(model, data, q[k], dq[k], ddq[k]) for k in range(len(q))])
     rigid -= ur5.armature * ddq  # Pinocchio adds the model's own rotor inertia; phi holds ours
     ia, fc, fv, fo = (phi[10 * n + k * n : 10 * n + (k + 1) * n] for k in range(4))
-    return rigid + ia * ddq + fc * np.sign(dq) + fv * dq + fo
+    at_rest = np.abs(dq) < 1e-3  # rad/s: a joint slower than this has no direction for its Coulomb friction
+    return rigid + ia * ddq + fc * np.where(at_rest, 0.0, np.sign(dq)) + fv * dq + fo
 
 
 # ---------------------------------------------------------------------------- the linear system
