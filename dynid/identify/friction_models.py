@@ -26,7 +26,6 @@ from numpy.typing import ArrayLike, NDArray
 
 from dynid.exceptions import DataError
 from dynid.identify.friction_base import FrictionModel
-from dynid.identify.rest import AT_REST, direction
 from dynid.identify.friction_fitting import (
     bounded_lsq,
     bounded_solve,
@@ -35,6 +34,7 @@ from dynid.identify.friction_fitting import (
     sample_stride,
     shape_search,
 )
+from dynid.identify.rest import AT_REST, direction
 
 __all__ = [
     "LinearFriction",
