@@ -28,9 +28,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from dynid._rest import direction
 from dynid._threads import single_blas_thread
 from dynid.exceptions import DataError, ShapeError, UsageError
-from dynid.identify.rest import direction
 
 __all__ = [
     "CHUNK_SAMPLES",

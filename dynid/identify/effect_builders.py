@@ -63,8 +63,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from dynid._rest import direction
 from dynid.exceptions import UsageError
-from dynid.identify.rest import direction
 
 __all__ = [
     "BUILDERS",
@@ -166,7 +166,7 @@ class FeatureSource:
         return out
 
     def sign(self, v: NDArray[np.float64]) -> NDArray[np.float64]:
-        """``sign(v)`` with a joint at rest counted as zero (:func:`dynid.identify.rest.direction`)."""
+        """``sign(v)`` with a joint at rest counted as zero (:func:`dynid._rest.direction`)."""
         return direction(v)
 
     def mass_column(self, j: int) -> NDArray[np.float64]:

@@ -38,6 +38,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
+from dynid._rest import AT_REST
 from dynid.exceptions import GeneratorError
 from dynid.identify.columns import EXTRA_KINDS, column_set
 from dynid.identify.friction import (
@@ -48,7 +49,6 @@ from dynid.identify.friction import (
     StribeckFriction,
 )
 from dynid.identify.model import IdentifiedModel
-from dynid.identify.rest import AT_REST
 from dynid.symbolic.base import random_states
 from dynid.symbolic.build import Progress, stderr_progress
 from dynid.symbolic.export import CompiledLibrary, ExportResult, export_c
@@ -99,7 +99,7 @@ class ModelExportResult:
 
 # ---------------------------------------------------------------------------- layer-2 friction in CasADi
 def _direction(v: ca.SX) -> ca.SX:
-    """:func:`dynid.identify.rest.direction` of one speed: its sign, 0 at rest."""
+    """:func:`dynid._rest.direction` of one speed: its sign, 0 at rest."""
     return ca.if_else(ca.fabs(v) < AT_REST, 0.0, ca.sign(v))
 
 

@@ -24,6 +24,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from dynid._rest import AT_REST, direction
 from dynid.exceptions import DataError
 from dynid.identify.friction_base import FrictionModel
 from dynid.identify.friction_fitting import (
@@ -34,7 +35,6 @@ from dynid.identify.friction_fitting import (
     sample_stride,
     shape_search,
 )
-from dynid.identify.rest import AT_REST, direction
 
 __all__ = [
     "LinearFriction",

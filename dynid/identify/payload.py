@@ -52,6 +52,7 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
 from dynid._progress import say
+from dynid._rest import direction
 from dynid.data.dataset import Dataset
 from dynid.data.preparation import Prepared
 from dynid.data.preprocess import resample_uniform
@@ -59,7 +60,6 @@ from dynid.exceptions import DataError, UsageError
 from dynid.identify.columns import CHUNK_SAMPLES, compiled_base_regressor
 from dynid.identify.consistent import pseudo_inertia
 from dynid.identify.estimators import long_run_factor
-from dynid.identify.rest import direction
 from dynid.symbolic.bodies import (
     PayloadFrame,
     body_figures,

@@ -38,13 +38,13 @@ _CACHE: dict[str, RobotFunctions] = {}
 
 def friction_columns_function(n: int) -> ca.Function:
     """``friction_columns(dq) -> F``: per joint, Coulomb ``sign(dq_j)`` (0 at rest, below
-    :data:`dynid.identify.rest.AT_REST`), viscous ``dq_j`` and offset ``1``.
+    :data:`dynid._rest.AT_REST`), viscous ``dq_j`` and offset ``1``.
 
     F has shape (n, 3n), columns ordered ``[fc_1..fc_n, fv_1..fv_n, fo_1..fo_n]``.
     """
     dq = ca.SX.sym("dq", n)
     eye = ca.SX.eye(n)
-    from dynid.identify.rest import AT_REST
+    from dynid._rest import AT_REST
 
     sign = ca.if_else(ca.fabs(dq) < AT_REST, 0.0, ca.sign(dq))
     cols = ca.horzcat(ca.diag(sign), ca.diag(dq), eye)

@@ -163,8 +163,7 @@ def output_stage(ur5):
 
 
 def test_an_output_stage_friction_is_recovered_and_the_motor_speed_form_is_not(ur5, output_stage) -> None:
-    """``coupled_friction@5+6:mix=0``: friction on dq6 felt by joints 5 and 6 (on the TX40's declared wrist
-    it takes joints 5 and 6 held out from 2.15 and 1.55 to 2.03 and 1.32 N m, below FIGAROH with its hook)."""
+    """``coupled_friction@5+6:mix=0``: friction on dq6 felt by joints 5 and 6."""
     effect, train, held = output_stage
     fit = dict(method="ols", friction="linear", gmm="off")
     with warnings.catch_warnings():
