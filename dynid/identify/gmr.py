@@ -56,6 +56,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from dynid._rest import AT_REST
 from dynid._threads import one_blas_thread
 from dynid.data.periodic import period_of  # one detector for the package; re-exported here
 from dynid.exceptions import DataError, ModelFileError, UsageError
@@ -118,9 +119,10 @@ def density_gate(mdl: dict[str, Any], u: NDArray[np.float64]) -> NDArray[np.floa
     u : ndarray, shape (m, d)
         Inputs (unclipped), as given to :meth:`GMRCorrection.predict`.
     """
+    moving = _moving(mdl, u)
     floor = float(mdl.get("log_floor", -np.inf))
     if not np.isfinite(floor):
-        return np.ones(u.shape[0])
+        return moving
     inp = mdl["inputs"]
     n_in = len(inp)
     us = (u[:, inp] - mdl["mean"][:n_in]) / mdl["scale"][:n_in]
@@ -131,7 +133,23 @@ def density_gate(mdl: dict[str, Any], u: NDArray[np.float64]) -> NDArray[np.floa
         # beyond the training range of any input, by how many of its standard deviations
         beyond = np.maximum(mdl["lo"] - u[:, inp], u[:, inp] - mdl["hi"]).clip(min=0.0) / mdl["scale"][:n_in]
         logp = logp - 0.5 * np.einsum("md,md->m", beyond, beyond) / margin**2
-    return np.exp(np.minimum(logp - floor, 0.0))
+    return np.exp(np.minimum(logp - floor, 0.0)) * moving
+
+
+def _moving(mdl: dict[str, Any], u: NDArray[np.float64]) -> NDArray[np.float64]:
+    """1 where the mixture's joint moves, 0 where it is at rest (:data:`dynid._rest.AT_REST`).
+
+    A joint at rest has no friction direction, and what its torque holds beyond the physical layers there
+    is the stiction its last motion left, anything within the static level: no function of the angle.  A
+    mixture of one joint's output is not fitted on its at-rest samples and predicts nothing there (on a
+    simulated xArm 7 whose held-out motion stands joint 3 still at 8 % of its samples, the position
+    mixture fitted on the stick samples of the training reversals predicted them wherever the joint
+    stood: 2.84 times the held-out RMS of OLS with linear friction, 1.14 without the mixture).  Mixtures
+    written before (no ``rest_speed``) and those over several joints' outputs are not gated."""
+    k = int(mdl.get("rest_speed", -1))
+    if k < 0 or k >= u.shape[1]:
+        return np.ones(u.shape[0])
+    return (np.abs(u[:, k]) >= AT_REST).astype(np.float64)
 
 
 def _blocks(m: int, n_blocks: int, fraction: float) -> NDArray[np.bool_]:
@@ -329,6 +347,21 @@ class GMRCorrection:
             "range_margin": np.array(float(self.range_margin if margin is None else margin)),
         }
 
+    @staticmethod
+    def _rest_speed(d: int, n: int, out) -> int:
+        """The column of ``u = [q, dq]`` holding the speed of a one-joint mixture's joint (-1: none)."""
+        return n + int(out[0]) if d == 2 * n and len(out) == 1 else -1
+
+    def _moving_model(self, u, y, inp, out, K: int, rest_speed: int, **kwargs) -> dict[str, Any]:
+        """A mixture fitted on the samples where its joint moves (all of them for ``rest_speed`` -1)."""
+        rows = np.arange(len(u)) if rest_speed < 0 else np.flatnonzero(np.abs(u[:, rest_speed]) >= AT_REST)
+        if len(rows) < 2 * (len(inp) + len(out) + 2):  # a joint that hardly moves: fitted on every sample
+            rows = np.arange(len(u))
+        rows = rows[:: max(1, -(-len(rows) // int(self.max_samples)))]
+        mdl = self._model(np.hstack([u[rows][:, inp], y[rows][:, out]]), len(inp), K, inp, out, **kwargs)
+        mdl["rest_speed"] = np.array(rest_speed)
+        return mdl
+
     # ------------------------------------------------------------------ fit / predict
     @one_blas_thread
     @one_openmp_thread()
@@ -369,10 +402,10 @@ class GMRCorrection:
         chosen, self.scores_ = [], []
         pred_val = np.zeros((len(val_idx), n))
         for inp, out in specs:
-            X = np.hstack([u[:, inp], y[:, out]])
+            rest = self._rest_speed(u.shape[1], n, out)
             best, scores, worse = None, [], 0
             for K in sizes:
-                mdl = self._model(X[train_idx], len(inp), K, inp, out, margin=np.inf)
+                mdl = self._moving_model(u[train_idx], y[train_idx], inp, out, K, rest, margin=np.inf)
                 pred = self._predict_model(mdl, u[val_idx])
                 score = float(np.sqrt(np.mean((y[val_idx][:, out] - pred) ** 2) * len(out)))
                 scores.append((K, score))
@@ -404,9 +437,8 @@ class GMRCorrection:
                 f"({self.validation_}) it did not lower the RMS by {100 * float(self.min_improvement):g} %"
             )
         # the chosen sizes refitted on all the samples
-        every = np.arange(0, m, stride)
         self.models_ = [
-            self._model(np.hstack([u[every][:, inp], y[every][:, out]]), len(inp), K, inp, out)
+            self._moving_model(u, y, inp, out, K, self._rest_speed(u.shape[1], n, out))
             for (inp, out), K in zip(specs, chosen, strict=True)
         ]
         self.n_components_ = [len(mdl["weights"]) for mdl in self.models_]
@@ -438,13 +470,12 @@ class GMRCorrection:
             raise UsageError(f"mode is {self.mode!r}; choose one of {', '.join(_MODES)}")
         self._check_options()
         u, y = self._check_pair(u, y)
-        m, n = y.shape
+        n = y.shape[1]
         specs = self._specs(u.shape[1], n)
         if len(sizes) != len(specs):
             raise UsageError(f"sizes has {len(sizes)} entries; mode {self.mode!r} has {len(specs)} mixtures")
-        every = np.arange(0, m, max(1, -(-m // int(self.max_samples))))
         self.models_ = [
-            self._model(np.hstack([u[every][:, inp], y[every][:, out]]), len(inp), K, inp, out)
+            self._moving_model(u, y, inp, out, K, self._rest_speed(u.shape[1], n, out))
             for (inp, out), K in zip(specs, sizes, strict=True)
         ]
         self.n_components_ = [len(mdl["weights"]) for mdl in self.models_]
@@ -615,6 +646,8 @@ class GMRCorrection:
                 mdl["log_floor"] = np.asarray(arrays[key] if key in arrays else -np.inf, dtype=np.float64)
                 key = f"{prefix}_{i}_range_margin"  # files written before the range fade: none
                 mdl["range_margin"] = np.asarray(arrays[key] if key in arrays else np.inf, dtype=np.float64)
+                key = f"{prefix}_{i}_rest_speed"  # files written before the rest gate: none
+                mdl["rest_speed"] = np.asarray(arrays[key] if key in arrays else -1)
             out.active_ = np.asarray(arrays[f"{prefix}_active"], dtype=bool)
         except (KeyError, ValueError, TypeError) as err:
             raise ModelFileError(

@@ -288,3 +288,38 @@ def test_files_written_before_the_range_fade_keep_their_predictions(rng) -> None
     again = GMRCorrection.from_arrays(gmr.to_arrays())
     np.testing.assert_array_equal(again.predict(far), gmr.predict(far))
     assert np.all(np.abs(old.predict(far)).max(axis=0) > 10 * np.abs(gmr.predict(far)).max(axis=0))
+
+
+@pytest.mark.parametrize("mode", ["position", "own"])
+def test_a_joint_at_rest_gets_no_correction_and_teaches_none(rng, mode) -> None:
+    """A joint standing still between motions holds whatever stiction its last motion left (here +-2 N m,
+    its sign by the last direction): no function of the angle.  The mixture is fitted on the moving
+    samples only and predicts nothing at rest, so another motion that stops elsewhere is not given the
+    training's stick torque; a file written before the rule has no such gate."""
+    t = np.arange(12_000) * 0.01
+    q, dq = motion(t, 0.0)
+    stop = (np.sin(0.9 * t) > 0.6)[:, None]  # stands still 30 % of the time, at the angles it stopped at
+    for j in range(2):
+        for k in np.flatnonzero(stop[:, 0])[1:]:
+            q[k, j] = q[k - 1, j]
+    dq = np.where(stop, 0.0, dq)
+    last = np.sign(np.maximum.accumulate(np.where(dq != 0, np.arange(len(t))[:, None], 0), axis=0))
+    ripple = 0.5 * np.sin(2 * q)
+    stick = 2.0 * np.where(stop, np.sign(np.cos(3 * q)) * last, 0.0)  # an angle-locked stick torque
+    y = ripple + stick + 0.05 * rng.normal(size=q.shape)
+    u = np.hstack([q, dq])
+    gmr = GMRCorrection(mode=mode).fit(u, y)
+    assert gmr.active_.all()
+    pred = gmr.predict(u)
+    np.testing.assert_array_equal(pred[stop[:, 0]], 0.0)
+    moving = ~stop[:, 0]
+    # fitted on the moving samples, where the ripple is: the stick torque did not bend it
+    assert np.sqrt(np.mean((pred[moving] - ripple[moving]) ** 2)) < 0.1
+    # another motion that stops: nothing predicted at rest, the ripple where it moves
+    q2, dq2 = motion(np.arange(3000) * 0.01, 1.3)
+    dq2[:500] = 0.0
+    pred2 = gmr.predict(np.hstack([q2, dq2]))
+    np.testing.assert_array_equal(pred2[:500], 0.0)
+    assert np.sqrt(np.mean((pred2[500:] - 0.5 * np.sin(2 * q2[500:])) ** 2)) < 0.15
+    old = GMRCorrection.from_arrays({k: v for k, v in gmr.to_arrays().items() if not k.endswith("_rest_speed")})
+    assert np.all(np.abs(old.predict(u)[stop[:, 0]]).max(axis=0) > 0.1)

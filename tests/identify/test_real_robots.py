@@ -226,8 +226,10 @@ def test_tx40_whole_recording_full_pipeline_keeps_the_torque_in_the_physical_lay
         model = identify(robot, full, method="irls", friction="seed", gmm="auto")
     check = model.info["physical_check"]
     phys = np.asarray(model.rms_layers["friction"])
-    # (1.1 before the pull toward the description; with it joint 2's fit is 1.103x the physical layers alone)
-    assert np.all(phys <= 1.12 * np.asarray(check["physical_alone_rms"])), check
+    # (1.1 before the pull toward the description; with it joint 2's fit is 1.103x the physical layers alone;
+    # 1.17x since a joint at rest has no friction direction and its mixture no correction: the rows where the
+    # arm stands still, 12 % of the recording, are the physical layers' alone)
+    assert np.all(phys <= 1.2 * np.asarray(check["physical_alone_rms"])), check
     # with the pull toward the description the joint fit's physical layers already hold joint 2 (the check
     # keeps the joint fit); without it the check had to fit the physical layers first
     assert check["kept"] == "joint fit" or (
@@ -236,10 +238,11 @@ def test_tx40_whole_recording_full_pipeline_keeps_the_torque_in_the_physical_lay
     assert np.all(np.asarray(model.rms_layers["gmm"]) <= 1.02 * phys)
 
 
-def test_irls_stops_short_of_its_fixed_point_by_far_less_than_a_standard_deviation_on_the_tx40(shared_data):
-    # IRLS converges linearly, by 0.87 a step on the whole recording (joint 5's weight and the estimate
-    # drift together): the default 50 steps stop with a warning, 0.01 standard deviation from the fixed
-    # point, which takes 101
+def test_irls_stops_short_of_its_fixed_point_by_less_than_a_standard_deviation_on_the_tx40(shared_data):
+    # IRLS converges linearly: on the whole recording, where a joint at rest has no friction direction,
+    # joint 5's weight and the estimate drift together; the default 50 steps stop with a warning 0.57
+    # standard deviation from the fixed point, which takes 225 (0.01 and 101 while a joint at rest had a
+    # friction direction)
     import warnings
 
     from dynid.data.adapters import load_recording, recording_model_path
@@ -251,9 +254,9 @@ def test_irls_stops_short_of_its_fixed_point_by_far_less_than_a_standard_deviati
     system = build_system(robot, load_recording("tx40", shared_data))
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # no "IRLS did not converge"
-        fixed = IRLS(robot=robot, max_iter=200).fit(system)
-    assert fixed.converged_ and 50 < fixed.n_iter_ < 200
+        fixed = IRLS(robot=robot, max_iter=400).fit(system)
+    assert fixed.converged_ and 100 < fixed.n_iter_ < 400
     with pytest.warns(Warning, match="IRLS did not converge in 50 iterations"):
         short = IRLS(robot=robot).fit(system)
     gap = np.max(np.abs(short.params_ - fixed.params_) / fixed.std_)
-    assert 1e-4 < gap < 0.05, gap
+    assert 1e-3 < gap < 1.0, gap
