@@ -32,7 +32,24 @@ __all__ = [
     "consistency_figures",
     "joint_rms",
     "layer1_friction",
+    "speed_quantiles",
 ]
+
+SPEED_LEVELS = 40
+"""Equal-probability samples of each joint's training speed the model file keeps (:func:`speed_quantiles`)."""
+
+
+def speed_quantiles(dq) -> list[list[float]]:
+    """Per joint, :data:`SPEED_LEVELS` quantiles of the training ``|dq|`` (rad/s) at the mid-levels
+    ``(k + 0.5) / SPEED_LEVELS``: equal-probability samples of the speeds the friction was fitted at.
+
+    The model file keeps them (``speed_quantiles``) so that what is written for a simulator, which holds
+    only a viscous coefficient and a Coulomb level per joint, is the straight line closest to the
+    identified friction where the arm was seen moving (:meth:`dynid.identify.friction.FrictionModel.
+    simulator_line`), not its linear coefficient alone.
+    """
+    levels = (np.arange(SPEED_LEVELS) + 0.5) / SPEED_LEVELS
+    return np.round(np.quantile(np.abs(np.asarray(dq, dtype=np.float64)), levels, axis=0).T, 9).tolist()
 
 AT_BOUND_STD = 1e-3
 """A bounded parameter closer to its bound than this many of its standard deviations is held at it."""

@@ -178,6 +178,28 @@ class FrictionModel(ABC):
         self._check_fitted()
         return 0.0, 0.0, tuple(self.simulator_items())
 
+    def simulator_line(self, speeds: ArrayLike) -> tuple[float, float]:
+        """The viscous coefficient and Coulomb level whose line is closest to this fit at ``speeds``.
+
+        Least squares, both >= 0, of the fit's odd part ``(F(v) - F(-v)) / 2`` against ``fc + fv v`` at the
+        given speeds (equal-probability samples of the training ``|dq|``): what a simulator holding only
+        ``damping`` and ``frictionloss`` keeps best of a nonlinear model, where the arm moved.  A model's
+        offset (its even part) has no simulator field either way.
+
+        Parameters
+        ----------
+        speeds : array_like, shape (k,)
+            Joint speeds (rad/s, >= 0).
+
+        Returns
+        -------
+        damping, frictionloss : float
+        """
+        v = np.abs(np.asarray(speeds, dtype=np.float64).ravel())
+        odd = 0.5 * (self.predict(v) - self.predict(-v))
+        coef, _ = bounded_lsq(np.column_stack([np.ones_like(v), v]), odd, (0.0, 0.0))
+        return float(coef[1]), float(coef[0])
+
     def _fit(
         self,
         dq: NDArray[np.float64],

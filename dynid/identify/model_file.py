@@ -388,6 +388,7 @@ def _model_from(doc: dict[str, Any], blob: bytes, robot, name: str) -> Identifie
             "prior",
             "pipeline",
             "torque_range",
+            "speed_quantiles",
             "payload",
             "data_sha256",
             "data_parts_sha256",

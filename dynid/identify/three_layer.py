@@ -50,6 +50,7 @@ from dynid.identify.fit_figures import (
     consistency_figures,
     joint_rms,
     layer1_friction,
+    speed_quantiles,
 )
 from dynid.identify.friction import FRICTION_MODELS, FrictionLayer
 from dynid.identify.gmr import GMRCorrection
@@ -258,6 +259,7 @@ class ThreeLayerModel:
             info["prior"] = self._prior.to_dict()
         tau_seen = prep.tau_reference
         info["torque_range"] = np.stack([tau_seen.min(axis=0), tau_seen.max(axis=0)], axis=1).tolist()
+        info["speed_quantiles"] = speed_quantiles(prep.dq[rows])
         if hasattr(est, "n_iter_"):
             info["irls"] = {"iterations": int(est.n_iter_), "converged": bool(est.converged_)}
         lower = physical_lower_bounds(cols) if self.physical else None

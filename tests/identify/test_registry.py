@@ -208,15 +208,24 @@ def test_a_registered_friction_model_runs_from_the_command_line(ur5, toy_data, t
 
 
 def test_the_export_lists_a_friction_model_it_cannot_carry(ur5, toy_data, toy, tmp_path) -> None:
-    """The toy model says nothing of simulators: no damping or frictionloss is written, and it is listed."""
+    """The toy model says nothing of simulators: it is listed, and what is written is the straight line
+    closest to it at the training speeds (a file without them: no damping or frictionloss)."""
+    from dataclasses import replace
+
     model = identify(ur5, toy_data, method="ols", friction="toy", gmm="off", reference_weight=0.0)
     params = simulator_parameters(model)
-    assert np.all(params.damping == 0) and np.all(params.frictionloss == 0)
     (item,) = [i for i in params.not_carried if i["what"] == "toy friction"]
     assert item["joints"] == [1, 2, 3, 4, 5, 6]
-    assert "no simulator field" in item["detail"]
+    assert "no simulator field" in item["detail"] and "the straight line closest" in item["detail"]
+    for j, mdl in enumerate(model.friction.models_):
+        assert (params.damping[j], params.frictionloss[j]) == mdl.simulator_line(model.info["speed_quantiles"][j])
+    assert np.all(params.damping + params.frictionloss > 0)
     save_model(model, tmp_path / "M.json")
     assert simulator_parameters(load_model(tmp_path / "M.json")).not_carried == params.not_carried
+    old = simulator_parameters(replace(model, info={k: v for k, v in model.info.items() if k != "speed_quantiles"}))
+    assert np.all(old.damping == 0) and np.all(old.frictionloss == 0)
+    (item,) = [i for i in old.not_carried if i["what"] == "toy friction"]
+    assert "no damping and frictionloss were written for it" in item["detail"]
 
 
 def test_builtin_friction_models_say_what_a_simulator_holds() -> None:

@@ -369,3 +369,54 @@ def test_real_panda_round_trip(shared_data, tmp_path):
     nominal = description_model(urdf, heldout, preprocessing=Preprocessing.from_settings(model.preprocessing))
     rms_nominal = np.asarray(validate(nominal, heldout).figures()["rms"])
     assert np.all(np.asarray(h["rms_exported"]) < rms_nominal)
+
+
+def test_a_nonlinear_friction_is_written_as_the_line_closest_to_it_where_the_arm_moved(tmp_path, ur5):
+    """A simulator holds one viscous coefficient and one Coulomb level per joint. Of a seed model (its
+    dq |dq| and dq^3 terms, its static levels) the export writes the least-squares line over the training
+    speeds the model file keeps, which predicts the model's friction at those speeds far better than the
+    model's linear coefficients alone (what was written before); a file without the speeds keeps those."""
+    from dynid.identify.friction import SeedFriction
+
+    rng = np.random.default_rng(3)
+    cols = column_set(ur5, friction=False, armature=True)
+    x = true_parameters(cols, rng)
+    truth = []
+    for j in range(ur5.n):
+        f = SeedFriction()
+        f.coef_ = np.array([1.0, 0.9, 0.3, 0.8, 0.4, 1.3, 1.2, 0.05]) * (1 + 0.1 * j)
+        truth.append(f)
+
+    def extra(q, dq):
+        return np.column_stack([f.predict(dq[:, j]) for j, f in enumerate(truth)])
+
+    ds = synthetic_dataset(cols, x, random_fourier(ur5, rng, periods=2, base_freq=0.2), rate=200, rng=rng,
+                           noise=0.02, extra=extra)  # fmt: skip
+    model = identify(ur5, ds, method="irls", friction="seed", gmm="off")
+    speeds = np.asarray(model.info["speed_quantiles"])
+    assert speeds.shape == (ur5.n, 40) and np.all(np.diff(speeds, axis=1) >= 0)
+    path = tmp_path / "M.json"
+    save_model(model, path)
+    again = load_model(path)
+    np.testing.assert_allclose(again.info["speed_quantiles"], speeds)
+    result = export_model(again, "urdf", tmp_path / "ur5.urdf")
+    p = result.params
+    v = speeds  # the training speeds, both directions
+    for j, mdl in enumerate(model.friction.models_):
+        odd = 0.5 * (mdl.predict(v[j]) - mdl.predict(-v[j]))
+        written = p.frictionloss[j] + p.damping[j] * v[j]
+        c = mdl.to_dict()["coef"]
+        before = 0.5 * (c["kc_pos"] + c["kc_neg"]) + c["kv1"] * v[j]
+        err, err_before = (float(np.sqrt(np.mean((odd - w) ** 2))) for w in (written, before))
+        assert err < 0.5 * err_before, (j, err, err_before)
+        # the least-squares line: no other (damping, frictionloss) >= 0 is closer
+        A = np.column_stack([np.ones_like(v[j]), v[j]])
+        best = np.linalg.lstsq(A, odd, rcond=None)[0]
+        if np.all(best >= 0):
+            np.testing.assert_allclose([p.frictionloss[j], p.damping[j]], best, rtol=1e-6, atol=1e-9)
+    assert any("closest to the identified friction" in item["detail"] for item in p.not_carried)
+    # a file written before the speeds were kept: the model's own linear coefficients
+    old = replace(again, info={k: v for k, v in again.info.items() if k != "speed_quantiles"})
+    q = export_model(old, "urdf", tmp_path / "old.urdf").params
+    c = [m.to_dict()["coef"] for m in model.friction.models_]
+    np.testing.assert_allclose(q.damping, [cj["kv1"] for cj in c])
