@@ -239,6 +239,17 @@ def convert_table(
         raise DataError(
             f"the angles reach {big:.4g}, more than 10 rad: they look like degrees; add --degrees"
         )
+    if len(t) > 1:  # what every reader refuses is not written (load_dataset's rule)
+        from dynid.data.files import MAX_TIME_STEP
+
+        dt = float(np.median(np.diff(t)))
+        if dt >= MAX_TIME_STEP:
+            guess = next((u for u, f in TIME_UNITS.items() if u != time_unit and dt * f / TIME_UNITS[time_unit] < 0.1), None)
+            raise DataError(
+                f"the column '{names[t_col]}' read in {time_unit} gives a median time step of {dt:.6g} s, but a robot "
+                f"is sampled faster than every {MAX_TIME_STEP:g} s; give its unit with --time-unit"
+                + (f" (e.g. --time-unit {guess})" if guess else "")
+            )
     meta = {
         "source": Path(path).name,
         "columns": {key: [names[c] for c in cols] for key, cols in picks.items()} | {"t": names[t_col]},

@@ -77,6 +77,11 @@ def test_the_command_writes_a_dataset_dynid_reads(tmp_path, capsys):
             r"--torque-scale is 0; give one non-zero",
         ),
         (["--q", "position_*"], r"--data needs --q and --tau"),
+        (  # a millisecond clock read as seconds: every later command would refuse the file
+            ["--q", "position_*", "--tau", "effort_*", "--degrees"],
+            r"'timestamp' read in s gives a median time step of .* give its unit with --time-unit "
+            r"\(e\.g\. --time-unit ms\)",
+        ),
     ],
 )
 def test_mistakes_end_in_one_sentence(tmp_path, capsys, extra, pattern):
