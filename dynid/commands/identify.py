@@ -178,6 +178,12 @@ def _links_line(figures: dict) -> str:
     )
 
 
+_DECIDED = {
+    "bound": "the consistency bound",
+    "shared": "the data through the base parameters it shares with other links",
+}
+
+
 def _bodies_lines(figures: dict) -> list[str]:
     """How far each identified body moved from the description, and whether the data or it decided."""
     links = figures.get("links")
@@ -200,7 +206,7 @@ def _bodies_lines(figures: dict) -> list[str]:
             + (
                 ""
                 if decided is None
-                else f"; decided by {'the consistency bound' if decided == 'bound' else decided} "
+                else f"; decided by {_DECIDED.get(decided, decided)} "
                 f"(data share {100 * body['data_share']:.0f} %)"
             )
         )

@@ -428,6 +428,6 @@ class IdentifiedModel:
         for body in out:
             # a link the data hardly see, held at the consistency bound: the bound moved it (the data moved the
             # links it shares base parameters with), not the description (a Z1's first link at 1.8x its mass)
-            if body["at_bound"] and body["decided_by"] == "description":
+            if body["at_bound"] and body["decided_by"] in ("description", "shared"):
                 body["decided_by"] = "bound"
         return out

@@ -90,6 +90,12 @@ def test_link_report_measures_the_move(ur5):
     assert report[2]["mass_ratio"] == pytest.approx(2.0) and report[2]["com_shift"] == pytest.approx(0.0, abs=1e-12)
     assert report[2]["divergence"] == pytest.approx(4 * (2 - np.log(2) - 1))
     assert report[0]["divergence"] == pytest.approx(0.0, abs=1e-9) and report[0]["decided_by"] is None
+    # who decided: the data's share of the uncertainty removed, and for a small share whether the body stayed
+    share = np.array([0.0, 0.95, 0.05, 0.5, 0.05, 0.05])
+    phi[4] *= 1.2  # 4 (1.2 - ln 1.2 - 1) = 0.071: stayed near the description
+    phi[5] *= 1.3  # 0.150: moved, by the few combinations the data see
+    decided = [r["decided_by"] for r in link_report(ur5, phi, share)]
+    assert decided == ["description", "data", "shared", "both", "description", "shared"]
 
 
 def test_noise_free_data_choose_a_prior_and_fit_to_rounding(tmp_path):
