@@ -599,9 +599,10 @@ class IRLS(LinkEstimator):
         benchmark's 60,000 samples (2.4 standard deviations from the fixed point after 5 steps, 0.06
         after 50, the tolerance after 174) and more slowly on the whole TX40 recording, where a joint at
         rest has no friction direction (0.57 after 50, the tolerance after 225; 0.87 a step, 0.01 after
-        50, when it had one).  There the default stops short, with the warning.  300 steps were tried as
-        the default and dropped: on a noise-free double pendulum IRLS wanders for 742 steps, and where
-        it stopped decided whether the pipeline's folds confirmed a drive gain.
+        50, when it had one).  A step costs about a millisecond there: the default tries 300 (with 50, a
+        UR5 whose joints carry a position torque of 1 N m stopped short enough that the mixture of joint
+        2 learnt a twentieth of it).  Where it does not settle (a noise-free double pendulum: 742 steps)
+        the warning says so.
 
     Attributes
     ----------
@@ -622,7 +623,7 @@ class IRLS(LinkEstimator):
         preprocessing: Preprocessing | None = None,
         weighting: str = "full",
         tol: float = 1e-6,
-        max_iter: int = 50,
+        max_iter: int = 300,
     ) -> None:
         super().__init__(robot=robot, friction=friction, armature=armature, preprocessing=preprocessing)
         self.weighting = weighting

@@ -524,3 +524,29 @@ def test_period_default_is_the_sidecars(heldout):
     from dynid.validation.validate import sidecar_period
 
     assert sidecar_period(heldout) == pytest.approx(PERIOD)
+
+
+def test_a_joint_predicted_far_worse_than_its_mean_is_said_in_one_sentence(full, heldout, case, tmp_path):
+    """A torque logged with the other sign (R^2 about -3 on that joint): the figures alone say it to nobody;
+    one warning names the joint and the usual causes.  The data as recorded get no such line."""
+    import warnings
+    from dataclasses import replace
+
+    from dynid.exceptions import DataWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DataWarning)
+        good = validate(full, heldout)
+    assert np.all(good.metrics["r2"] > -1)
+    tau = np.asarray(heldout.tau).copy()
+    tau[:, 1] *= -1.0
+    flipped = replace(heldout, tau=tau)
+    with pytest.warns(DataWarning, match=r"predicts joint\(s\) 2 worse than their mean torque would, by far") as caught:
+        bad = validate(full, flipped)
+    assert bad.metrics["r2"][1] < -1 and f"R^2 {bad.metrics['r2'][1]:.3g}" in str(caught[0].message)
+    assert "joint order" in str(caught[0].message) and "dynid diagnose" in str(caught[0].message)
+    save_dataset(flipped, tmp_path / "V.csv")
+    with pytest.warns(DataWarning) as caught:  # main(argv) keeps pytest's capture; the console prints one line
+        assert main(["validate", "--model", str(case.full), "--data", str(tmp_path / "V.csv"), "--quiet"]) == 0
+    said = [str(w.message) for w in caught if "worse than their mean torque would" in str(w.message)]
+    assert len(said) == 1 and said[0].startswith("M.json predicts joint(s) 2 "), said
