@@ -103,8 +103,9 @@ def _direction(v: ca.SX) -> ca.SX:
     return ca.if_else(ca.fabs(v) < AT_REST, 0.0, ca.sign(v))
 
 
-def _seed(v: ca.SX, lam: float) -> list[ca.SX]:
-    """The columns of :class:`SeedFriction` at threshold ``lam`` (its ``_seed_rows``, one speed)."""
+def _seed(v: ca.SX, lam: float, vmax: float = np.inf) -> list[ca.SX]:
+    """The columns of :class:`SeedFriction` at threshold ``lam`` (its ``_seed_rows``, one speed), the square
+    and cube continued as secants beyond ``vmax`` (its ``columns``)."""
     a = ca.fabs(v)
     high = a >= lam
     low = a < lam
@@ -117,8 +118,8 @@ def _seed(v: ca.SX, lam: float) -> list[ca.SX]:
         ca.if_else(pos_low, r, ca.if_else(ca.logic_and(pos, high), 1.0, 0.0)),
         ca.if_else(neg_low, -r, ca.if_else(ca.logic_and(neg, high), -1.0, 0.0)),
         ca.if_else(high, v, signed * lam),
-        ca.if_else(high, v * a, signed * lam**2),
-        ca.if_else(high, v**3, signed * lam**3),
+        ca.if_else(high, v * a if not np.isfinite(vmax) else ca.if_else(a > vmax, vmax * v, v * a), signed * lam**2),
+        ca.if_else(high, v**3 if not np.isfinite(vmax) else ca.if_else(a > vmax, vmax**2 * v, v**3), signed * lam**3),
         ca.if_else(pos_low, 1.0 - r, 0.0),
         ca.if_else(neg_low, -(1.0 - r), 0.0),
     ]
@@ -135,7 +136,7 @@ def _friction_basis(mdl: Any, v: ca.SX) -> list[tuple[str, ca.SX]] | None:
         k = len(mdl.linear_coef())
         return list(zip(("fc", "fv", "fo")[:k], [_direction(v), v, ca.SX(1.0)][:k], strict=True))
     if issubclass(kind, SeedFriction):  # held or shared static levels share a column (merged)
-        cols = mdl.merged(_seed(v, float(mdl.coef_[-1])))
+        cols = mdl.merged(_seed(v, float(mdl.coef_[-1]), mdl.vmax_))
         return list(zip((mdl.coef_names[k] for k in mdl._linear), cols, strict=True))
     if kind is StribeckFriction:
         vs = float(mdl.coef_[-1])

@@ -273,3 +273,32 @@ def test_a_joint_at_rest_has_no_friction_direction(rng, model) -> None:
     np.testing.assert_allclose(creep, at_zero, atol=1e-3)  # the viscous part of 9e-4 rad/s at most
     moving = layer.predict(np.array([[-2e-3], [2e-3]]))[:, 0] - at_zero
     assert moving[0] < -0.5 and moving[1] > 0.5, moving
+
+
+@pytest.mark.parametrize("model", ["seed", "seed_shared"])
+def test_the_seed_models_viscous_polynomial_is_not_extrapolated(rng, model) -> None:
+    """Fitted over |dq| <= 2 rad/s, the square and cube go on beyond the fastest training speed as their
+    secants: continuous there, straight beyond, and the speed limit survives the model file."""
+    dq = rng.uniform(-2.0, 2.0, 6000)
+    F = 0.5 * np.sign(dq) + 0.1 * dq + 0.08 * dq * np.abs(dq) + 0.02 * dq**3 + 0.01 * rng.normal(size=dq.size)
+    layer = FrictionLayer(model=model).fit(dq[:, None], F[:, None])
+    mdl = layer.models_[0]
+    vmax = mdl.vmax_
+    assert vmax == pytest.approx(np.abs(dq).max())
+    c = mdl.to_dict()["coef"]
+    assert c["kv2"] > 0.05 and c["kv3"] > 0.01  # the polynomial was fitted
+    inside = layer.predict(np.array([[vmax * (1 - 1e-9)], [-vmax * (1 - 1e-9)]]))[:, 0]
+    edge = layer.predict(np.array([[vmax * (1 + 1e-9)], [-vmax * (1 + 1e-9)]]))[:, 0]
+    np.testing.assert_allclose(edge, inside, atol=1e-6)  # continuous at vmax
+    v = vmax * np.array([1.5, 2.0, 3.0])
+    far = layer.predict(v[:, None])[:, 0]
+    slope = c["kv1"] + c["kv2"] * vmax + c["kv3"] * vmax**2
+    np.testing.assert_allclose(np.diff(far) / np.diff(v), slope, rtol=1e-9)  # a straight line beyond it
+    cubic = c["kc_pos"] + c["kv1"] * v[-1] + c["kv2"] * v[-1] ** 2 + c["kv3"] * v[-1] ** 3
+    assert far[-1] < 0.6 * cubic  # where the polynomial would have gone
+    again = FrictionLayer.from_dict(layer.to_dict())
+    assert again.models_[0].vmax_ == vmax
+    np.testing.assert_array_equal(again.predict(v[:, None]), layer.predict(v[:, None]))
+    old = layer.to_dict()
+    del old["joints"][0]["vmax"]  # a file written before the limit: the polynomial, as it was
+    np.testing.assert_allclose(FrictionLayer.from_dict(old).predict(v[-1:, None])[0, 0], cubic, rtol=1e-9)
