@@ -58,7 +58,10 @@ def main() -> None:
             ident.add_additional_parameters()
             ident._compute_validation_metrics = lambda *a, **k: None
         wls = ident.identif_config.get("wls", False)
-        ident.solve(decimate=True, plotting=False, save_results=False, wls=wls, html_report=False)
+        import inspect
+
+        report = {"html_report": False} if "html_report" in inspect.signature(ident.solve).parameters else {}
+        ident.solve(decimate=True, plotting=False, save_results=False, wls=wls, **report)  # versions differ
         whole = TX40Identification(robot, config)
         whole.process_data(truncate=None)
     data = whole.processed_data
