@@ -55,11 +55,12 @@ def _accepted_delay(joint: int, theta: float, measured: float) -> RankedCandidat
 
 @pytest.mark.slow
 def test_a_refit_that_raises_another_joint_is_not_written(ur5):
-    """A 5 ms delay on every joint, a physically consistent model; the diagnosis accepted delays on joints 4,
-    6 and 1 (the --max-effects cap).  Refitted with them (irls: consistent takes no effect terms), joint 5,
-    whose own delay was not accepted, came out 3.7 % worse on held-out data through the shared link
-    parameters."""
-    train, held = _runs(ur5, 8, "delay:1.25")
+    """A 5 ms delay on every joint, a physically consistent model; a diagnosis of such a run accepted delays
+    on joints 4, 6 and 1 (the --max-effects cap).  Refitted with them (irls: consistent takes no effect
+    terms), another joint whose own delay was not accepted comes out worse on held-out data through the
+    shared link parameters: joint 3 by 11 % on this run (seed 9; on seed 8, where the test was written,
+    joint 5 by 3.7 %, and by 1.7 % since a joint at rest has no friction direction)."""
+    train, held = _runs(ur5, 9, "delay:1.25")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         model = identify(ur5, train, method="consistent")
