@@ -224,7 +224,7 @@ def identify_recording(robot: Any, recording: Recording, settings: FleetSettings
                 row[f"{name}_std"] = float(std)
             if model.friction is not None and model.friction_source == "layer2":
                 for j, coefs in enumerate(model.friction.to_dict()["joints"], start=1):
-                    row.update({f"friction.{k}{j}": float(v) for k, v in coefs.items() if not k.endswith("_held") and k != "ks_shared"})
+                    row.update({f"friction.{k}{j}": float(v) for k, v in coefs.items() if not k.endswith("_held") and k not in ("ks_shared", "vmax")})
             if held is not None:
                 rms = np.asarray(validate(model, held).metrics["rms"], dtype=float)
                 row.update({f"heldout_rms_{j}": float(v) for j, v in enumerate(rms, start=1)})

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from dynid._rest import AT_REST
 from dynid.data.preparation import Prepared
 from dynid.identify.columns import ColumnSet, linear_torque
 from dynid.identify.consistent import pseudo_inertia
@@ -41,7 +42,8 @@ SPEED_LEVELS = 40
 
 def speed_quantiles(dq) -> list[list[float]]:
     """Per joint, :data:`SPEED_LEVELS` quantiles of the training ``|dq|`` (rad/s) at the mid-levels
-    ``(k + 0.5) / SPEED_LEVELS``: equal-probability samples of the speeds the friction was fitted at.
+    ``(k + 0.5) / SPEED_LEVELS``, over the samples where it moves (``|dq| >= AT_REST``; all of them for a
+    joint that never does): equal-probability samples of the speeds the friction was fitted at.
 
     The model file keeps them (``speed_quantiles``) so that what is written for a simulator, which holds
     only a viscous coefficient and a Coulomb level per joint, is the straight line closest to the
@@ -49,7 +51,12 @@ def speed_quantiles(dq) -> list[list[float]]:
     simulator_line`), not its linear coefficient alone.
     """
     levels = (np.arange(SPEED_LEVELS) + 0.5) / SPEED_LEVELS
-    return np.round(np.quantile(np.abs(np.asarray(dq, dtype=np.float64)), levels, axis=0).T, 9).tolist()
+    a = np.abs(np.asarray(dq, dtype=np.float64))
+    out = []
+    for j in range(a.shape[1]):  # the moving samples: at rest a joint has no friction direction (dynid._rest)
+        moving = a[a[:, j] >= AT_REST, j]
+        out.append(np.round(np.quantile(moving if moving.size else a[:, j], levels), 9).tolist())
+    return out
 
 AT_BOUND_STD = 1e-3
 """A bounded parameter closer to its bound than this many of its standard deviations is held at it."""

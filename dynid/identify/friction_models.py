@@ -205,11 +205,11 @@ class ShapedFriction(FrictionModel):
         raise NotImplementedError
 
     def _fit(self, dq, F, dq_k, sampling, around) -> None:
-        a = np.abs(dq_k[dq_k != 0])
+        a = np.abs(dq_k[np.abs(dq_k) >= AT_REST])  # a joint at rest has no direction (dynid._rest)
         if a.size < 20:
             raise DataError(
                 f"the {self._search_label} friction model needs the joint to move; only {a.size} samples "
-                f"have dq != 0{self._move_advice}"
+                f"have |dq| >= {AT_REST:g} rad/s (slower is at rest){self._move_advice}"
             )
         lo, hi = np.quantile(a, self.quantiles)
         lo = max(lo, hi * 1e-4)
@@ -255,7 +255,7 @@ class ShapedFriction(FrictionModel):
         return np.ascontiguousarray(self._columns(speeds, shape).T)
 
 
-_STATIC_PAIRS = ((0, 5), (1, 6))
+_STATIC_PAIRS = ((0, 5), (1, 6))  # the seed model's (Coulomb, static level) coefficients, per direction
 
 
 def _fastest(dq: NDArray[np.float64], dq_k: NDArray[np.float64]) -> float:
@@ -266,7 +266,7 @@ def _fastest(dq: NDArray[np.float64], dq_k: NDArray[np.float64]) -> float:
     than its excitation, joint 1's friction came out 10-25 % high there (1.12 times the held-out RMS of
     OLS with linear friction).  Beyond this speed they continue as their secants through zero, a straight
     line that meets them at it."""
-    return float(max(np.abs(dq).max(initial=0.0), np.abs(dq_k).max(initial=0.0)))  # the seed model's (Coulomb, static level) coefficients, per direction
+    return float(max(np.abs(dq).max(initial=0.0), np.abs(dq_k).max(initial=0.0)))
 
 
 class SeedFriction(ShapedFriction):

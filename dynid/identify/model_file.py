@@ -39,20 +39,29 @@ from dynid.identify.identified import IdentifiedModel
 __all__ = ["FORMAT", "VERSION", "load_model", "save_model"]
 
 FORMAT = "dynid-model"
-VERSION = 4
+VERSION = 5
 """Model file version: 2 adds effect terms and a coupled transmission; 3 the links' consistent standard
 parameters (``links``: mass, centre of mass and inertia of each body, as a URDF inertial takes them) and the
 links held at the consistency bound; 4 a coupled friction's ``mix`` (an output stage's friction, which a
-version-3 reader would take for the motor's).  A file is written at the lowest version that holds it (4
-only with a mix other than 1), so older readers refuse what they would misread and read the rest;
-version-1 to -3 files still load."""
+version-3 reader would take for the motor's) and the ``seed_shared`` friction; 5 a seed model's fastest
+training speed ``vmax`` (beyond it its square and cube go on as secants) and a mixture's ``rest_speed``
+(no correction at rest), which a version-4 reader would ignore and so predict otherwise.  A file is
+written at the lowest version that holds it, so older readers refuse what they would misread and read
+the rest; version-1 to -4 files still load."""
 
 
 def _file_version(model: IdentifiedModel) -> int:
     """The lowest version that holds the model (see :data:`VERSION`)."""
+    friction = getattr(model, "friction", None)
+    models = getattr(friction, "models_", None) or ()
+    gmr = getattr(model, "gmr", None)
+    if any(np.isfinite(getattr(m, "vmax_", np.inf)) for m in models) or any(
+        int(mdl.get("rest_speed", -1)) >= 0 for mdl in (getattr(gmr, "models_", None) or ())
+    ):
+        return 5
     terms = getattr(model, "effects", None) or ()
-    shared = getattr(getattr(model, "friction", None), "model", None) == "seed_shared"  # a model of version 4
-    return VERSION if shared or any(t.hyper.get("mix", 1.0) != 1.0 for t in terms) else 3
+    shared = getattr(friction, "model", None) == "seed_shared"
+    return 4 if shared or any(t.hyper.get("mix", 1.0) != 1.0 for t in terms) else 3
 
 
 def _recorded_robot(info_robot: dict[str, Any], path: Path, name: str, load_robot) -> Any:

@@ -176,7 +176,9 @@ def _friction(model: IdentifiedModel, n: int) -> tuple[np.ndarray, np.ndarray, l
         leave(what, [j + 1 for j, out in enumerate(outside) if what in out], detail)
     line = "damping and frictionloss are the straight line closest to the identified friction at the training speeds"
     for item in left:
-        if fitted_line and set(item["joints"]) <= set(fitted_line) and item["what"] != "negative Coulomb or viscous coefficient":
+        if fitted_line and set(item["joints"]) <= set(fitted_line) and item["what"] not in (
+            "negative Coulomb or viscous coefficient", "friction offset"
+        ):
             whole = "no damping and frictionloss were written for it"  # a model of one's own (its default terms)
             item["detail"] = item["detail"].replace(whole, line) if whole in item["detail"] else f"{item['detail']}; {line}"
     return damping, loss, left

@@ -369,6 +369,8 @@ def compiled_functions(
             ]
         ).encode()
         + (_HERE / "batch.c").read_bytes()
+        # the functions built at run time (friction_columns' rest rule): a change to them is a new library
+        + (Path(__file__).with_name("functions.py")).read_bytes()
     ).hexdigest()[:20]
     if digest in _COMPILED:
         return _COMPILED[digest]

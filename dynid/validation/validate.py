@@ -262,7 +262,7 @@ def validate(
     tau = prep.tau_reference
     pred = link + fric + gmm
     metrics = torque_metrics(tau, pred)
-    _warn_far_off(metrics["r2"], (info or {}).get("model_file", "the model"))
+    _warn_far_off(metrics["r2"], (info or {}).get("model_file") or label or "the model")
     if period is None:
         period = sidecar_period(data)
     source = data.meta.get("source")

@@ -183,15 +183,13 @@ def test_an_output_stage_term_round_trips_in_a_version_4_file(ur5, output_stage,
     """The mix reaches the model file (version 4, which a version-3 reader refuses: it would take the stage
     for the motor's friction), the diagnosis' --effects text and the key, to the bit."""
     from dynid.diagnosis.model_refit import effect_spec
-    from dynid.identify.model_file import VERSION
-
     _, train, held = output_stage
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         model = identify(ur5, train, method="ols", friction="linear", gmm="off", effects="coupled_friction@5+6:mix=0")
     save_model(model, tmp_path / "M.json")
     doc = json.loads((tmp_path / "M.json").read_text())
-    assert doc["version"] == VERSION == 4 and doc["effects"][0]["hyper"]["mix"] == 0.0
+    assert doc["version"] == 4 and doc["effects"][0]["hyper"]["mix"] == 0.0
     again = load_model(tmp_path / "M.json")
     assert again.effects[0].hyper == model.effects[0].hyper
     np.testing.assert_allclose(_heldout_rms(again, held), _heldout_rms(model, held), rtol=1e-12)

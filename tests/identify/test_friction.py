@@ -302,3 +302,21 @@ def test_the_seed_models_viscous_polynomial_is_not_extrapolated(rng, model) -> N
     old = layer.to_dict()
     del old["joints"][0]["vmax"]  # a file written before the limit: the polynomial, as it was
     np.testing.assert_allclose(FrictionLayer.from_dict(old).predict(v[-1:, None])[0, 0], cubic, rtol=1e-9)
+
+
+def test_a_model_file_with_the_speed_limit_or_the_rest_gate_is_version_5(tmp_path, ur5) -> None:
+    """A version-4 reader would ignore a seed model's vmax (and extrapolate its polynomial) and a mixture's
+    rest gate: such files are written as version 5, which it refuses; a model with neither stays lower."""
+    import json
+
+    from dynid.identify.columns import column_set
+    from dynid.identify.model import identify, save_model
+    from dynid.sim.synthetic import random_fourier, synthetic_dataset, true_parameters
+
+    rng = np.random.default_rng(2)
+    cols = column_set(ur5)
+    data = synthetic_dataset(cols, true_parameters(cols, rng), random_fourier(ur5, rng), rate=100, rng=rng)
+    for friction, gmm, version in (("seed", "off", 5), ("linear", 3, 5), ("linear", "off", 3)):
+        model = identify(ur5, data, method="ols", friction=friction, gmm=gmm, reference_weight=0.0)
+        save_model(model, tmp_path / "M.json")
+        assert json.loads((tmp_path / "M.json").read_text())["version"] == version, (friction, gmm)

@@ -420,3 +420,20 @@ def test_a_nonlinear_friction_is_written_as_the_line_closest_to_it_where_the_arm
     q = export_model(old, "urdf", tmp_path / "old.urdf").params
     c = [m.to_dict()["coef"] for m in model.friction.models_]
     np.testing.assert_allclose(q.damping, [cj["kv1"] for cj in c])
+
+
+def test_the_line_is_fitted_where_the_arm_moved_not_where_it_stood(rng):
+    """A recording standing still for 40 % of its samples: the speeds kept for the export are the moving
+    ones, so a seed model that is a line (no square, cube or static excess) is written as that very line;
+    counted with the rest samples (odd part 0 there) it came out as frictionloss 0.27, damping 0.84."""
+    from dynid.identify.fit_figures import speed_quantiles
+    from dynid.identify.friction import FrictionLayer
+
+    dq = rng.uniform(-2.0, 2.0, (5000, 2))
+    dq[:2000] = rng.normal(scale=3e-5, size=(2000, 2))  # creeping at rest
+    speeds = np.asarray(speed_quantiles(dq))
+    assert speeds.shape == (2, 40) and np.all(speeds >= 1e-3)
+    line = {"kc_pos": 1.0, "kc_neg": 1.0, "kv1": 0.3, "kv2": 0.0, "kv3": 0.0, "ks_pos": 1.0, "ks_neg": 1.0}
+    seed = FrictionLayer.from_dict({"model": "seed", "joints": [{**line, "lam": 0.01}]})
+    damping, loss = seed.models_[0].simulator_line(speeds[0])
+    assert damping == pytest.approx(0.3, rel=1e-6) and loss == pytest.approx(1.0, rel=1e-6)
