@@ -245,9 +245,26 @@ def _check_held_out(args, described: bool, inputs: _Inputs) -> None:
         check_period(heldout.t, heldout.q, args.period, source=Path(args.heldout).name)
 
 
+def _verdict_line(result) -> str:
+    """The verdict with the joints of each accepted effect ("load_friction (joints 1, 5, 6)"), not its name
+    once per joint."""
+    if not result.accepted:
+        return ", ".join(result.verdict)
+    joints: dict[str, list[int]] = {}
+    for a in result.accepted:
+        c = a.candidate
+        on = tuple(c.joints or ()) or (() if c.joint is None else (c.joint,))
+        joints.setdefault(c.effect, []).extend(j + 1 for j in on)
+    out = []
+    for effect, js in joints.items():
+        js = sorted(set(js))
+        out.append(effect if not js else f"{effect} (joint{'s' if len(js) > 1 else ''} {', '.join(map(str, js))})")
+    return ", ".join(out)
+
+
 def _print_diagnosis(model, result) -> None:
     """Print the verdict, the summary and each joint's excess error and closure."""
-    print(f"verdict: {', '.join(result.verdict)}")
+    print(f"verdict: {_verdict_line(result)}")
     print(result.summary())
     dec = result.decomposition
     print("joint  excess  closure")

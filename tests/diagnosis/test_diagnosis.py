@@ -711,3 +711,25 @@ def test_none_says_what_it_means_and_a_gap_no_test_decides_gets_its_recording(sm
     assert settle is not None and settle["reason"].startswith(f"Not decided: {d.joint_names[4]}")
     assert settle["excite"].startswith("dynid excite --robot ur5") and settle["candidate"] is None
     assert settle["heldout_seconds"] is not None and settle["heldout_seconds"] > held.duration
+
+
+def test_the_verdict_line_names_each_effect_once_with_its_joints():
+    """Load friction accepted on joints 1, 5 and 6 read 'load_friction, load_friction, load_friction'."""
+    from types import SimpleNamespace
+
+    from dynid.commands.diagnose import _verdict_line
+    from dynid.identify.effect_terms import Candidate
+
+    def accepted(effect, joint, joints=()):
+        return SimpleNamespace(candidate=Candidate(effect, joint, joints, {}, effect))
+
+    result = SimpleNamespace(
+        verdict=["load_friction", "load_friction", "coupled_friction", "load_friction", "base_tilt"],
+        accepted=[accepted("load_friction", 0, (0,)), accepted("load_friction", 5, (5,)),
+                  accepted("coupled_friction", None, (4, 5)), accepted("load_friction", 4, (4,)),
+                  accepted("base_tilt", None)],
+    )  # fmt: skip
+    assert _verdict_line(result) == (
+        "load_friction (joints 1, 5, 6), coupled_friction (joints 5, 6), base_tilt"
+    )
+    assert _verdict_line(SimpleNamespace(verdict=["unexplained"], accepted=[])) == "unexplained"
