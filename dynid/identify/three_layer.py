@@ -51,6 +51,7 @@ from dynid.identify.fit_figures import (
     joint_rms,
     layer1_friction,
     speed_quantiles,
+    warn_unexplained,
 )
 from dynid.identify.friction import FRICTION_MODELS, FrictionLayer
 from dynid.identify.gmr import GMRCorrection
@@ -306,6 +307,7 @@ class ThreeLayerModel:
         if gmr is not None:
             rms_layers = cap_mixture(gmr, system.prepared, rms_layers, info)
             info["gmm_validation_rms"] = gmr.validation_rms_.tolist()
+        warn_unexplained(np.asarray(rms_layers["gmm"]), tau_seen)
         self.link_ = est
         self.model_ = IdentifiedModel(
             robot=robot,
