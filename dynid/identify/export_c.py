@@ -52,6 +52,7 @@ from dynid.identify.model import IdentifiedModel
 from dynid.symbolic.base import random_states
 from dynid.symbolic.build import Progress, stderr_progress
 from dynid.symbolic.export import CompiledLibrary, ExportResult, export_c
+from dynid.symbolic.functions import direction_sx
 
 __all__ = [
     "MODEL_FUNCTIONS",
@@ -98,11 +99,6 @@ class ModelExportResult:
 
 
 # ---------------------------------------------------------------------------- layer-2 friction in CasADi
-def _direction(v: ca.SX) -> ca.SX:
-    """:func:`dynid._rest.direction` of one speed: its sign, 0 at rest."""
-    return ca.if_else(ca.fabs(v) < AT_REST, 0.0, ca.sign(v))
-
-
 def _seed(v: ca.SX, lam: float, vmax: float = np.inf) -> list[ca.SX]:
     """The columns of :class:`SeedFriction` at threshold ``lam`` (its ``_seed_rows``, one speed), the square
     and cube continued as secants beyond ``vmax`` (its ``columns``)."""
@@ -114,12 +110,15 @@ def _seed(v: ca.SX, lam: float, vmax: float = np.inf) -> list[ca.SX]:
     pos_low = ca.logic_and(pos, low)
     neg_low = ca.logic_and(neg, low)
     signed = ca.if_else(pos_low, r, ca.if_else(neg_low, -r, 0.0))
+    square, cube = v * a, v**3
+    if np.isfinite(vmax):  # beyond the training speeds: their secants (SeedFriction.columns)
+        square, cube = ca.if_else(a > vmax, vmax * v, square), ca.if_else(a > vmax, vmax**2 * v, cube)
     return [
         ca.if_else(pos_low, r, ca.if_else(ca.logic_and(pos, high), 1.0, 0.0)),
         ca.if_else(neg_low, -r, ca.if_else(ca.logic_and(neg, high), -1.0, 0.0)),
         ca.if_else(high, v, signed * lam),
-        ca.if_else(high, v * a if not np.isfinite(vmax) else ca.if_else(a > vmax, vmax * v, v * a), signed * lam**2),
-        ca.if_else(high, v**3 if not np.isfinite(vmax) else ca.if_else(a > vmax, vmax**2 * v, v**3), signed * lam**3),
+        ca.if_else(high, square, signed * lam**2),
+        ca.if_else(high, cube, signed * lam**3),
         ca.if_else(pos_low, 1.0 - r, 0.0),
         ca.if_else(neg_low, -(1.0 - r), 0.0),
     ]
@@ -134,14 +133,14 @@ def _friction_basis(mdl: Any, v: ca.SX) -> list[tuple[str, ca.SX]] | None:
         return []
     if kind is LinearFriction:
         k = len(mdl.linear_coef())
-        return list(zip(("fc", "fv", "fo")[:k], [_direction(v), v, ca.SX(1.0)][:k], strict=True))
+        return list(zip(("fc", "fv", "fo")[:k], [direction_sx(v), v, ca.SX(1.0)][:k], strict=True))
     if issubclass(kind, SeedFriction):  # held or shared static levels share a column (merged)
         cols = mdl.merged(_seed(v, float(mdl.coef_[-1]), mdl.vmax_))
         return list(zip((mdl.coef_names[k] for k in mdl._linear), cols, strict=True))
     if kind is StribeckFriction:
         vs = float(mdl.coef_[-1])
         e = ca.exp(-((v / vs) ** 2))
-        sg = _direction(v)
+        sg = direction_sx(v)
         return list(zip(("fc", "fs", "fv", "fo"), [sg * (1.0 - e), sg * e, v, ca.SX(1.0)], strict=True))
     if kind is SigmoidFriction:
         phi2, phi3 = float(mdl.coef_[1]), float(mdl.coef_[2])
@@ -294,7 +293,7 @@ def model_functions(model: IdentifiedModel) -> tuple[ca.Function, ca.Function, d
         if not used[nb + k]:
             continue
         kind, j = EXTRA_KINDS[e // n], e % n
-        value = {"armature": ddu[j], "coulomb": _direction(du[j]), "viscous": du[j], "offset": ca.SX(1.0)}[kind]
+        value = {"armature": ddu[j], "coulomb": direction_sx(du[j]), "viscous": du[j], "offset": ca.SX(1.0)}[kind]
         columns.append(value * ca.DM(cols.extra_weights[:, k]))
     fric = plan.reference.friction if plan.reference.friction_source == "layer2" else None
     if fric is not None:

@@ -31,9 +31,16 @@ import numpy as np
 from dynid.symbolic.build import FUNCTION_NAMES, Progress, robot_function_dir, stderr_progress
 from dynid.symbolic.robot import RobotModel
 
-__all__ = ["RobotFunctions", "friction_columns_function", "robot_functions"]
+__all__ = ["RobotFunctions", "direction_sx", "friction_columns_function", "robot_functions"]
 
 _CACHE: dict[str, RobotFunctions] = {}
+
+
+def direction_sx(v: ca.SX) -> ca.SX:
+    """:func:`dynid._rest.direction` on symbols, element by element: the sign, 0 at rest."""
+    from dynid._rest import AT_REST
+
+    return ca.if_else(ca.fabs(v) < AT_REST, 0.0, ca.sign(v))
 
 
 def friction_columns_function(n: int) -> ca.Function:
@@ -44,10 +51,7 @@ def friction_columns_function(n: int) -> ca.Function:
     """
     dq = ca.SX.sym("dq", n)
     eye = ca.SX.eye(n)
-    from dynid._rest import AT_REST
-
-    sign = ca.if_else(ca.fabs(dq) < AT_REST, 0.0, ca.sign(dq))
-    cols = ca.horzcat(ca.diag(sign), ca.diag(dq), eye)
+    cols = ca.horzcat(ca.diag(direction_sx(dq)), ca.diag(dq), eye)
     return ca.Function("friction_columns", [dq], [ca.densify(cols)], ["dq"], ["F"])
 
 
